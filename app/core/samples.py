@@ -1,0 +1,106 @@
+"""Sample blocks: the data model that flows from a device through the pipeline.
+
+Sensor frame and axis conventions (written down once, used everywhere)
+----------------------------------------------------------------------
+- The sensor frame is the LSM6DSOX's own right-handed x, y, z frame as printed on the chip.
+- Acceleration is *specific force* in m/s^2: a sensor lying still with +z up reads
+  ``(0, 0, +9.80665)``. The accelerometer therefore measures the "up" direction at rest.
+- Angular rate is in rad/s, right-handed about each sensor axis.
+- Time is in seconds on the device clock (float64), starting near 0 at connection. It is
+  monotonic within a connection; lost samples leave a hole in time and set ``gap``.
+- Temperature is in degrees Celsius, one value per sample.
+- A reference orientation, when a source knows one (the simulator, a recording with reference
+  columns), is a unit quaternion ``(w, x, y, z)`` rotating sensor-frame vectors into the earth
+  frame, earth z up. See :mod:`app.core.orientation` for angles.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+STANDARD_GRAVITY_M_S2 = 9.80665
+
+
+@dataclass(frozen=True, slots=True)
+class ScaleFactors:
+    """How a device's raw numbers become SI units (``si = raw * scale + offset``)."""
+
+    accel_m_s2_per_lsb: float
+    gyro_rad_s_per_lsb: float
+    temp_degc_per_lsb: float = 1.0
+    temp_offset_degc: float = 0.0
+
+
+@dataclass(slots=True)
+class RawBlock:
+    """A block of samples as a device delivers them, before unit conversion.
+
+    Attributes
+    ----------
+    t_s : (N,) float64, device clock in seconds (already unwrapped by the driver).
+    accel_raw, gyro_raw : (N, 3), raw device units (LSB counts for the LSM6DSOX).
+    temp_raw : (N,), raw temperature units.
+    scale : how to convert the raw arrays to SI.
+    gap : (N,) bool, True on the first sample after lost data.
+    lost_samples : number of samples known to be lost just before this block.
+    reference_quat : (N, 4) sensor-to-earth reference orientation, or None when unknown.
+    """
+
+    t_s: np.ndarray
+    accel_raw: np.ndarray
+    gyro_raw: np.ndarray
+    temp_raw: np.ndarray
+    scale: ScaleFactors
+    gap: np.ndarray | None = None
+    lost_samples: int = 0
+    reference_quat: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+
+@dataclass(slots=True)
+class SampleBlock:
+    """A block of samples in SI units (see the module docstring for conventions).
+
+    Attributes
+    ----------
+    t_s : (N,) float64 seconds, device clock.
+    accel_m_s2 : (N, 3) float64 specific force.
+    gyro_rad_s : (N, 3) float64 angular rate.
+    temp_degc : (N,) float64.
+    gap : (N,) bool, True on the first sample after lost data.
+    reference_quat : (N, 4) or None, sensor-to-earth reference orientation.
+    """
+
+    t_s: np.ndarray
+    accel_m_s2: np.ndarray
+    gyro_rad_s: np.ndarray
+    temp_degc: np.ndarray
+    gap: np.ndarray
+    reference_quat: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+
+def convert_raw_block(raw: RawBlock) -> SampleBlock:
+    """Convert a device block to SI units (the pipeline's first stage)."""
+    n = len(raw)
+    scale = raw.scale
+    accel = np.asarray(raw.accel_raw, dtype=np.float64) * scale.accel_m_s2_per_lsb
+    gyro = np.asarray(raw.gyro_raw, dtype=np.float64) * scale.gyro_rad_s_per_lsb
+    temp = np.asarray(raw.temp_raw, dtype=np.float64) * scale.temp_degc_per_lsb
+    temp += scale.temp_offset_degc
+    gap = np.zeros(n, dtype=bool) if raw.gap is None else np.asarray(raw.gap, dtype=bool)
+    ref = None if raw.reference_quat is None else np.asarray(raw.reference_quat, np.float64)
+    return SampleBlock(
+        t_s=np.asarray(raw.t_s, dtype=np.float64),
+        accel_m_s2=accel.reshape(n, 3),
+        gyro_rad_s=gyro.reshape(n, 3),
+        temp_degc=temp.reshape(n),
+        gap=gap,
+        reference_quat=ref,
+    )

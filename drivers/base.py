@@ -1,0 +1,115 @@
+"""The device interface every driver implements (a template method, as in python-can).
+
+The public :meth:`Device.open`, :meth:`Device.read` and :meth:`Device.close` do the bookkeeping
+(state checks, error typing); a driver overrides only ``_open``, ``_read`` and ``_close``.
+"""
+
+from __future__ import annotations
+
+import threading
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+from app.core.samples import RawBlock
+from drivers.errors import DeviceClosedError, DeviceError, DeviceIOError
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceInfo:
+    """What a device says about itself once open."""
+
+    url: str
+    name: str
+    unique_id: str
+    sensor: str
+    odr_hz: float
+    """Output data rate actually used (trimmed clock), samples per second."""
+    odr_nominal_hz: float
+    accel_fs_g: int
+    gyro_fs_dps: int
+    firmware: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceDescriptor:
+    """One entry of a device listing: a URL to open and a line to show the user."""
+
+    url: str
+    description: str
+    kind: str
+
+
+class Device(ABC):
+    """A source of :class:`~app.core.samples.RawBlock` s, named by a URL.
+
+    Thread use: one thread opens, reads and closes a device. Only methods documented as
+    thread-safe (such as a simulator's live controls) may be called from other threads.
+    """
+
+    scheme: ClassVar[str] = ""
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+        self._info: DeviceInfo | None = None
+        self._lock = threading.Lock()
+
+    # -- public template methods -------------------------------------------------------------
+    def open(self) -> DeviceInfo:
+        """Open the device and return its description; raises :class:`DeviceOpenError`."""
+        if self._info is not None:
+            return self._info
+        self._info = self._open()
+        return self._info
+
+    def read(self, timeout_s: float) -> RawBlock | None:
+        """Return the next block, or None when nothing arrived within ``timeout_s``."""
+        if self._info is None:
+            raise DeviceClosedError(f"{self.url} is not open")
+        try:
+            return self._read(timeout_s)
+        except DeviceError:
+            raise
+        except OSError as exc:
+            raise DeviceIOError(f"{self.url}: {exc}") from exc
+
+    def close(self) -> None:
+        """Close the device; safe to call twice."""
+        if self._info is None:
+            return
+        try:
+            self._close()
+        finally:
+            self._info = None
+
+    @property
+    def info(self) -> DeviceInfo | None:
+        """The open device's description, None while closed."""
+        return self._info
+
+    @property
+    def is_open(self) -> bool:
+        return self._info is not None
+
+    def __enter__(self) -> Device:
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- what drivers implement -------------------------------------------------------------
+    @classmethod
+    def discover(cls) -> list[DeviceDescriptor]:
+        """Devices of this kind that could be opened now (default: none to list)."""
+        return []
+
+    @abstractmethod
+    def _open(self) -> DeviceInfo: ...
+
+    @abstractmethod
+    def _read(self, timeout_s: float) -> RawBlock | None: ...
+
+    @abstractmethod
+    def _close(self) -> None: ...

@@ -1,0 +1,78 @@
+"""Devices are found by URL scheme and imported only when chosen (as python-can's interfaces).
+
+Built-in schemes are listed in ``_BUILTIN``; other packages add drivers through the
+``inclinometer.drivers`` entry-point group (name = scheme, value = ``module:Class``).
+"""
+
+from __future__ import annotations
+
+import importlib
+from importlib.metadata import entry_points
+from urllib.parse import urlsplit
+
+from drivers.base import Device, DeviceDescriptor
+from drivers.errors import DeviceOpenError, DeviceUrlError
+
+DEFAULT_DEVICE_URL = "sim://interactive"
+
+_BUILTIN: dict[str, tuple[str, str]] = {
+    "sim": ("drivers.sim.device", "SimulatedDevice"),
+}
+
+
+def _schemes() -> dict[str, tuple[str, str]]:
+    schemes = dict(_BUILTIN)
+    for ep in entry_points(group="inclinometer.drivers"):
+        module, _, cls = ep.value.partition(":")
+        schemes.setdefault(ep.name, (module, cls))
+    return schemes
+
+
+def scheme_of(url: str) -> str:
+    """The scheme of a device URL (``sim`` for ``sim://static``)."""
+    parts = urlsplit(url)
+    if not parts.scheme or "://" not in url:
+        raise DeviceUrlError(
+            f"{url!r} is not a device URL; expected something like {DEFAULT_DEVICE_URL!r}"
+        )
+    return parts.scheme.lower()
+
+
+def driver_class(scheme: str) -> type[Device]:
+    """Import and return the driver class for ``scheme``."""
+    schemes = _schemes()
+    if scheme not in schemes:
+        known = ", ".join(sorted(f"{s}://" for s in schemes))
+        raise DeviceUrlError(f"no driver for {scheme}:// (known: {known})")
+    module_name, class_name = schemes[scheme]
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise DeviceOpenError(
+            f"the {scheme}:// driver needs a package that is not installed: {exc.name or exc}"
+        ) from exc
+    return getattr(module, class_name)
+
+
+def create_device(url: str) -> Device:
+    """A closed device object for ``url`` (raises :class:`DeviceUrlError` for a bad URL)."""
+    return driver_class(scheme_of(url))(url)
+
+
+def open_device(url: str) -> Device:
+    """Create and open the device named by ``url``."""
+    device = create_device(url)
+    device.open()
+    return device
+
+
+def available_devices() -> list[DeviceDescriptor]:
+    """Everything that could be connected now, from every driver that imports."""
+    found: list[DeviceDescriptor] = []
+    for scheme in _schemes():
+        try:
+            cls = driver_class(scheme)
+        except DeviceOpenError:
+            continue
+        found.extend(cls.discover())
+    return found
