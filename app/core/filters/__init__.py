@@ -1,0 +1,30 @@
+"""Orientation filters, listed by name for the GUI and the command line."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from app.core.filters.accel_tilt import AccelerometerTilt
+from app.core.filters.base import OrientationBlock, OrientationFilter, ParameterSpec
+from app.core.filters.complementary import ComplementaryFilter
+
+FILTERS: dict[str, type[OrientationFilter]] = {
+    cls.name: cls for cls in (ComplementaryFilter, AccelerometerTilt)
+}
+DEFAULT_FILTER = ComplementaryFilter.name
+
+
+def create_filter(name: str, **values: Any) -> OrientationFilter:
+    """A new filter by registry name, with parameter values applied."""
+    try:
+        cls = FILTERS[name]
+    except KeyError:
+        known = ", ".join(FILTERS)
+        raise KeyError(f"no filter named {name!r} (available: {known})") from None
+    return cls(**values)
+
+
+__all__ = [
+    "DEFAULT_FILTER", "FILTERS", "OrientationBlock", "OrientationFilter", "ParameterSpec",
+    "create_filter",
+]

@@ -1,0 +1,136 @@
+"""The processing pipeline: device block -> units -> calibration -> filter -> ring buffers.
+
+A :class:`Pipeline` is plain Python, driven by one thread (the worker) and read by another
+(the GUI) only through its ring buffers, which lock. Nothing here knows about Qt.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from app.core.calibration import IDENTITY_CALIBRATION, SensorCalibration
+from app.core.filters import DEFAULT_FILTER, OrientationFilter, create_filter
+from app.core.orientation import angles_from_quaternion, inclination_error_deg
+from app.core.ring_buffer import RingBuffer
+from app.core.samples import RawBlock, SampleBlock, convert_raw_block
+
+MAX_WINDOW_S = 60.0
+"""The longest time window the views may ask for."""
+
+SAMPLE_COLUMNS = {"t": 1, "accel": 3, "gyro": 3, "temp": 1, "gap": 1, "ref_quat": 4}
+ORIENTATION_COLUMNS = {
+    "t": 1, "quat": 4, "roll": 1, "pitch": 1, "tilt": 1, "direction": 1,
+    # From the reference orientation when the source knows it (NaN otherwise):
+    "ref_roll": 1, "ref_pitch": 1, "ref_tilt": 1, "incl_error": 1,
+}
+
+
+REFERENCE_COLUMNS = ("ref_roll", "ref_pitch", "ref_tilt", "incl_error")
+
+
+def capacity_for(odr_hz: float, window_s: float = MAX_WINDOW_S) -> int:
+    """Ring rows needed to hold ``window_s`` at ``odr_hz`` with a 10 % margin."""
+    return max(1024, math.ceil(odr_hz * window_s * 1.1))
+
+
+@dataclass(slots=True)
+class PipelineCounters:
+    """Running totals since the pipeline was (re)configured."""
+
+    samples: int = 0
+    blocks: int = 0
+    lost_samples: int = 0
+    gaps: int = 0
+    filter_cpu_s: float = 0.0
+    """Thread CPU time spent in conversion, calibration, filtering and buffering."""
+
+
+class Pipeline:
+    """Turns raw device blocks into buffered samples and orientation.
+
+    Parameters
+    ----------
+    odr_hz : expected sample rate, used to size the ring buffers.
+    filter_name : the initial filter (see :data:`app.core.filters.FILTERS`).
+    """
+
+    def __init__(self, odr_hz: float = 104.0, filter_name: str = DEFAULT_FILTER) -> None:
+        self.calibration: SensorCalibration = IDENTITY_CALIBRATION
+        self.filter: OrientationFilter = create_filter(filter_name)
+        self.counters = PipelineCounters()
+        self.samples = RingBuffer(1024, SAMPLE_COLUMNS)
+        self.orientation = RingBuffer(1024, ORIENTATION_COLUMNS)
+        self.configure(odr_hz)
+
+    def configure(self, odr_hz: float) -> None:
+        """Size the buffers for a sample rate and start afresh (a new device connected)."""
+        capacity = capacity_for(odr_hz)
+        self.samples = RingBuffer(capacity, SAMPLE_COLUMNS)
+        self.orientation = RingBuffer(capacity, ORIENTATION_COLUMNS)
+        self.counters = PipelineCounters()
+        self.filter.reset()
+
+    # -- configuration ----------------------------------------------------------------------
+    def set_filter(self, name: str, **values: Any) -> OrientationFilter:
+        """Switch filters mid-stream; the new one starts from the current orientation."""
+        new_filter = create_filter(name, **values)
+        new_filter.warm_up()
+        if self.counters.samples:
+            new_filter.reset(self.filter.quaternion, self.filter.last_time_s)
+        self.filter = new_filter
+        return new_filter
+
+    def set_filter_parameter(self, name: str, value: Any) -> None:
+        self.filter.set_parameter(name, value)
+
+    def set_calibration(self, calibration: SensorCalibration) -> None:
+        self.calibration = calibration
+
+    # -- processing -------------------------------------------------------------------------
+    def process(self, raw: RawBlock) -> SampleBlock:
+        """Run one device block through every stage and into the ring buffers."""
+        cpu_start = time.thread_time()
+        block = self.calibration.apply(convert_raw_block(raw))
+        n = len(block)
+        if n == 0:
+            return block
+        if raw.lost_samples:
+            self.counters.lost_samples += raw.lost_samples
+        self.counters.gaps += int(np.count_nonzero(block.gap))
+        orientation = self.filter.process(block)
+        angles = orientation.angles
+        if block.reference_quat is not None:
+            ref = block.reference_quat
+            ref_angles = angles_from_quaternion(ref)
+            ref_columns = {
+                "ref_roll": ref_angles.roll_deg, "ref_pitch": ref_angles.pitch_deg,
+                "ref_tilt": ref_angles.tilt_deg,
+                "incl_error": inclination_error_deg(orientation.quat, ref),
+            }
+        else:
+            ref = np.full((n, 4), np.nan)
+            unknown = np.full(n, np.nan)
+            ref_columns = dict.fromkeys(REFERENCE_COLUMNS, unknown)
+        self.samples.write(
+            {
+                "t": block.t_s, "accel": block.accel_m_s2, "gyro": block.gyro_rad_s,
+                "temp": block.temp_degc, "gap": block.gap, "ref_quat": ref,
+            }
+        )
+        self.orientation.write(
+            {
+                "t": block.t_s, "quat": orientation.quat, "roll": angles.roll_deg,
+                "pitch": angles.pitch_deg, "tilt": angles.tilt_deg,
+                "direction": angles.direction_deg, **ref_columns,
+            }
+        )
+        self.counters.samples += n
+        self.counters.blocks += 1
+        self.counters.filter_cpu_s += time.thread_time() - cpu_start
+        return block
+

@@ -1,0 +1,61 @@
+"""Test set-up: offscreen Qt, and no QThread or QTimer may outlive a test (as napari does)."""
+
+from __future__ import annotations
+
+import os
+import traceback
+from weakref import WeakKeyDictionary
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+import pytest
+
+ARTIFACTS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "test-artifacts")
+
+
+@pytest.fixture
+def artifacts_dir() -> str:
+    """Folder for screenshots and other files a person may look at after the run."""
+    os.makedirs(ARTIFACTS, exist_ok=True)
+    return ARTIFACTS
+
+
+@pytest.fixture(autouse=True)
+def _no_dangling_qthreads_or_timers(request, monkeypatch):
+    """Fail a test that leaves a started QThread running or a QTimer active."""
+    if "qtbot" not in request.fixturenames and "qapp" not in request.fixturenames:
+        yield
+        return
+    from PySide6.QtCore import QThread, QTimer
+
+    threads: WeakKeyDictionary = WeakKeyDictionary()
+    timers: WeakKeyDictionary = WeakKeyDictionary()
+    thread_start = QThread.start
+    timer_start = QTimer.start
+
+    def tracked_thread_start(self, *args):
+        threads[self] = "".join(traceback.format_stack(limit=6)[:-1])
+        return thread_start(self, *args)
+
+    def tracked_timer_start(self, *args):
+        timers[self] = "".join(traceback.format_stack(limit=6)[:-1])
+        return timer_start(self, *args)
+
+    monkeypatch.setattr(QThread, "start", tracked_thread_start)
+    monkeypatch.setattr(QTimer, "start", tracked_timer_start)
+    yield
+    problems = []
+    for thread, where in list(threads.items()):
+        try:
+            if thread.isRunning():
+                problems.append(f"QThread still running, started at:\n{where}")
+        except RuntimeError:  # the C++ object is gone: fine
+            pass
+    for timer, where in list(timers.items()):
+        try:
+            if timer.isActive():
+                problems.append(f"QTimer still active, started at:\n{where}")
+        except RuntimeError:
+            pass
+    if problems:
+        pytest.fail("\n".join(problems))
