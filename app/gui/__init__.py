@@ -1,0 +1,1 @@
+"""Qt widgets of the Inclinometer: they display what the core computed and do no maths."""

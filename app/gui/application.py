@@ -1,0 +1,35 @@
+"""Start the GUI: the QApplication, the theme, the device session and the main window."""
+
+from __future__ import annotations
+
+import sys
+
+from PySide6.QtCore import QSettings
+from PySide6.QtWidgets import QApplication
+
+from app import __version__
+from app.gui import theme
+from app.gui.main_window import MainWindow
+from app.worker import DeviceSession
+
+ORGANIZATION = "Inclinometer"
+APPLICATION = "Inclinometer"
+
+
+def create_settings() -> QSettings:
+    """User settings in the platform's user configuration directory."""
+    ini, user = QSettings.Format.IniFormat, QSettings.Scope.UserScope
+    return QSettings(ini, user, ORGANIZATION, APPLICATION)
+
+
+def run_gui(device_url: str | None = None, filter_name: str | None = None) -> int:
+    """Show the main window and run the event loop; returns the exit code."""
+    app = QApplication.instance() or QApplication(sys.argv)
+    app.setOrganizationName(ORGANIZATION)
+    app.setApplicationName(APPLICATION)
+    app.setApplicationVersion(__version__)
+    theme.apply_theme(app)
+    session = DeviceSession()
+    window = MainWindow(session, create_settings(), device_url, filter_name)
+    window.show()
+    return app.exec()

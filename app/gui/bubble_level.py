@@ -1,0 +1,589 @@
+"""A two-axis bull's-eye vial that shows roll and pitch like a precision circular level."""
+
+from __future__ import annotations
+
+import enum
+import math
+
+from PySide6.QtCore import QEvent, QPointF, QRectF, QSize, Qt
+from PySide6.QtGui import (
+    QBrush,
+    QColor,
+    QConicalGradient,
+    QFont,
+    QFontMetricsF,
+    QLinearGradient,
+    QPainter,
+    QPainterPath,
+    QPaintEvent,
+    QPen,
+    QPixmap,
+    QRadialGradient,
+    QResizeEvent,
+)
+from PySide6.QtWidgets import QSizePolicy, QWidget
+
+from app.gui import theme
+
+# Fractions of the vial radius: the bubble, and the bezel's width relative to the outer radius.
+_BUBBLE_FRACTION = 0.12
+_BEZEL_FRACTION = 0.085
+# Divisions tried for the graduation rings, in order of preference, and the "nice" mantissas
+# a ring step may have so that its label reads cleanly (0.1, 0.25, 0.5, 1, 2.5, 10, 30 ...).
+_RING_DIVISIONS = (4, 5, 3, 2)
+_NICE_MANTISSAS = (1.0, 2.0, 2.5, 3.0, 5.0)
+
+
+class LevelState(enum.Enum):
+    """What the vial currently signals (and so which colour it uses)."""
+
+    NO_DATA = "no data"
+    LEVEL = "level"
+    OFF_LEVEL = "off level"
+    OVER_RANGE = "over range"
+
+
+def _is_nice(step: float) -> bool:
+    """True if ``step`` is a mantissa from ``_NICE_MANTISSAS`` times a power of ten."""
+    exponent = math.floor(math.log10(step))
+    mantissa = step / 10.0**exponent
+    return any(math.isclose(mantissa, nice, rel_tol=1e-9) for nice in _NICE_MANTISSAS)
+
+
+def _ring_step(full_scale_deg: float) -> float:
+    """Graduation ring spacing (degrees) that divides the full scale into a few clean steps."""
+    for divisions in _RING_DIVISIONS:
+        step = full_scale_deg / divisions
+        if _is_nice(step):
+            return step
+    return full_scale_deg / _RING_DIVISIONS[0]
+
+
+def _with_alpha(color: str | QColor, alpha: int) -> QColor:
+    """A copy of ``color`` with the given alpha (0..255)."""
+    result = QColor(color)
+    result.setAlpha(alpha)
+    return result
+
+
+def _mix(color_a: str | QColor, color_b: str | QColor, weight_b: float) -> QColor:
+    """Linear blend of two colours; ``weight_b`` in 0..1 is the share of ``color_b``."""
+    a, b = QColor(color_a), QColor(color_b)
+    weight_a = 1.0 - weight_b
+    return QColor(
+        round(a.red() * weight_a + b.red() * weight_b),
+        round(a.green() * weight_a + b.green() * weight_b),
+        round(a.blue() * weight_a + b.blue() * weight_b),
+    )
+
+
+class BubbleLevel(QWidget):
+    """A circular (bull's-eye) spirit level for two axes.
+
+    The bubble's centre sits at (pitch, roll) scaled to the full-scale range, +x (pitch) to
+    the right and +y (roll) upwards, so it moves toward the raised side like a real bubble.
+    Within the level tolerance the bubble and centre ring are green, otherwise amber; beyond
+    full scale the bubble is pinned to the rim in red and an arrow on the bezel points the way.
+    The widget maps the given values to pixels and nothing more.
+    """
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self._roll_deg = 0.0
+        self._pitch_deg = 0.0
+        self._tilt_deg: float | None = None
+        self._full_scale_deg = 1.0
+        self._tolerance_deg = 0.05
+        self._valid = False
+        self._reference: tuple[float, float] | None = None
+        self._static_layer: QPixmap | None = None
+        policy = QSizePolicy(QSizePolicy.Policy.Preferred, QSizePolicy.Policy.Preferred)
+        policy.setHeightForWidth(True)
+        self.setSizePolicy(policy)
+        self.setMinimumSize(160, 160)
+
+    # ---- API -----------------------------------------------------------------------------
+
+    def setTilt(self, roll_deg: float, pitch_deg: float, tilt_deg: float | None = None) -> None:
+        """Show roll and pitch (degrees); ``tilt_deg`` (total tilt) picks the colour.
+
+        Without ``tilt_deg`` the bubble's distance from the centre, hypot(roll, pitch), is used.
+        """
+        self._roll_deg = float(roll_deg)
+        self._pitch_deg = float(pitch_deg)
+        self._tilt_deg = None if tilt_deg is None else float(tilt_deg)
+        self.update()
+
+    def setRange(self, full_scale_deg: float) -> None:
+        """Set the tilt (degrees) at the outer graduation ring, e.g. 0.5, 1, 2, 5, 10, 30, 90."""
+        if not full_scale_deg > 0.0:
+            raise ValueError(f"full scale must be positive, got {full_scale_deg!r}")
+        self._full_scale_deg = float(full_scale_deg)
+        self._static_layer = None
+        self.update()
+
+    def setLevelTolerance(self, tolerance_deg: float) -> None:
+        """Set the total tilt (degrees) within which the instrument reads "level"."""
+        if tolerance_deg < 0.0:
+            raise ValueError(f"tolerance must not be negative, got {tolerance_deg!r}")
+        self._tolerance_deg = float(tolerance_deg)
+        self.update()
+
+    def setValid(self, valid: bool) -> None:
+        """Show the bubble (True) or hide it and print "no data" (False, e.g. disconnected)."""
+        self._valid = bool(valid)
+        self.update()
+
+    def setReference(self, roll_deg: float, pitch_deg: float) -> None:
+        """Show a faint second marker at a reference orientation (e.g. a simulator's truth)."""
+        self._reference = (float(roll_deg), float(pitch_deg))
+        self.update()
+
+    def clearReference(self) -> None:
+        """Remove the reference marker."""
+        self._reference = None
+        self.update()
+
+    def roll(self) -> float:
+        """The roll shown, in degrees."""
+        return self._roll_deg
+
+    def pitch(self) -> float:
+        """The pitch shown, in degrees."""
+        return self._pitch_deg
+
+    def tilt(self) -> float:
+        """The total tilt used for the colour, in degrees."""
+        if self._tilt_deg is not None:
+            return self._tilt_deg
+        return math.hypot(self._roll_deg, self._pitch_deg)
+
+    def fullScale(self) -> float:
+        """The full-scale range in degrees."""
+        return self._full_scale_deg
+
+    def levelTolerance(self) -> float:
+        """The level tolerance in degrees."""
+        return self._tolerance_deg
+
+    def isValid(self) -> bool:
+        """Whether data are shown (False: no data)."""
+        return self._valid
+
+    def hasReference(self) -> bool:
+        """Whether a reference marker is shown."""
+        return self._reference is not None
+
+    def state(self) -> LevelState:
+        """What the vial signals for the current values."""
+        if not self._valid or not self._finite():
+            return LevelState.NO_DATA
+        if (
+            self.tilt() > self._full_scale_deg
+            or self._scaled_offset(self._roll_deg, self._pitch_deg) > 1.0
+        ):
+            return LevelState.OVER_RANGE
+        if self.tilt() <= self._tolerance_deg:
+            return LevelState.LEVEL
+        return LevelState.OFF_LEVEL
+
+    def bubbleCenter(self) -> QPointF:
+        """Where the bubble's centre is drawn, in widget pixels (pinned to the rim if over)."""
+        pin = self.state() is LevelState.OVER_RANGE
+        return self._position(self._roll_deg, self._pitch_deg, self._geometry(), pin)
+
+    # ---- Qt size handling ----------------------------------------------------------------
+
+    def sizeHint(self) -> QSize:
+        """A comfortable square size."""
+        return QSize(340, 340)
+
+    def minimumSizeHint(self) -> QSize:
+        """The smallest square in which the labels stay legible."""
+        return QSize(160, 160)
+
+    def hasHeightForWidth(self) -> bool:
+        """The vial is round: keep the widget square."""
+        return True
+
+    def heightForWidth(self, width: int) -> int:
+        """Square: as high as wide."""
+        return width
+
+    def resizeEvent(self, event: QResizeEvent) -> None:
+        """Drop the cached static drawing; it is redrawn at the new size."""
+        self._static_layer = None
+        super().resizeEvent(event)
+
+    def changeEvent(self, event: QEvent) -> None:
+        """Redraw the cached engraving when the widget's font changes."""
+        if event.type() == QEvent.Type.FontChange:
+            self._static_layer = None
+        super().changeEvent(event)
+
+    # ---- Geometry (pixels) ---------------------------------------------------------------
+
+    def _geometry(self) -> _VialGeometry:
+        return _VialGeometry(self.width(), self.height())
+
+    def _finite(self) -> bool:
+        return math.isfinite(self._roll_deg) and math.isfinite(self._pitch_deg)
+
+    def _scaled_offset(self, roll_deg: float, pitch_deg: float) -> float:
+        """Distance of (pitch, roll) from the centre as a fraction of full scale."""
+        return math.hypot(pitch_deg, roll_deg) / self._full_scale_deg
+
+    def _position(
+        self, roll_deg: float, pitch_deg: float, geo: _VialGeometry, pin: bool = False
+    ) -> QPointF:
+        """Pixel position of (pitch, roll): +x right, +y up; on the rim if beyond or ``pin``."""
+        dx = pitch_deg / self._full_scale_deg
+        dy = roll_deg / self._full_scale_deg
+        norm = math.hypot(dx, dy)
+        if norm > 1.0 or (pin and norm > 0.0):
+            dx, dy = dx / norm, dy / norm
+        return QPointF(
+            geo.center.x() + dx * geo.scale_radius, geo.center.y() - dy * geo.scale_radius
+        )
+
+    # ---- Painting ------------------------------------------------------------------------
+
+    def paintEvent(self, event: QPaintEvent) -> None:
+        """Draw the cached vial, then level ring, caption, markers, bubble and glass sheen."""
+        geo = self._geometry()
+        if geo.outer_radius < 20:
+            return
+        painter = QPainter(self)
+        painter.setRenderHint(QPainter.RenderHint.Antialiasing)
+        painter.drawPixmap(0, 0, self._static_pixmap(geo))
+
+        state = self.state()
+        state_color = _STATE_COLORS[state]
+        self._paint_level_ring(painter, geo, state, state_color)
+        self._paint_range_caption(painter, geo, state)
+        if state is not LevelState.NO_DATA and self._reference is not None:
+            self._paint_reference(painter, geo)
+        if state is LevelState.NO_DATA:
+            self._paint_no_data(painter, geo)
+        else:
+            pin = state is LevelState.OVER_RANGE
+            center = self._position(self._roll_deg, self._pitch_deg, geo, pin)
+            self._paint_bubble(painter, geo, center, state_color)
+            if state is LevelState.OVER_RANGE:
+                self._paint_over_range_arrow(painter, geo, center)
+        self._paint_sheen(painter, geo)
+        painter.end()
+
+    def _static_pixmap(self, geo: _VialGeometry) -> QPixmap:
+        """Bezel, glass, graduations and crosshair, cached until size or range change."""
+        ratio = self.devicePixelRatioF()
+        if self._static_layer is None or self._static_layer.devicePixelRatio() != ratio:
+            pixmap = QPixmap(round(self.width() * ratio), round(self.height() * ratio))
+            pixmap.setDevicePixelRatio(ratio)
+            pixmap.fill(Qt.GlobalColor.transparent)
+            painter = QPainter(pixmap)
+            painter.setRenderHint(QPainter.RenderHint.Antialiasing)
+            painter.setRenderHint(QPainter.RenderHint.TextAntialiasing)
+            self._paint_bezel(painter, geo)
+            self._paint_glass(painter, geo)
+            self._paint_graduations(painter, geo)
+            self._paint_crosshair(painter, geo)
+            self._paint_axis_labels(painter, geo)
+            painter.end()
+            self._static_layer = pixmap
+        return self._static_layer
+
+    def _paint_bezel(self, painter: QPainter, geo: _VialGeometry) -> None:
+        c, r_out, r_in = geo.center, geo.outer_radius, geo.vial_radius
+        # Soft drop shadow under the instrument.
+        shadow = QRadialGradient(c + QPointF(0, r_out * 0.03), r_out * 1.04)
+        shadow.setColorAt(0.9, QColor(0, 0, 0, 110))
+        shadow.setColorAt(1.0, QColor(0, 0, 0, 0))
+        painter.setPen(Qt.PenStyle.NoPen)
+        painter.setBrush(shadow)
+        painter.drawEllipse(c, r_out * 1.04, r_out * 1.04)
+        # Turned-metal ring: a conical gradient gives the machined sheen.
+        metal = QConicalGradient(c, 135)
+        metal.setColorAt(0.00, QColor("#8d959e"))
+        metal.setColorAt(0.20, QColor("#4b525a"))
+        metal.setColorAt(0.45, QColor("#2e3339"))
+        metal.setColorAt(0.55, QColor("#3a4047"))
+        metal.setColorAt(0.75, QColor("#2a2e33"))
+        metal.setColorAt(0.90, QColor("#5c646d"))
+        metal.setColorAt(1.00, QColor("#8d959e"))
+        painter.setBrush(metal)
+        painter.setPen(QPen(QColor("#0c0e10"), 1.2))
+        painter.drawEllipse(c, r_out, r_out)
+        # A darker inner chamfer between the metal and the glass.
+        chamfer = QLinearGradient(c - QPointF(0, r_in), c + QPointF(0, r_in))
+        chamfer.setColorAt(0.0, QColor("#0e1013"))
+        chamfer.setColorAt(1.0, QColor("#5a626b"))
+        painter.setPen(Qt.PenStyle.NoPen)
+        painter.setBrush(chamfer)
+        chamfer_radius = r_in + (r_out - r_in) * 0.3
+        painter.drawEllipse(c, chamfer_radius, chamfer_radius)
+
+    def _paint_glass(self, painter: QPainter, geo: _VialGeometry) -> None:
+        c, r = geo.center, geo.vial_radius
+        liquid = QRadialGradient(c - QPointF(r * 0.15, r * 0.2), r * 1.2)
+        liquid.setColorAt(0.0, QColor("#26343c"))
+        liquid.setColorAt(0.55, QColor("#19232a"))
+        liquid.setColorAt(0.85, QColor("#11181d"))
+        liquid.setColorAt(1.0, QColor("#0a0e11"))
+        painter.setBrush(liquid)
+        painter.setPen(QPen(QColor("#07090b"), 1.5))
+        painter.drawEllipse(c, r, r)
+        # Inner shadow along the wall where the glass meets the bezel.
+        wall = QRadialGradient(c, r)
+        wall.setColorAt(0.88, QColor(0, 0, 0, 0))
+        wall.setColorAt(1.0, QColor(0, 0, 0, 120))
+        painter.setPen(Qt.PenStyle.NoPen)
+        painter.setBrush(wall)
+        painter.drawEllipse(c, r, r)
+
+    def _paint_graduations(self, painter: QPainter, geo: _VialGeometry) -> None:
+        step = _ring_step(self._full_scale_deg)
+        ring_count = round(self._full_scale_deg / step)
+        font = self._label_font(geo)
+        painter.setFont(font)
+        metrics = QFontMetricsF(font)
+        ring_pen = QPen(_with_alpha(theme.TEXT_DIM, 110), max(1.0, geo.outer_radius / 200))
+        outer_pen = QPen(_with_alpha(theme.TEXT_DIM, 190), max(1.2, geo.outer_radius / 130))
+        label_angle = math.radians(-45.0)  # labels along the lower-right diagonal
+        for index in range(1, ring_count + 1):
+            radius = geo.scale_radius * index / ring_count
+            painter.setPen(outer_pen if index == ring_count else ring_pen)
+            painter.setBrush(Qt.BrushStyle.NoBrush)
+            painter.drawEllipse(geo.center, radius, radius)
+            label = f"{step * index:g}°"
+            anchor = QPointF(
+                geo.center.x() + radius * math.cos(label_angle),
+                geo.center.y() - radius * math.sin(label_angle),
+            )
+            width = metrics.horizontalAdvance(label)
+            box = QRectF(anchor.x() + 3, anchor.y() + 1, width + 2, metrics.height())
+            painter.setPen(QColor(theme.TEXT_DIM))
+            painter.drawText(box, Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignTop, label)
+
+    def _paint_crosshair(self, painter: QPainter, geo: _VialGeometry) -> None:
+        c, r_scale = geo.center, geo.scale_radius
+        reach = geo.vial_radius * 0.97
+        painter.setPen(QPen(_with_alpha(theme.TEXT_DIM, 120), max(1.0, geo.outer_radius / 220)))
+        painter.drawLine(QPointF(c.x() - reach, c.y()), QPointF(c.x() + reach, c.y()))
+        painter.drawLine(QPointF(c.x(), c.y() - reach), QPointF(c.x(), c.y() + reach))
+        # Tick marks: major at each ring, minor between, on both axes, both ways.
+        step = _ring_step(self._full_scale_deg)
+        ring_count = round(self._full_scale_deg / step)
+        minor_per_ring = 5 if r_scale / ring_count / 5 >= 5 else 2
+        ticks = ring_count * minor_per_ring
+        major_len = max(4.0, geo.outer_radius * 0.035)
+        minor_len = major_len * 0.5
+        major_pen = QPen(_with_alpha(theme.TEXT_DIM, 200), max(1.0, geo.outer_radius / 170))
+        minor_pen = QPen(_with_alpha(theme.TEXT_DIM, 140), max(1.0, geo.outer_radius / 240))
+        for index in range(1, ticks + 1):
+            offset = r_scale * index / ticks
+            major = index % minor_per_ring == 0
+            half = major_len if major else minor_len
+            painter.setPen(major_pen if major else minor_pen)
+            for sign in (-1.0, 1.0):
+                x = c.x() + sign * offset
+                y = c.y() + sign * offset
+                painter.drawLine(QPointF(x, c.y() - half), QPointF(x, c.y() + half))
+                painter.drawLine(QPointF(c.x() - half, y), QPointF(c.x() + half, y))
+
+    def _paint_axis_labels(self, painter: QPainter, geo: _VialGeometry) -> None:
+        """Engrave "+X" and "+Y" on the bezel where those sides point."""
+        font = self._label_font(geo)
+        font.setBold(True)
+        font.setPixelSize(max(8, round((geo.outer_radius - geo.vial_radius) * 0.62)))
+        painter.setFont(font)
+        band = (geo.outer_radius + geo.vial_radius) / 2
+        size = (geo.outer_radius - geo.vial_radius) * 2
+        for text, direction in (("+X", QPointF(1, 0)), ("+Y", QPointF(0, -1))):
+            spot = geo.center + direction * band
+            box = QRectF(spot.x() - size, spot.y() - size / 2, size * 2, size)
+            painter.setPen(QColor(0, 0, 0, 150))
+            painter.drawText(box.translated(0, 1), Qt.AlignmentFlag.AlignCenter, text)
+            painter.setPen(QColor("#d5dae0"))
+            painter.drawText(box, Qt.AlignmentFlag.AlignCenter, text)
+
+    def _paint_level_ring(
+        self, painter: QPainter, geo: _VialGeometry, state: LevelState, color: QColor
+    ) -> None:
+        """The centre ring: just wider than the bubble by the tolerance, like a real vial."""
+        tolerance_px = self._tolerance_deg / self._full_scale_deg * geo.scale_radius
+        radius = min(geo.bubble_radius + tolerance_px + 1.5, geo.scale_radius)
+        width = max(1.5, geo.outer_radius / 90)
+        if state is LevelState.LEVEL:
+            glow = QRadialGradient(geo.center, radius + width * 3)
+            glow.setColorAt(0.75, _with_alpha(color, 0))
+            glow.setColorAt(0.9, _with_alpha(color, 60))
+            glow.setColorAt(1.0, _with_alpha(color, 0))
+            painter.setPen(Qt.PenStyle.NoPen)
+            painter.setBrush(glow)
+            painter.drawEllipse(geo.center, radius + width * 3, radius + width * 3)
+        alpha = 230 if state is LevelState.LEVEL else 170
+        painter.setBrush(Qt.BrushStyle.NoBrush)
+        painter.setPen(QPen(_with_alpha(color, alpha), width))
+        painter.drawEllipse(geo.center, radius, radius)
+
+    def _paint_reference(self, painter: QPainter, geo: _VialGeometry) -> None:
+        roll_deg, pitch_deg = self._reference or (0.0, 0.0)
+        spot = self._position(roll_deg, pitch_deg, geo)
+        color = _with_alpha(theme.TRACE_REFERENCE, 170)
+        pen = QPen(color, max(1.0, geo.outer_radius / 160), Qt.PenStyle.DashLine)
+        painter.setPen(pen)
+        painter.setBrush(Qt.BrushStyle.NoBrush)
+        painter.drawEllipse(spot, geo.bubble_radius, geo.bubble_radius)
+        arm = geo.bubble_radius * 0.35
+        painter.setPen(QPen(color, max(1.0, geo.outer_radius / 160)))
+        painter.drawLine(spot - QPointF(arm, 0), spot + QPointF(arm, 0))
+        painter.drawLine(spot - QPointF(0, arm), spot + QPointF(0, arm))
+
+    def _paint_bubble(
+        self, painter: QPainter, geo: _VialGeometry, center: QPointF, color: QColor
+    ) -> None:
+        r = geo.bubble_radius
+        # Meniscus: the liquid darkens in a thin ring around the bubble.
+        meniscus = QRadialGradient(center, r * 1.25)
+        meniscus.setColorAt(0.78, QColor(0, 0, 0, 0))
+        meniscus.setColorAt(0.86, QColor(0, 0, 0, 90))
+        meniscus.setColorAt(1.0, QColor(0, 0, 0, 0))
+        painter.setPen(Qt.PenStyle.NoPen)
+        painter.setBrush(meniscus)
+        painter.drawEllipse(center, r * 1.25, r * 1.25)
+        # The bubble: light and slightly translucent, tinted by the state colour.
+        body = QRadialGradient(center - QPointF(r * 0.3, r * 0.35), r * 1.35)
+        body.setColorAt(0.0, _with_alpha(_mix(color, "#ffffff", 0.9), 215))
+        body.setColorAt(0.45, _with_alpha(_mix(color, "#ffffff", 0.55), 160))
+        body.setColorAt(0.8, _with_alpha(_mix(color, "#ffffff", 0.2), 165))
+        body.setColorAt(1.0, _with_alpha(_mix(color, "#000000", 0.2), 210))
+        painter.setBrush(body)
+        painter.setPen(QPen(_with_alpha(_mix(color, "#ffffff", 0.55), 220), max(1.0, r / 14)))
+        painter.drawEllipse(center, r, r)
+        # Specular highlight, upper left.
+        highlight = QRadialGradient(center - QPointF(r * 0.38, r * 0.42), r * 0.42)
+        highlight.setColorAt(0.0, QColor(255, 255, 255, 230))
+        highlight.setColorAt(1.0, QColor(255, 255, 255, 0))
+        painter.setPen(Qt.PenStyle.NoPen)
+        painter.setBrush(highlight)
+        painter.drawEllipse(center - QPointF(r * 0.38, r * 0.42), r * 0.42, r * 0.42)
+        # Faint refracted light on the far side.
+        painter.setBrush(Qt.BrushStyle.NoBrush)
+        painter.setPen(QPen(QColor(255, 255, 255, 70), max(1.0, r / 12)))
+        painter.drawArc(
+            QRectF(center.x() - r * 0.78, center.y() - r * 0.78, r * 1.56, r * 1.56),
+            -80 * 16,
+            -70 * 16,
+        )
+
+    def _paint_over_range_arrow(
+        self, painter: QPainter, geo: _VialGeometry, bubble: QPointF
+    ) -> None:
+        """A red arrowhead on the bezel, pointing the way the bubble left the scale."""
+        direction = bubble - geo.center
+        length = math.hypot(direction.x(), direction.y())
+        if length == 0.0:
+            return
+        ux, uy = direction.x() / length, direction.y() / length
+        band = geo.outer_radius - geo.vial_radius
+        base_radius = geo.vial_radius + band * 0.15
+        tip_radius = geo.outer_radius - band * 0.05
+        half_width = band * 0.75
+        tip = geo.center + QPointF(ux, uy) * tip_radius
+        base = geo.center + QPointF(ux, uy) * base_radius
+        normal = QPointF(-uy, ux) * half_width
+        arrow = QPainterPath(tip)
+        arrow.lineTo(base + normal)
+        arrow.lineTo(base - normal)
+        arrow.closeSubpath()
+        painter.setPen(QPen(QColor("#2a0d0b"), 1.0))
+        painter.setBrush(QColor(theme.ALARM_RED))
+        painter.drawPath(arrow)
+
+    def _paint_sheen(self, painter: QPainter, geo: _VialGeometry) -> None:
+        """The curved glass: a soft reflection across the upper part of the vial."""
+        c, r = geo.center, geo.vial_radius
+        upper = QPainterPath()
+        upper.addEllipse(c, r * 0.94, r * 0.94)
+        cut = QPainterPath()
+        cut.addEllipse(QPointF(c.x() + r * 0.12, c.y() + r * 0.55), r * 1.25, r * 1.2)
+        reflection = upper.subtracted(cut)
+        shine = QLinearGradient(c - QPointF(0, r), c - QPointF(0, r * 0.2))
+        shine.setColorAt(0.0, QColor(255, 255, 255, 38))
+        shine.setColorAt(1.0, QColor(255, 255, 255, 0))
+        painter.setPen(Qt.PenStyle.NoPen)
+        painter.setBrush(QBrush(shine))
+        painter.drawPath(reflection)
+
+    def _paint_no_data(self, painter: QPainter, geo: _VialGeometry) -> None:
+        font = self._label_font(geo)
+        font.setPixelSize(max(11, round(geo.vial_radius * 0.11)))
+        font.setLetterSpacing(QFont.SpacingType.PercentageSpacing, 115)
+        painter.setFont(font)
+        metrics = QFontMetricsF(font)
+        text = "NO DATA"
+        width = metrics.horizontalAdvance(text) + metrics.height()
+        height = metrics.height() * 1.5
+        box = QRectF(geo.center.x() - width / 2, geo.center.y() - height / 2, width, height)
+        painter.setPen(QPen(_with_alpha(theme.TEXT_DIM, 120), 1.0))
+        painter.setBrush(QColor(14, 18, 21, 220))
+        painter.drawRoundedRect(box, 4, 4)
+        painter.setPen(QColor(theme.TEXT_DIM))
+        painter.drawText(box, Qt.AlignmentFlag.AlignCenter, text)
+
+    def _paint_range_caption(
+        self, painter: QPainter, geo: _VialGeometry, state: LevelState
+    ) -> None:
+        """Full-scale legend printed high on the glass ("OVER RANGE" in red when exceeded)."""
+        font = self._label_font(geo)
+        font.setLetterSpacing(QFont.SpacingType.PercentageSpacing, 108)
+        painter.setFont(font)
+        metrics = QFontMetricsF(font)
+        full_scale = f"{self._full_scale_deg:g}°"
+        if state is LevelState.OVER_RANGE:
+            text, color = f"OVER RANGE  > {full_scale}", QColor(theme.ALARM_RED)
+        else:
+            text, color = f"FULL SCALE ±{full_scale}", _with_alpha(theme.TEXT_DIM, 220)
+        width = metrics.horizontalAdvance(text) + metrics.height()
+        height = metrics.height() * 1.2
+        box = QRectF(
+            geo.center.x() - width / 2,
+            geo.center.y() - geo.scale_radius * 0.6 - height / 2,
+            width,
+            height,
+        )
+        # A plate of liquid colour, so crosshair and rings do not run through the letters.
+        painter.setPen(Qt.PenStyle.NoPen)
+        painter.setBrush(QColor(22, 31, 37, 235))
+        painter.drawRoundedRect(box, height / 2, height / 2)
+        painter.setPen(color)
+        painter.drawText(box, Qt.AlignmentFlag.AlignCenter, text)
+
+    def _label_font(self, geo: _VialGeometry) -> QFont:
+        font = QFont(self.font())
+        font.setPixelSize(max(9, round(geo.outer_radius * 0.058)))
+        return font
+
+
+class _VialGeometry:
+    """Pixel layout of the vial for a widget size: centre and radii."""
+
+    __slots__ = ("bubble_radius", "center", "outer_radius", "scale_radius", "vial_radius")
+
+    def __init__(self, width: int, height: int) -> None:
+        side = min(width, height)
+        self.center = QPointF(width / 2.0, height / 2.0)
+        self.outer_radius = side / 2.0 - max(2.0, side * 0.02)
+        self.vial_radius = self.outer_radius * (1.0 - _BEZEL_FRACTION)
+        self.bubble_radius = self.vial_radius * _BUBBLE_FRACTION
+        # Full scale puts the bubble against the wall of the vial.
+        self.scale_radius = self.vial_radius - self.bubble_radius - 1.0
+
+
+_STATE_COLORS: dict[LevelState, QColor] = {
+    LevelState.NO_DATA: QColor(theme.TEXT_DISABLED),
+    LevelState.LEVEL: QColor(theme.OK_GREEN),
+    LevelState.OFF_LEVEL: QColor(theme.WARN_AMBER),
+    LevelState.OVER_RANGE: QColor(theme.ALARM_RED),
+}

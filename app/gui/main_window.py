@@ -1,0 +1,377 @@
+"""The main window: device bar, bubble level with readouts, live plots and dockable panels."""
+
+from __future__ import annotations
+
+import time
+from urllib.parse import urlsplit
+
+from PySide6.QtCore import QSettings, Qt, QTimer
+from PySide6.QtGui import QAction, QCloseEvent, QKeySequence, QShowEvent
+from PySide6.QtWidgets import (
+    QComboBox,
+    QDockWidget,
+    QFrame,
+    QHBoxLayout,
+    QLabel,
+    QMainWindow,
+    QMessageBox,
+    QPlainTextEdit,
+    QPushButton,
+    QScrollArea,
+    QSizePolicy,
+    QToolButton,
+    QVBoxLayout,
+    QWidget,
+)
+
+from app import __version__
+from app.core.filters import DEFAULT_FILTER, FILTERS
+from app.gui import theme
+from app.gui.bubble_level import BubbleLevel
+from app.gui.device_bar import DeviceBar
+from app.gui.device_panel import DevicePanel
+from app.gui.filter_panel import FilterPanel
+from app.gui.plots import LivePlots
+from app.gui.presenter import UNIT_LABELS, LivePresenter
+from app.gui.readouts import TiltReadouts
+from app.gui.simulator_panel import SimulatorPanel
+from app.worker import DeviceSession, StreamStatus
+from drivers.base import DeviceInfo
+from drivers.registry import DEFAULT_DEVICE_URL, available_devices
+
+PLOT_WINDOWS_S = (2, 5, 10, 20, 30, 60)
+AVERAGING_S = (0.05, 0.2, 0.5, 1.0, 2.0, 5.0)
+LEVEL_RANGES_DEG = (0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 90.0)
+
+
+class ErrorBanner(QFrame):
+    """A dismissible one-line message across the top of the window."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setObjectName("errorBanner")
+        self.setStyleSheet(
+            f"#errorBanner {{ background: {theme.ALARM_RED}33; border: 1px solid {theme.ALARM_RED};"
+            " border-radius: 4px; }"
+        )
+        layout = QHBoxLayout(self)
+        layout.setContentsMargins(10, 4, 4, 4)
+        self.label = QLabel()
+        self.label.setWordWrap(True)
+        layout.addWidget(self.label, 1)
+        close = QToolButton()
+        close.setText("✕")
+        close.setAutoRaise(True)
+        close.clicked.connect(self.hide)
+        layout.addWidget(close)
+        self.hide()
+
+    def show_message(self, text: str) -> None:
+        self.label.setText(text)
+        self.show()
+
+
+class MainWindow(QMainWindow):
+    """The instrument window. It owns the device session and the live presenter."""
+
+    def __init__(
+        self,
+        session: DeviceSession,
+        settings: QSettings,
+        device_url: str | None = None,
+        filter_name: str | None = None,
+    ) -> None:
+        super().__init__()
+        self.session = session
+        self.settings = settings
+        self.setWindowTitle("Inclinometer")
+        self.setWindowIcon(theme.app_icon())
+        self.setDockOptions(
+            QMainWindow.DockOption.AnimatedDocks | QMainWindow.DockOption.AllowTabbedDocks
+        )
+
+        # Device bar.
+        self.device_bar = DeviceBar(self)
+        self.addToolBar(Qt.ToolBarArea.TopToolBarArea, self.device_bar)
+
+        # Central level view.
+        self.banner = ErrorBanner()
+        self.level = BubbleLevel()
+        self.readouts = TiltReadouts()
+        self.truth_label = QLabel()
+        self.truth_label.setObjectName("dimLabel")
+        self.truth_label.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self.setCentralWidget(self._build_level_view())
+
+        # Docks.
+        self.plots = LivePlots()
+        self.filter_panel = FilterPanel()
+        self.simulator_panel = SimulatorPanel()
+        self.device_panel = DevicePanel()
+        self.messages = QPlainTextEdit()
+        self.messages.setReadOnly(True)
+        self.messages.setMaximumBlockCount(2000)
+        self.docks: dict[str, QDockWidget] = {}
+        plots_host = self._build_plots_host()
+        self._add_dock("plots", "Live plots", plots_host, Qt.DockWidgetArea.BottomDockWidgetArea)
+        self._add_dock("filter", "Filter", self.filter_panel, Qt.DockWidgetArea.RightDockWidgetArea)
+        self._add_dock(
+            "simulator", "Simulator", self.simulator_panel, Qt.DockWidgetArea.RightDockWidgetArea
+        )
+        self._add_dock("device", "Device", self.device_panel, Qt.DockWidgetArea.RightDockWidgetArea)
+        self._add_dock("messages", "Messages", self.messages, Qt.DockWidgetArea.RightDockWidgetArea)
+        self.tabifyDockWidget(self.docks["filter"], self.docks["simulator"])
+        self.tabifyDockWidget(self.docks["simulator"], self.docks["device"])
+        self.tabifyDockWidget(self.docks["device"], self.docks["messages"])
+        self.docks["filter"].raise_()
+        self._default_layout_pending = True
+
+        # Status bar.
+        self.status_device = QLabel("No device")
+        self.status_rate = QLabel()
+        self.status_filter = QLabel()
+        self.status_fps = QLabel()
+        for widget in (self.status_device, self.status_rate, self.status_filter):
+            self.statusBar().addWidget(widget)
+        self.statusBar().addPermanentWidget(self.status_fps)
+
+        self._build_menus()
+
+        # Live presenter.
+        self.presenter = LivePresenter(
+            session, self.level, self.readouts, self.plots, self.truth_label, self
+        )
+        self.presenter.framesPerSecond.connect(
+            lambda fps: self.status_fps.setText(f"{fps:.0f} fps")
+        )
+
+        # Wiring: GUI -> session (queued to the worker) and worker -> GUI.
+        self.device_bar.connectRequested.connect(self.connect_device)
+        self.device_bar.disconnectRequested.connect(session.requestDisconnect)
+        self.device_bar.refreshRequested.connect(self.refresh_devices)
+        self.filter_panel.filterRequested.connect(session.requestFilter)
+        self.filter_panel.parameterChanged.connect(session.requestFilterParameter)
+        self.simulator_panel.deviceRequested.connect(self.connect_device)
+        self.simulator_panel.targetChanged.connect(session.requestSimulatorTarget)
+        worker = session.worker
+        worker.connected.connect(self._on_connected)
+        worker.disconnected.connect(self._on_disconnected)
+        worker.error.connect(self.show_error)
+        worker.status.connect(self._on_status)
+        worker.filterChanged.connect(self._on_filter_changed)
+
+        self._restore_settings()
+        self.refresh_devices()
+        chosen_filter = filter_name or str(self.settings.value("filter", DEFAULT_FILTER))
+        if chosen_filter not in FILTERS:
+            chosen_filter = DEFAULT_FILTER
+        session.requestFilter.emit(chosen_filter)
+        url = device_url or str(self.settings.value("device_url", DEFAULT_DEVICE_URL))
+        self.presenter.start()
+        self.connect_device(url)
+
+    # -- construction -----------------------------------------------------------------------
+    def _build_level_view(self) -> QWidget:
+        view = QWidget()
+        outer = QVBoxLayout(view)
+        outer.setContentsMargins(12, 8, 12, 8)
+        outer.addWidget(self.banner)
+        row = QHBoxLayout()
+        self.level.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
+        row.addWidget(self.level, 3)
+        side = QVBoxLayout()
+        side.addWidget(self.readouts)
+        controls = QHBoxLayout()
+        self.unit_combo = QComboBox()
+        for unit, label in (("deg", "degrees"), ("percent", "% grade"), ("mm/m", "mm/m")):
+            self.unit_combo.addItem(label, unit)
+        self.unit_combo.setToolTip("Units of roll, pitch and tilt")
+        self.averaging_combo = QComboBox()
+        for seconds in AVERAGING_S:
+            self.averaging_combo.addItem(f"avg {seconds:g} s", seconds)
+        self.averaging_combo.setToolTip("The readouts show the mean over this time")
+        self.range_combo = QComboBox()
+        for degrees in LEVEL_RANGES_DEG:
+            self.range_combo.addItem(f"±{degrees:g}°", degrees)
+        self.range_combo.setToolTip("Full scale of the bubble level")
+        self.hold_button = QPushButton("Hold")
+        self.hold_button.setCheckable(True)
+        self.hold_button.setShortcut(QKeySequence("H"))
+        self.hold_button.setToolTip("Freeze the readouts (H)")
+        self.hold_button.toggled.connect(lambda on: self.presenter.set_hold(on))
+        for widget in (self.unit_combo, self.averaging_combo, self.range_combo, self.hold_button):
+            controls.addWidget(widget)
+        side.addLayout(controls)
+        side.addStretch(1)
+        row.addLayout(side, 2)
+        outer.addLayout(row, 1)
+        outer.addWidget(self.truth_label)
+        return view
+
+    def _build_plots_host(self) -> QWidget:
+        host = QWidget()
+        layout = QVBoxLayout(host)
+        layout.setContentsMargins(4, 0, 4, 4)
+        bar = QHBoxLayout()
+        bar.addWidget(QLabel("Window"))
+        self.window_combo = QComboBox()
+        for seconds in PLOT_WINDOWS_S:
+            self.window_combo.addItem(f"{seconds} s", seconds)
+        self.window_combo.setCurrentIndex(self.window_combo.findData(10))
+        self.window_combo.currentIndexChanged.connect(
+            lambda _: self.plots.set_window(self.window_combo.currentData())
+        )
+        bar.addWidget(self.window_combo)
+        bar.addStretch(1)
+        layout.addLayout(bar)
+        layout.addWidget(self.plots, 1)
+        return host
+
+    def _add_dock(self, key: str, title: str, widget: QWidget, area: Qt.DockWidgetArea) -> None:
+        dock = QDockWidget(title, self)
+        dock.setObjectName(f"dock-{key}")
+        if area == Qt.DockWidgetArea.RightDockWidgetArea and not isinstance(widget, QPlainTextEdit):
+            # Panels scroll rather than forcing their full height on the window.
+            scroller = QScrollArea()
+            scroller.setWidgetResizable(True)
+            scroller.setFrameShape(QFrame.Shape.NoFrame)
+            scroller.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+            scroller.setWidget(widget)
+            widget = scroller
+        dock.setWidget(widget)
+        self.addDockWidget(area, dock)
+        self.docks[key] = dock
+
+    def _build_menus(self) -> None:
+        file_menu = self.menuBar().addMenu("&File")
+        quit_action = QAction("&Quit", self)
+        quit_action.setShortcut(QKeySequence.StandardKey.Quit)
+        quit_action.triggered.connect(self.close)
+        file_menu.addAction(quit_action)
+        view_menu = self.menuBar().addMenu("&View")
+        for dock in self.docks.values():
+            view_menu.addAction(dock.toggleViewAction())
+        help_menu = self.menuBar().addMenu("&Help")
+        about = QAction("&About Inclinometer", self)
+        about.triggered.connect(self._show_about)
+        help_menu.addAction(about)
+
+    # -- actions ----------------------------------------------------------------------------
+    def connect_device(self, url: str) -> None:
+        """Ask the worker to open ``url`` (any open device is closed first)."""
+        self.banner.hide()
+        self.device_bar.select_url(url)
+        self.device_bar.set_state("connecting", f"Connecting to {url}…")
+        self.session.requestConnect.emit(url)
+
+    def refresh_devices(self) -> None:
+        devices = available_devices()
+        self.device_bar.set_devices(devices)
+        self.simulator_panel.set_scenarios([d for d in devices if d.kind == "simulator"])
+
+    def show_error(self, message: str) -> None:
+        self.banner.show_message(message)
+        self.log(message, error=True)
+
+    def log(self, message: str, error: bool = False) -> None:
+        stamp = time.strftime("%H:%M:%S")
+        self.messages.appendPlainText(f"{stamp}  {'ERROR  ' if error else ''}{message}")
+
+    # -- worker events ----------------------------------------------------------------------
+    def _on_connected(self, info: DeviceInfo) -> None:
+        self.device_bar.select_url(info.url)
+        self.device_bar.set_state("streaming", "Streaming")
+        self.device_panel.show_info(info)
+        self.status_device.setText(f"{info.name}  ·  {info.odr_hz:.1f} Hz")
+        is_sim = urlsplit(info.url).scheme == "sim"
+        if is_sim:
+            self.simulator_panel.show_url(info.url)
+        else:
+            self.simulator_panel.set_interactive(False)
+        self.settings.setValue("device_url", info.url)
+        self.log(f"Connected to {info.name} ({info.url}), id {info.unique_id}")
+
+    def _on_disconnected(self, reason: str) -> None:
+        if reason:
+            self.device_bar.set_state("error", "Disconnected: error")
+        else:
+            self.device_bar.set_state("disconnected", "Disconnected")
+        self.status_device.setText("No device")
+        self.status_rate.setText("")
+        self.simulator_panel.set_interactive(False)
+        self.log("Disconnected" + (f": {reason}" if reason else ""))
+
+    def _on_status(self, status: StreamStatus) -> None:
+        stalled = status.measured_rate_hz <= 0.0 and status.samples > 0
+        lost = f"  ·  lost {status.lost_samples:,}" if status.lost_samples else ""
+        text = f"{status.measured_rate_hz:.1f} Hz{lost}"
+        self.device_bar.set_state("stalled" if stalled else "streaming", text)
+        self.status_rate.setText(
+            f"{status.samples:,} samples  ·  lost {status.lost_samples:,}  ·  "
+            f"pipeline {100 * status.pipeline_load:.1f} %"
+        )
+        self.device_panel.show_status(status)
+
+    def _on_filter_changed(self, name: str, values: dict) -> None:
+        self.filter_panel.show_filter(name, values)
+        self.status_filter.setText(f"Filter: {FILTERS[name].title}")
+        self.settings.setValue("filter", name)
+
+    def _on_display_changed(self) -> None:
+        self.presenter.settings.unit = self.unit_combo.currentData()
+        self.presenter.settings.averaging_s = self.averaging_combo.currentData()
+        self.level.setRange(self.range_combo.currentData())
+        self.presenter.refresh()
+        self.settings.setValue("unit", self.presenter.settings.unit)
+        self.settings.setValue("averaging_s", self.presenter.settings.averaging_s)
+        self.settings.setValue("range_deg", self.range_combo.currentData())
+
+    def _show_about(self) -> None:
+        QMessageBox.about(
+            self, "About Inclinometer",
+            f"<b>Inclinometer {__version__}</b><br>LSM6DSOX tilt meter and IMU workbench.<br>"
+            f"Units: {', '.join(UNIT_LABELS.values())}.",
+        )
+
+    # -- settings ---------------------------------------------------------------------------
+    def _restore_settings(self) -> None:
+        geometry = self.settings.value("geometry")
+        if geometry is not None:
+            self.restoreGeometry(geometry)
+        else:
+            self.resize(1280, 860)
+        state = self.settings.value("window_state")
+        if state is not None:
+            self.restoreState(state)
+        for combo, key, default in (
+            (self.unit_combo, "unit", "deg"),
+            (self.averaging_combo, "averaging_s", 0.5),
+            (self.range_combo, "range_deg", 5.0),
+        ):
+            try:
+                index = combo.findData(type(default)(self.settings.value(key, default)))
+            except (TypeError, ValueError):
+                index = -1
+            combo.setCurrentIndex(index if index >= 0 else combo.findData(default))
+            combo.currentIndexChanged.connect(self._on_display_changed)
+        self._on_display_changed()
+
+    def showEvent(self, event: QShowEvent) -> None:
+        super().showEvent(event)
+        if self._default_layout_pending:
+            self._default_layout_pending = False
+            if self.settings.value("window_state") is None:
+                # Dock sizes only stick once the window has its final size.
+                QTimer.singleShot(0, self._apply_default_layout)
+
+    def _apply_default_layout(self) -> None:
+        height = max(300, int(self.height() * 0.45))
+        self.resizeDocks([self.docks["filter"]], [360], Qt.Orientation.Horizontal)
+        self.resizeDocks([self.docks["plots"]], [height], Qt.Orientation.Vertical)
+
+    def closeEvent(self, event: QCloseEvent) -> None:
+        self.presenter.stop()
+        self.settings.setValue("geometry", self.saveGeometry())
+        self.settings.setValue("window_state", self.saveState())
+        self.session.shutdown()
+        super().closeEvent(event)

@@ -1,0 +1,118 @@
+"""Live strip charts: acceleration, angular rate and angles against time.
+
+The widget only draws arrays it is handed (:meth:`LivePlots.set_data`); the presenter pulls
+them from the ring buffers. pyqtgraph does the heavy lifting: clip-to-view, automatic peak
+downsampling and no per-point finiteness checks on finite data.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QVBoxLayout, QWidget
+
+from app.gui import theme
+
+pg.setConfigOptions(antialias=False, background=theme.BASE_BG, foreground=theme.TEXT_DIM)
+
+
+def _make_plot(title: str, unit: str) -> pg.PlotItem:
+    plot = pg.PlotItem()
+    plot.setLabel("left", title, units=unit)
+    plot.getAxis("left").setWidth(62)
+    plot.showGrid(x=True, y=True, alpha=0.25)
+    plot.setClipToView(True)
+    plot.setDownsampling(auto=True, mode="peak")
+    plot.setMouseEnabled(x=False, y=True)
+    plot.hideButtons()
+    legend = plot.addLegend(offset=(-8, 4), labelTextSize="8pt", colCount=4)
+    legend.setBrush(pg.mkBrush(theme.PANEL_BG + "c0"))
+    return plot
+
+
+class LivePlots(QWidget):
+    """Three stacked, x-linked plots. Times are given relative to the newest sample (<= 0)."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self._window_s = 10.0
+        self.graphics = pg.GraphicsLayoutWidget()
+        self.graphics.ci.setSpacing(2)
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(self.graphics)
+
+        self.accel_plot = _make_plot("accel", "g")
+        self.gyro_plot = _make_plot("rate", "°/s")
+        self.angle_plot = _make_plot("angle", "°")
+        for row, plot in enumerate((self.accel_plot, self.gyro_plot, self.angle_plot)):
+            self.graphics.addItem(plot, row=row, col=0)
+            if plot is not self.accel_plot:
+                plot.setXLink(self.accel_plot)
+        self.angle_plot.setLabel("bottom", "time", units="s")
+        for plot in (self.accel_plot, self.gyro_plot):
+            plot.getAxis("bottom").setStyle(showValues=False)
+            plot.getAxis("bottom").setHeight(4)
+
+        def pen(color: str, style: Qt.PenStyle = Qt.PenStyle.SolidLine) -> pg.QtGui.QPen:
+            return pg.mkPen(color, width=1, style=style)
+
+        axes = ("x", "y", "z")
+        self.accel_curves = [
+            self.accel_plot.plot(pen=pen(c), name=a) for c, a in zip(theme.AXIS_COLORS, axes)
+        ]
+        self.gyro_curves = [
+            self.gyro_plot.plot(pen=pen(c), name=a) for c, a in zip(theme.AXIS_COLORS, axes)
+        ]
+        self.angle_curves = {
+            "roll": self.angle_plot.plot(pen=pen(theme.TRACE_ROLL), name="roll"),
+            "pitch": self.angle_plot.plot(pen=pen(theme.TRACE_PITCH), name="pitch"),
+            "ref_roll": self.angle_plot.plot(
+                pen=pen(theme.TRACE_ROLL, Qt.PenStyle.DashLine), name="true roll"
+            ),
+            "ref_pitch": self.angle_plot.plot(
+                pen=pen(theme.TRACE_PITCH, Qt.PenStyle.DashLine), name="true pitch"
+            ),
+        }
+        self.set_window(self._window_s)
+
+    def set_window(self, seconds: float) -> None:
+        """Show the last ``seconds`` of data."""
+        self._window_s = float(seconds)
+        self.accel_plot.setXRange(-self._window_s, 0.0, padding=0.0)
+
+    @property
+    def window_s(self) -> float:
+        return self._window_s
+
+    def clear(self) -> None:
+        for curve in (*self.accel_curves, *self.gyro_curves, *self.angle_curves.values()):
+            curve.setData([], [])
+
+    def set_data(
+        self,
+        t_rel: np.ndarray,
+        accel_g: np.ndarray,
+        gyro_dps: np.ndarray,
+        angles_t_rel: np.ndarray,
+        angles: dict[str, np.ndarray],
+    ) -> None:
+        """Replace every curve: times (N,) relative to now and vectors (N, 3) for the sensor
+        plots; times (M,) and traces (M,) for the angle plot.
+
+        Angle traces missing from ``angles`` (or NaN at the newest sample: no reference) are
+        hidden.
+        """
+        for axis, curve in enumerate(self.accel_curves):
+            curve.setData(t_rel, accel_g[:, axis], skipFiniteCheck=True)
+        for axis, curve in enumerate(self.gyro_curves):
+            curve.setData(t_rel, gyro_dps[:, axis], skipFiniteCheck=True)
+        for name, curve in self.angle_curves.items():
+            values = angles.get(name)
+            visible = values is not None and len(values) > 0 and bool(np.isfinite(values[-1]))
+            curve.setVisible(visible)
+            if visible:
+                curve.setData(angles_t_rel, values, skipFiniteCheck=True)
+            elif curve.xData is not None and len(curve.xData):
+                curve.setData([], [])

@@ -1,0 +1,236 @@
+"""The device worker: one long-lived object on its own QThread (QtCore only, no widgets).
+
+The GUI talks to it only through queued signals; it reads the device, runs the pipeline and
+reports status a few times a second. Samples never travel through signals: the views pull
+them from the pipeline's ring buffers on their own timer.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+import traceback
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+from PySide6.QtCore import QMetaObject, QObject, Qt, QThread, QTimer, Signal, Slot
+
+from app.core.pipeline import Pipeline
+from drivers.base import Device, DeviceInfo
+from drivers.errors import DeviceError
+from drivers.registry import create_device
+
+log = logging.getLogger(__name__)
+
+READ_TIMEOUT_S = 0.05
+STATUS_INTERVAL_MS = 250
+RATE_WINDOW_S = 2.0
+
+
+@dataclass(frozen=True, slots=True)
+class StreamStatus:
+    """Figures the status bar shows, sent a few times per second."""
+
+    url: str
+    measured_rate_hz: float
+    samples: int
+    lost_samples: int
+    gaps: int
+    pipeline_load: float
+    """Fraction of one core the pipeline used over the last interval."""
+
+
+class DeviceWorker(QObject):
+    """Owns the open device and the pipeline; lives on the worker thread."""
+
+    connected = Signal(object)  # DeviceInfo
+    disconnected = Signal(str)  # the reason, "" when the user asked
+    error = Signal(str)
+    status = Signal(object)  # StreamStatus
+    filterChanged = Signal(str, dict)  # name, parameter values
+
+    def __init__(self, pipeline: Pipeline) -> None:
+        super().__init__()
+        self.pipeline = pipeline
+        self._device: Device | None = None
+        self._poll_timer: QTimer | None = None
+        self._status_timer: QTimer | None = None
+        self._rate_history: deque[tuple[float, int]] = deque()
+        self._last_cpu = (time.monotonic(), 0.0)
+
+    # -- lifecycle (worker thread) ----------------------------------------------------------
+    @Slot()
+    def start(self) -> None:
+        """Create the timers in the worker thread and compile the filter."""
+        self._poll_timer = QTimer(self)
+        self._poll_timer.setInterval(0)
+        self._poll_timer.timeout.connect(self._poll)
+        self._status_timer = QTimer(self)
+        self._status_timer.setInterval(STATUS_INTERVAL_MS)
+        self._status_timer.timeout.connect(self._emit_status)
+        self.pipeline.filter.warm_up()
+
+    @Slot()
+    def shutdown(self) -> None:
+        """Close the device and stop the timers (before the thread quits)."""
+        self._close_device("")
+        for timer in (self._poll_timer, self._status_timer):
+            if timer is not None:
+                timer.stop()
+
+    # -- commands from the GUI --------------------------------------------------------------
+    @Slot(str)
+    def connect_device(self, url: str) -> None:
+        """Close any open device, then open ``url`` and start streaming."""
+        self._close_device("")
+        try:
+            device = create_device(url)
+            info = device.open()
+        except DeviceError as exc:
+            self.error.emit(str(exc))
+            self.disconnected.emit(str(exc))
+            return
+        except Exception as exc:  # a driver bug must not take the app down
+            log.exception("opening %s failed", url)
+            self.error.emit(f"{url}: unexpected error while opening: {exc!r}")
+            self.disconnected.emit(str(exc))
+            return
+        self._device = device
+        self.pipeline.configure(info.odr_hz)
+        self._rate_history.clear()
+        self._last_cpu = (time.monotonic(), self.pipeline.counters.filter_cpu_s)
+        assert self._poll_timer is not None and self._status_timer is not None
+        self._poll_timer.start()
+        self._status_timer.start()
+        self.connected.emit(info)
+
+    @Slot()
+    def disconnect_device(self) -> None:
+        self._close_device("")
+
+    @Slot(str)
+    def set_filter(self, name: str) -> None:
+        try:
+            new_filter = self.pipeline.set_filter(name)
+        except (KeyError, ValueError) as exc:
+            self.error.emit(str(exc))
+            return
+        self.filterChanged.emit(new_filter.name, new_filter.parameter_values())
+
+    @Slot(str, object)
+    def set_filter_parameter(self, name: str, value: Any) -> None:
+        try:
+            self.pipeline.set_filter_parameter(name, value)
+        except (KeyError, ValueError) as exc:
+            self.error.emit(str(exc))
+            return
+        current = self.pipeline.filter
+        self.filterChanged.emit(current.name, current.parameter_values())
+
+    @Slot(float, float)
+    def set_simulator_target(self, roll_deg: float, pitch_deg: float) -> None:
+        """Tilt an interactive simulator (ignored by devices that cannot be tilted)."""
+        setter = getattr(self._device, "set_target_attitude", None)
+        if setter is not None:
+            setter(roll_deg, pitch_deg)
+
+    # -- streaming --------------------------------------------------------------------------
+    def _poll(self) -> None:
+        device = self._device
+        if device is None:
+            return
+        try:
+            raw = device.read(READ_TIMEOUT_S)
+            if raw is not None and len(raw):
+                self.pipeline.process(raw)
+        except DeviceError as exc:
+            self.error.emit(str(exc))
+            self._close_device(str(exc))
+        except Exception as exc:
+            log.error("pipeline failure:\n%s", traceback.format_exc())
+            message = f"{device.url}: processing failed ({exc!r}); the device was disconnected"
+            self.error.emit(message)
+            self._close_device(message)
+
+    def _emit_status(self) -> None:
+        device = self._device
+        if device is None:
+            return
+        now = time.monotonic()
+        counters = self.pipeline.counters
+        history = self._rate_history
+        history.append((now, counters.samples))
+        while len(history) > 2 and now - history[0][0] > RATE_WINDOW_S:
+            history.popleft()
+        span = history[-1][0] - history[0][0]
+        rate = (history[-1][1] - history[0][1]) / span if span > 0 else 0.0
+        last_time, last_cpu = self._last_cpu
+        load = (counters.filter_cpu_s - last_cpu) / max(now - last_time, 1e-9)
+        self._last_cpu = (now, counters.filter_cpu_s)
+        self.status.emit(
+            StreamStatus(
+                url=device.url, measured_rate_hz=rate, samples=counters.samples,
+                lost_samples=counters.lost_samples, gaps=counters.gaps, pipeline_load=load,
+            )
+        )
+
+    def _close_device(self, reason: str) -> None:
+        device, self._device = self._device, None
+        for timer in (self._poll_timer, self._status_timer):
+            if timer is not None:
+                timer.stop()
+        if device is None:
+            return
+        try:
+            device.close()
+        except DeviceError as exc:
+            log.warning("closing %s: %s", device.url, exc)
+        self.disconnected.emit(reason)
+
+
+class DeviceSession(QObject):
+    """The GUI-side handle: starts the worker thread and forwards requests to it.
+
+    Every request is a queued signal, so the GUI thread never blocks on the device.
+    """
+
+    requestConnect = Signal(str)
+    requestDisconnect = Signal()
+    requestFilter = Signal(str)
+    requestFilterParameter = Signal(str, object)
+    requestSimulatorTarget = Signal(float, float)
+
+    def __init__(self, pipeline: Pipeline | None = None, parent: QObject | None = None) -> None:
+        super().__init__(parent)
+        self.pipeline = pipeline or Pipeline()
+        self.worker = DeviceWorker(self.pipeline)
+        self.thread = QThread()
+        self.thread.setObjectName("device-worker")
+        self.worker.moveToThread(self.thread)
+        self.thread.started.connect(self.worker.start)
+        self.requestConnect.connect(self.worker.connect_device)
+        self.requestDisconnect.connect(self.worker.disconnect_device)
+        self.requestFilter.connect(self.worker.set_filter)
+        self.requestFilterParameter.connect(self.worker.set_filter_parameter)
+        self.requestSimulatorTarget.connect(self.worker.set_simulator_target)
+        self.device_info: DeviceInfo | None = None
+        self.worker.connected.connect(self._on_connected)
+        self.worker.disconnected.connect(self._on_disconnected)
+        self.thread.start()
+
+    def _on_connected(self, info: DeviceInfo) -> None:
+        self.device_info = info
+
+    def _on_disconnected(self, _reason: str) -> None:
+        self.device_info = None
+
+    def shutdown(self) -> None:
+        """Close the device and stop the thread; blocks until the thread has finished."""
+        if not self.thread.isRunning():
+            return
+        # Runs in the worker thread, after whatever slot is in progress (at most one read).
+        blocking = Qt.ConnectionType.BlockingQueuedConnection
+        QMetaObject.invokeMethod(self.worker, "shutdown", blocking)
+        self.thread.quit()
+        self.thread.wait()

@@ -1,0 +1,1 @@
+"""Package data (stylesheets, icons) loaded through :mod:`importlib.resources`."""

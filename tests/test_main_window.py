@@ -1,0 +1,93 @@
+"""The main window, driven like a user would: it shows live data, switches and survives errors."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+from PySide6.QtCore import QSettings
+
+from app.gui import theme
+from app.gui.main_window import MainWindow
+from app.worker import DeviceSession
+
+TIMEOUT_MS = 15_000
+
+
+@pytest.fixture
+def window(qtbot, qapp, tmp_path):
+    theme.apply_theme(qapp)
+    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+    session = DeviceSession()
+    window = MainWindow(session, settings, "sim://wobble?odr=208&seed=3")
+    qtbot.addWidget(window)
+    window.resize(1280, 860)
+    window.show()
+    qtbot.waitUntil(lambda: session.device_info is not None, timeout=TIMEOUT_MS)
+    yield window
+    window.close()
+
+
+def curve_points(curve) -> int:
+    return 0 if curve.xData is None else len(curve.xData)
+
+
+def test_window_shows_live_data(qtbot, window, artifacts_dir):
+    pipeline = window.session.pipeline
+    qtbot.waitUntil(lambda: pipeline.counters.samples > 600, timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: window.level.isValid(), timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: curve_points(window.plots.accel_curves[2]) > 300, timeout=TIMEOUT_MS)
+    assert window.readouts.isEnabled()
+    assert "Streaming" in window.device_bar.status_label.text() or "Hz" in (
+        window.device_bar.status_label.text()
+    )
+    # The angle plot shows the estimate and the simulator's truth.
+    assert window.plots.angle_curves["roll"].isVisible()
+    assert window.plots.angle_curves["ref_roll"].isVisible()
+    assert window.truth_label.text().startswith("Simulator truth")
+    path = os.path.join(artifacts_dir, "main_window.png")
+    assert window.grab().save(path)
+
+
+def test_filter_switch_from_the_panel(qtbot, window):
+    panel = window.filter_panel
+    qtbot.waitUntil(lambda: panel.current_filter == "complementary", timeout=TIMEOUT_MS)
+    index = panel.combo.findData("accel")
+    with qtbot.waitSignal(window.session.worker.filterChanged, timeout=TIMEOUT_MS):
+        panel.combo.setCurrentIndex(index)
+        panel.combo.activated.emit(index)
+    assert window.session.pipeline.filter.name == "accel"
+    qtbot.waitUntil(lambda: "Accelerometer" in window.status_filter.text(), timeout=TIMEOUT_MS)
+
+
+def test_interactive_simulator_follows_the_sliders(qtbot, window):
+    with qtbot.waitSignal(window.session.worker.connected, timeout=TIMEOUT_MS):
+        window.connect_device("sim://interactive?odr=208")
+    assert window.simulator_panel.roll_slider.isEnabled()
+    window.simulator_panel.set_target(12.0, -7.0, emit=True)
+    orientation = lambda: window.session.pipeline.orientation.latest(1)  # noqa: E731
+    qtbot.waitUntil(lambda: abs(orientation()["ref_roll"][0] - 12.0) < 0.01, timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: abs(window.level.roll() - 12.0) < 2.0, timeout=TIMEOUT_MS)
+
+
+def test_device_failure_shows_a_banner_and_the_app_keeps_running(qtbot, window):
+    with qtbot.waitSignal(window.session.worker.disconnected, timeout=TIMEOUT_MS):
+        window.connect_device("sim://static?fail_after=0.3")
+    qtbot.waitUntil(lambda: window.banner.isVisible(), timeout=TIMEOUT_MS)
+    assert "unplugged" in window.banner.label.text()
+    assert "error" in window.device_bar.status_label.text().lower()
+    assert "unplugged" in window.messages.toPlainText()
+    # Reconnecting clears the banner and streams again.
+    with qtbot.waitSignal(window.session.worker.connected, timeout=TIMEOUT_MS):
+        window.connect_device("sim://static")
+    assert not window.banner.isVisible()
+
+
+def test_display_units_and_hold(qtbot, window):
+    window.unit_combo.setCurrentIndex(window.unit_combo.findData("mm/m"))
+    assert window.presenter.settings.unit == "mm/m"
+    qtbot.waitUntil(lambda: window.level.isValid(), timeout=TIMEOUT_MS)
+    window.hold_button.setChecked(True)
+    assert window.presenter.settings.hold
+    window.range_combo.setCurrentIndex(window.range_combo.findData(30.0))
+    assert window.level.fullScale() == 30.0
