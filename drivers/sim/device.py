@@ -1,0 +1,276 @@
+"""A simulated LSM6DSOX: a seed-picked chip with realistic errors, moved by a scenario.
+
+URL: ``sim://SCENARIO?key=value&...``, for example ``sim://wobble?odr=416&seed=7``.
+
+Scenarios (:data:`SCENARIOS`): static, slow-tilt, wobble, vibration, translation, tour,
+interactive. Options every scenario accepts:
+
+- ``odr`` Hz, snapped to the nearest LSM6DSOX rate 12.5 ... 6667 (default 104)
+- ``accel_fs`` 2/4/8/16 g (default 4), ``gyro_fs`` 125/250/500/1000/2000 dps (default 250)
+- ``seed`` integer >= 0 (default 1): picks the simulated *unit*, its unique id and errors
+- ``realtime`` 1 (default): paced by the wall clock; 0: each read returns ``block`` samples
+  (default 256) at once
+- ``errors`` 0: an ideal chip; ``noise`` 0: no white noise (quantisation stays)
+- ``fail_after`` seconds of device time, after which reads raise ``DeviceIOError`` as if the
+  cable had been unplugged
+
+plus the scenario's own options (``SCENARIOS[name].parameters``), such as ``roll``/``pitch``.
+
+Time: the chip's oscillator runs at the nominal rate times its trim (``odr_hz`` in the
+:class:`DeviceInfo`, what the chip reports) times a small untrimmed residual (``true_odr_hz``).
+``t_s`` counts samples in trimmed periods, as the device's own timestamps would; the scenario
+is evaluated at true time (sample index / ``true_odr_hz``), which in realtime mode is the wall
+clock since :meth:`open`.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable
+from typing import ClassVar
+
+import numpy as np
+
+from app import __version__
+from app.core import quaternion as quat
+from app.core.orientation import quaternion_from_roll_pitch
+from app.core.samples import RawBlock, ScaleFactors
+from drivers import lsm6dsox
+from drivers.base import Device, DeviceDescriptor, DeviceInfo
+from drivers.errors import DeviceError, DeviceIOError
+from drivers.sim.error_model import (
+    REFERENCE_TEMP_DEGC,
+    STREAM_SCENARIO,
+    MeasurementModel,
+    UnitErrors,
+    unique_id_for_seed,
+)
+from drivers.sim.options import SimOptions, parse_sim_url
+from drivers.sim.scenarios import SCENARIOS, Interactive, Scenario
+
+__all__ = ["SCENARIOS", "SimulatedDevice"]
+
+FIFO_SPAN_S = 1.0
+"""A reader more than this far behind loses the excess (the chip's FIFO would overflow)."""
+MIN_BLOCK_S = 0.020
+"""Realtime reads wait for at least this much data (and at least one sample)."""
+GENERATION_CHUNK = 1024
+"""Samples computed at a time inside one block."""
+_GRAVITY_EARTH = np.array([0.0, 0.0, lsm6dsox.STANDARD_GRAVITY_M_S2])
+
+
+class SimulatedDevice(Device):
+    """The simulator behind ``sim://`` URLs (see the module docstring for the options).
+
+    Parameters
+    ----------
+    url : ``sim://SCENARIO?options``.
+    clock : wall clock in seconds for realtime pacing (tests may pass a fake one).
+    **overrides : URL options given as Python values (``realtime=False``, ``odr=416``); they win
+        over the URL's query.
+
+    Attributes
+    ----------
+    options : the validated URL options.
+    unit_errors : the true errors of this unit (ideal when ``errors=0``): what a calibration
+        should find.
+    scenario : the true motion; ``scenario.motion(t)`` gives it at true times ``t``.
+    """
+
+    scheme: ClassVar[str] = "sim"
+
+    def __init__(
+        self, url: str, *, clock: Callable[[], float] = time.monotonic, **overrides: object
+    ) -> None:
+        super().__init__(url)
+        self.options: SimOptions = parse_sim_url(url, overrides)
+        unit = UnitErrors.draw(self.options.seed)
+        self.unit_errors: UnitErrors = unit if self.options.errors else unit.without_errors()
+        self.unique_id = unique_id_for_seed(self.options.seed)
+        self.scenario: Scenario = self._new_scenario()
+        self._clock = clock
+        self._stop = threading.Event()
+        self._generation_lock = threading.Lock()
+        self._opened_before = False
+        self._start_wall_s = 0.0
+        self._next_index = 0
+        self._measurement = self._new_measurement()
+        self.scale = ScaleFactors(
+            accel_m_s2_per_lsb=self._measurement.accel_lsb_m_s2,
+            gyro_rad_s_per_lsb=self._measurement.gyro_lsb_rad_s,
+            temp_degc_per_lsb=1.0 / lsm6dsox.TEMP_LSB_PER_DEGC,
+            temp_offset_degc=lsm6dsox.TEMP_OFFSET_DEGC,
+        )
+
+    # -- what the GUI and tests use ------------------------------------------------------------
+    @property
+    def odr_hz(self) -> float:
+        """The trimmed output data rate the chip reports (nominal x trim)."""
+        return self.options.odr_nominal_hz * self.unit_errors.clock_trim_factor
+
+    @property
+    def true_odr_hz(self) -> float:
+        """The real sample rate: the trimmed rate with the untrimmed residual."""
+        return self.odr_hz * (1.0 + self.unit_errors.clock_residual)
+
+    @property
+    def measurement(self) -> MeasurementModel:
+        """Noise levels, LSB sizes and the current bias random-walk state."""
+        return self._measurement
+
+    @property
+    def is_interactive(self) -> bool:
+        """True when :meth:`set_target_attitude` can move the sensor."""
+        return isinstance(self.scenario, Interactive)
+
+    def set_target_attitude(self, roll_deg: float, pitch_deg: float, yaw_deg: float = 0.0) -> float:
+        """Tilt the virtual sensor (``sim://interactive`` only). Thread-safe.
+
+        The true attitude glides from where it is now to the target, so the gyroscope and the
+        accelerometer stay consistent. Returns the glide time in seconds.
+        """
+        if not self.is_interactive:
+            raise DeviceError(f"{self.url}: only sim://interactive can be tilted from the program")
+        target = quaternion_from_roll_pitch(roll_deg, pitch_deg, yaw_deg)
+        with self._generation_lock:
+            scenario = self.scenario
+            assert isinstance(scenario, Interactive)
+            t_start = self._next_index / self.true_odr_hz
+            if self.options.realtime and self.is_open:
+                t_start = max(t_start, self._clock() - self._start_wall_s)
+            return scenario.set_target(t_start, target)
+
+    @classmethod
+    def discover(cls) -> list[DeviceDescriptor]:
+        """One entry per scenario (the simulator is always available)."""
+        return [
+            DeviceDescriptor(f"sim://{name}", f"Simulated LSM6DSOX: {sc.description}", "simulator")
+            for name, sc in SCENARIOS.items()
+        ]
+
+    # -- Device template -----------------------------------------------------------------------
+    def _open(self) -> DeviceInfo:
+        with self._generation_lock:
+            if self._opened_before:
+                self.scenario = self._new_scenario()
+                self._measurement = self._new_measurement()
+            self._opened_before = True
+            self._next_index = 0
+            self._stop.clear()
+            self._start_wall_s = self._clock()
+        opts = self.options
+        return DeviceInfo(
+            url=self.url,
+            name=f"Simulated LSM6DSOX ({opts.scenario})",
+            unique_id=self.unique_id,
+            sensor="LSM6DSOX",
+            odr_hz=self.odr_hz,
+            odr_nominal_hz=opts.odr_nominal_hz,
+            accel_fs_g=opts.accel_fs_g,
+            gyro_fs_dps=opts.gyro_fs_dps,
+            firmware=f"simulator {__version__}",
+            extra={
+                "scenario": opts.scenario,
+                "scenario_params": dict(self.scenario.params),
+                "seed": opts.seed,
+                "errors": opts.errors,
+                "noise": opts.noise,
+                "realtime": opts.realtime,
+            },
+        )
+
+    def _read(self, timeout_s: float) -> RawBlock | None:
+        if self._stop.is_set():
+            return None
+        limit = self._sample_limit()
+        if self._next_index >= limit:
+            raise DeviceIOError(
+                f"{self.url}: simulated cable unplugged after {self.options.fail_after_s:g} s "
+                "of device time (fail_after option)"
+            )
+        if not self.options.realtime:
+            return self._generate(min(self.options.block, limit - self._next_index), 0)
+        due = self._wait_for_samples(timeout_s)
+        if due <= 0:
+            return None
+        due = min(due, limit - self._next_index)
+        capacity = max(1, round(FIFO_SPAN_S * self.true_odr_hz))
+        lost = max(0, due - capacity)
+        return self._generate(due - lost, lost)
+
+    def _close(self) -> None:
+        self._stop.set()
+
+    # -- internals ---------------------------------------------------------------------------
+    def _new_scenario(self) -> Scenario:
+        rng = np.random.default_rng([self.options.seed, STREAM_SCENARIO])
+        return SCENARIOS[self.options.scenario](rng, **self.options.scenario_params)
+
+    def _new_measurement(self) -> MeasurementModel:
+        return MeasurementModel(
+            self.unit_errors,
+            self.options.accel_fs_g,
+            self.options.gyro_fs_dps,
+            self.odr_hz,
+            white_noise=self.options.noise,
+        )
+
+    def _sample_limit(self) -> int:
+        """Index of the first sample never delivered (fail_after), or a huge number."""
+        if self.options.fail_after_s is None:
+            return np.iinfo(np.int64).max
+        return math.ceil(self.options.fail_after_s * self.odr_hz)
+
+    def _due(self) -> int:
+        """Samples whose true time has come and that were not generated yet."""
+        elapsed = self._clock() - self._start_wall_s
+        return math.floor(elapsed * self.true_odr_hz + 1e-9) + 1 - self._next_index
+
+    def _wait_for_samples(self, timeout_s: float) -> int:
+        due = self._due()
+        wanted = max(1, math.ceil(MIN_BLOCK_S * self.true_odr_hz))
+        if due < wanted:
+            ready_at = self._start_wall_s + (self._next_index + wanted - 1) / self.true_odr_hz
+            wait_s = min(max(0.0, timeout_s), ready_at - self._clock())
+            if wait_s > 0.0 and self._stop.wait(wait_s):
+                return 0
+            due = self._due()
+        return due
+
+    def _generate(self, n: int, lost: int) -> RawBlock:
+        accel_raw = np.empty((n, 3), dtype=np.int16)
+        gyro_raw = np.empty((n, 3), dtype=np.int16)
+        temp_degc = np.empty(n)
+        reference = np.empty((n, 4))
+        with self._generation_lock:
+            self._next_index += lost
+            first = self._next_index
+            self._next_index += n
+            # Chunks keep numpy's temporaries small (cache-resident, no page faults).
+            for start in range(0, n, GENERATION_CHUNK):
+                stop = min(n, start + GENERATION_CHUNK)
+                t_true = np.arange(first + start, first + stop) / self.true_odr_hz
+                motion = self.scenario.motion(t_true)
+                temp_degc[start:stop] = self.unit_errors.temperature_degc(t_true)
+                specific_force = quat.rotate_inverse(
+                    motion.orientation_quat, motion.linear_accel_m_s2 + _GRAVITY_EARTH
+                )
+                accel_raw[start:stop], gyro_raw[start:stop] = self._measurement.measure(
+                    first + start, specific_force, motion.angular_rate_rad_s, temp_degc[start:stop]
+                )
+                reference[start:stop] = motion.orientation_quat
+        temp_raw = np.rint((temp_degc - REFERENCE_TEMP_DEGC) * lsm6dsox.TEMP_LSB_PER_DEGC)
+        gap = np.zeros(n, dtype=bool)
+        gap[0] = lost > 0
+        return RawBlock(
+            t_s=np.arange(first, first + n) / self.odr_hz,
+            accel_raw=accel_raw,
+            gyro_raw=gyro_raw,
+            temp_raw=temp_raw.astype(np.int16),
+            scale=self.scale,
+            gap=gap,
+            lost_samples=lost,
+            reference_quat=reference,
+        )

@@ -1,0 +1,171 @@
+"""Parse and validate ``sim://SCENARIO?key=value&...`` URLs (see :mod:`drivers.sim.device`)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from urllib.parse import parse_qsl, urlsplit
+
+from drivers import lsm6dsox
+from drivers.errors import DeviceUrlError
+from drivers.sim.scenarios import SCENARIOS, Param
+
+DEFAULT_ODR_HZ = 104.0
+DEFAULT_ACCEL_FS_G = 4
+DEFAULT_GYRO_FS_DPS = 250
+DEFAULT_SEED = 1
+DEFAULT_BLOCK = 256
+MAX_BLOCK = 1_000_000
+
+GENERAL_OPTIONS: dict[str, str] = {
+    "odr": "Hz, snapped to the nearest LSM6DSOX rate (12.5 ... 6667)",
+    "accel_fs": "accelerometer full scale: 2, 4, 8 or 16 g",
+    "gyro_fs": "gyroscope full scale: 125, 250, 500, 1000 or 2000 dps",
+    "seed": "integer >= 0 picking the simulated unit (its id and its errors)",
+    "realtime": "1: paced by the wall clock; 0: blocks as fast as possible",
+    "block": "samples per read when realtime=0",
+    "errors": "0: an ideal chip (no bias, scale, cross-axis, drift or clock error)",
+    "noise": "0: no white noise (quantisation stays)",
+    "fail_after": "seconds of device time after which reads fail like an unplugged cable",
+}
+"""Options every scenario accepts, with a line of help each."""
+
+_TRUE = {"1", "true", "yes", "on"}
+_FALSE = {"0", "false", "no", "off"}
+
+
+@dataclass(frozen=True, slots=True)
+class SimOptions:
+    """A validated simulator URL."""
+
+    scenario: str
+    odr_nominal_hz: float = DEFAULT_ODR_HZ
+    accel_fs_g: int = DEFAULT_ACCEL_FS_G
+    gyro_fs_dps: int = DEFAULT_GYRO_FS_DPS
+    seed: int = DEFAULT_SEED
+    realtime: bool = True
+    block: int = DEFAULT_BLOCK
+    errors: bool = True
+    noise: bool = True
+    fail_after_s: float | None = None
+    scenario_params: dict[str, float | int | bool] = field(default_factory=dict)
+
+
+def _fail(url: str, message: str) -> DeviceUrlError:
+    return DeviceUrlError(f"{url}: {message}")
+
+
+def _number(url: str, key: str, text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise _fail(url, f"{key}={text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise _fail(url, f"{key}={text!r} is not a finite number")
+    return value
+
+
+def _integer(url: str, key: str, text: str, minimum: float, maximum: float) -> int:
+    value = _number(url, key, text)
+    if value != int(value) or not minimum <= value <= maximum:
+        raise _fail(url, f"{key}={text!r}: expected a whole number from {minimum:g} to {maximum:g}")
+    return int(value)
+
+
+def _choice(url: str, key: str, text: str, allowed: list[int], unit: str) -> int:
+    value = _number(url, key, text)
+    if value not in allowed:
+        choices = ", ".join(str(a) for a in allowed)
+        raise _fail(url, f"{key}={text!r} is not supported; use one of {choices} ({unit})")
+    return int(value)
+
+
+def _flag(url: str, key: str, text: str) -> bool:
+    word = text.lower()
+    if word in _TRUE:
+        return True
+    if word in _FALSE:
+        return False
+    raise _fail(url, f"{key}={text!r}: use 1 or 0 (also true/false, yes/no, on/off)")
+
+
+def _param(url: str, key: str, text: str, spec: Param) -> float | int | bool:
+    if isinstance(spec.default, bool):
+        return _flag(url, key, text)
+    if isinstance(spec.default, int):
+        return _integer(url, key, text, spec.minimum, spec.maximum)
+    value = _number(url, key, text)
+    if not spec.minimum <= value <= spec.maximum:
+        raise _fail(url, f"{key}={text!r} is out of range [{spec.minimum:g}, {spec.maximum:g}]")
+    return value
+
+
+def _query(url: str, query: str, overrides: Mapping[str, object]) -> dict[str, str]:
+    raw: dict[str, str] = {}
+    for key, value in parse_qsl(query, keep_blank_values=True):
+        key = key.strip().lower()
+        if key in raw:
+            raise _fail(url, f"option {key!r} is given twice")
+        raw[key] = value.strip()
+    for key, value in overrides.items():
+        if value is None:
+            raw.pop(key, None)
+        else:
+            raw[key] = str(int(value)) if isinstance(value, bool) else str(value)
+    for key, value in raw.items():
+        if value == "":
+            raise _fail(url, f"option {key!r} needs a value ({key}=...)")
+    return raw
+
+
+def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> SimOptions:
+    """Validate a ``sim://`` URL; ``overrides`` (option name -> value) win over the query.
+
+    Raises
+    ------
+    DeviceUrlError
+        For an unknown scenario or option, or a bad value; the message names the allowed ones.
+    """
+    parts = urlsplit(url)
+    if parts.scheme.lower() != "sim" or "://" not in url:
+        raise _fail(url, "not a simulator URL; expected sim://SCENARIO?option=value&...")
+    name = (parts.netloc + parts.path).strip("/").lower().replace("_", "-")
+    if name not in SCENARIOS:
+        names = ", ".join(SCENARIOS)
+        raise _fail(url, f"unknown simulator scenario {name!r}; choose one of: {names}")
+    spec = SCENARIOS[name].parameters
+    raw = _query(url, parts.query, overrides or {})
+    unknown = sorted(set(raw) - set(GENERAL_OPTIONS) - set(spec))
+    if unknown:
+        allowed = ", ".join([*GENERAL_OPTIONS, *spec])
+        raise _fail(url, f"unknown option {unknown[0]!r} for sim://{name}; allowed: {allowed}")
+
+    options: dict[str, object] = {"scenario": name}
+    if "odr" in raw:
+        odr = _number(url, "odr", raw["odr"])
+        if odr <= 0.0:
+            raise _fail(url, f"odr={raw['odr']!r} must be positive (12.5 ... 6667 Hz)")
+        options["odr_nominal_hz"] = lsm6dsox.ODR_CODES_HZ[lsm6dsox.odr_code_for(odr)]
+    if "accel_fs" in raw:
+        allowed = sorted(lsm6dsox.ACCEL_MG_PER_LSB)
+        options["accel_fs_g"] = _choice(url, "accel_fs", raw["accel_fs"], allowed, "g")
+    if "gyro_fs" in raw:
+        allowed = sorted(lsm6dsox.GYRO_MDPS_PER_LSB)
+        options["gyro_fs_dps"] = _choice(url, "gyro_fs", raw["gyro_fs"], allowed, "dps")
+    if "seed" in raw:
+        options["seed"] = _integer(url, "seed", raw["seed"], 0, 2**63 - 1)
+    if "block" in raw:
+        options["block"] = _integer(url, "block", raw["block"], 1, MAX_BLOCK)
+    for key in ("realtime", "errors", "noise"):
+        if key in raw:
+            options[key] = _flag(url, key, raw[key])
+    if "fail_after" in raw:
+        seconds = _number(url, "fail_after", raw["fail_after"])
+        if seconds <= 0.0:
+            raise _fail(url, f"fail_after={raw['fail_after']!r} must be a positive time in s")
+        options["fail_after_s"] = seconds
+    options["scenario_params"] = {
+        key: _param(url, key, raw[key], spec[key]) for key in spec if key in raw
+    }
+    return SimOptions(**options)  # type: ignore[arg-type]
