@@ -131,9 +131,13 @@ class DeviceWorker(QObject):
     @Slot(float, float)
     def set_simulator_target(self, roll_deg: float, pitch_deg: float) -> None:
         """Tilt an interactive simulator (ignored by devices that cannot be tilted)."""
-        setter = getattr(self._device, "set_target_attitude", None)
-        if setter is not None:
-            setter(roll_deg, pitch_deg)
+        device = self._device
+        if device is None or not getattr(device, "is_interactive", False):
+            return
+        try:
+            device.set_target_attitude(roll_deg, pitch_deg)
+        except DeviceError as exc:
+            self.error.emit(str(exc))
 
     # -- streaming --------------------------------------------------------------------------
     def _poll(self) -> None:

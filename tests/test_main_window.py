@@ -63,7 +63,7 @@ def test_filter_switch_from_the_panel(qtbot, window):
 def test_interactive_simulator_follows_the_sliders(qtbot, window):
     with qtbot.waitSignal(window.session.worker.connected, timeout=TIMEOUT_MS):
         window.connect_device("sim://interactive?odr=208")
-    assert window.simulator_panel.roll_slider.isEnabled()
+    qtbot.waitUntil(window.simulator_panel.roll_slider.isEnabled, timeout=TIMEOUT_MS)
     window.simulator_panel.set_target(12.0, -7.0, emit=True)
     orientation = lambda: window.session.pipeline.orientation.latest(1)  # noqa: E731
     qtbot.waitUntil(lambda: abs(orientation()["ref_roll"][0] - 12.0) < 0.01, timeout=TIMEOUT_MS)

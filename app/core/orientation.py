@@ -44,10 +44,12 @@ class TiltAngles:
 def up_in_sensor_frame(q: np.ndarray) -> np.ndarray:
     """The earth's up direction expressed in the sensor frame, shape (..., 3)."""
     q = np.asarray(q, dtype=np.float64)
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack(
-        [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)], axis=-1
-    )
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    up = np.empty((*q.shape[:-1], 3))
+    up[..., 0] = 2.0 * (x * z - w * y)
+    up[..., 1] = 2.0 * (y * z + w * x)
+    up[..., 2] = 1.0 - 2.0 * (x * x + y * y)
+    return up
 
 
 def angles_from_up(up: np.ndarray) -> TiltAngles:
@@ -56,7 +58,7 @@ def angles_from_up(up: np.ndarray) -> TiltAngles:
     ``up`` need not be normalised (an accelerometer reading works).
     """
     up = np.asarray(up, dtype=np.float64)
-    ux, uy, uz = np.moveaxis(up, -1, 0)
+    ux, uy, uz = up[..., 0], up[..., 1], up[..., 2]
     horizontal = np.hypot(ux, uy)
     roll = np.degrees(np.arctan2(uy, uz))
     pitch = np.degrees(np.arctan2(ux, np.hypot(uy, uz)))
@@ -74,16 +76,19 @@ def quaternion_from_roll_pitch(
     roll_deg: np.ndarray | float, pitch_deg: np.ndarray | float, yaw_deg: np.ndarray | float = 0.0
 ) -> np.ndarray:
     """Sensor-to-earth quaternion ``Rz(yaw) * Ry(-pitch) * Rx(roll)`` (degrees in)."""
-    roll, pitch, yaw = np.broadcast_arrays(
-        np.radians(roll_deg), np.radians(pitch_deg), np.radians(yaw_deg)
+    half_roll, half_pitch, half_yaw = np.broadcast_arrays(
+        np.radians(roll_deg) * 0.5, np.radians(pitch_deg) * -0.5, np.radians(yaw_deg) * 0.5
     )
-    ex = np.array([1.0, 0.0, 0.0])
-    ey = np.array([0.0, 1.0, 0.0])
-    ez = np.array([0.0, 0.0, 1.0])
-    q_roll = quat.from_axis_angle(ex, roll)
-    q_pitch = quat.from_axis_angle(ey, -pitch)
-    q_yaw = quat.from_axis_angle(ez, yaw)
-    return quat.normalize(quat.multiply(q_yaw, quat.multiply(q_pitch, q_roll)))
+    cr, sr = np.cos(half_roll), np.sin(half_roll)
+    cp, sp = np.cos(half_pitch), np.sin(half_pitch)
+    cy, sy = np.cos(half_yaw), np.sin(half_yaw)
+    # The product Rz(yaw) * Ry(-pitch) * Rx(roll), written out.
+    q = np.empty((*cr.shape, 4))
+    q[..., 0] = cr * cp * cy + sr * sp * sy
+    q[..., 1] = sr * cp * cy - cr * sp * sy
+    q[..., 2] = cr * sp * cy + sr * cp * sy
+    q[..., 3] = cr * cp * sy - sr * sp * cy
+    return quat.normalize(q)
 
 
 def quaternion_from_up(up: np.ndarray) -> np.ndarray:

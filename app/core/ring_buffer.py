@@ -105,6 +105,20 @@ class RingBuffer:
             count = max(0, min(int(count), self._count))
             return self._copy(self._count - count, count, names)
 
+    def since(
+        self, absolute_index: int, names: list[str] | None = None
+    ) -> tuple[int, dict[str, np.ndarray]]:
+        """Rows from absolute row ``absolute_index`` on (the first row ever written is 0).
+
+        Returns the absolute index of the first row returned, which is later than asked when
+        older rows have already been overwritten.
+        """
+        names = list(self.columns) if names is None else names
+        with self._lock:
+            oldest = self._total - self._count
+            first = min(max(int(absolute_index), oldest), self._total)
+            return first, self._copy(first - oldest, self._total - first, names)
+
     def window(self, duration_s: float, names: list[str] | None = None) -> dict[str, np.ndarray]:
         """Rows whose time lies within ``duration_s`` of the newest row, oldest first."""
         names = list(self.columns) if names is None else names

@@ -1,8 +1,7 @@
 """Live strip charts: acceleration, angular rate and angles against time.
 
 The widget only draws arrays it is handed (:meth:`LivePlots.set_data`); the presenter pulls
-them from the ring buffers. pyqtgraph does the heavy lifting: clip-to-view, automatic peak
-downsampling and no per-point finiteness checks on finite data.
+them from the ring buffers and decimates them to the pixel width first.
 """
 
 from __future__ import annotations
@@ -21,9 +20,10 @@ def _make_plot(title: str, unit: str) -> pg.PlotItem:
     plot = pg.PlotItem()
     plot.setLabel("left", title, units=unit)
     plot.getAxis("left").setWidth(62)
-    plot.showGrid(x=True, y=True, alpha=0.25)
+    plot.showGrid(x=False, y=False)
+    # Traces arrive already min/max-decimated to the pixel width (app.core.decimation), so
+    # pyqtgraph's own per-frame downsampling would only repeat the work.
     plot.setClipToView(True)
-    plot.setDownsampling(auto=True, mode="peak")
     plot.setMouseEnabled(x=False, y=True)
     plot.hideButtons()
     legend = plot.addLegend(offset=(-8, 4), labelTextSize="8pt", colCount=4)

@@ -13,6 +13,7 @@ import numpy as np
 from PySide6.QtCore import QObject, QTimer, Signal
 from PySide6.QtWidgets import QLabel
 
+from app.core.decimation import IncrementalMinMax, decimation_factor
 from app.core.orientation import slope_from_angle
 from app.core.readout import averaged_angles
 from app.core.samples import STANDARD_GRAVITY_M_S2
@@ -21,6 +22,7 @@ from app.gui.plots import LivePlots
 from app.gui.readouts import TiltReadouts
 from app.worker import DeviceSession
 
+ANGLE_TRACES = ["roll", "pitch", "ref_roll", "ref_pitch"]
 UNIT_LABELS = {"deg": "°", "percent": "%", "mm/m": "mm/m"}
 
 
@@ -32,6 +34,9 @@ class DisplaySettings:
     averaging_s: float = 0.5
     hold: bool = False
     frame_rate_hz: float = 30.0
+    readout_rate_hz: float = 10.0
+    """Numeric readouts change at most this often, like a digital level's display: faster
+    figures cannot be read, and every text change repaints the tiles."""
 
 
 class LivePresenter(QObject):
@@ -61,6 +66,9 @@ class LivePresenter(QObject):
         self.frames = 0
         self._fps_window = (time.monotonic(), 0)
         self._shown_total = -1
+        self._last_text_update = 0.0
+        self._sensor_trace: IncrementalMinMax | None = None
+        self._angle_trace: IncrementalMinMax | None = None
 
     def start(self) -> None:
         self.timer.start(round(1000.0 / self.settings.frame_rate_hz))
@@ -84,7 +92,7 @@ class LivePresenter(QObject):
             if total == 0:
                 self._show_no_data()
             else:
-                self._update_readouts(orientation)
+                self._update_level(orientation)
                 if self.plots_enabled and self.plots.isVisible():
                     self._update_plots(samples, orientation)
         if not connected and total == 0:
@@ -97,9 +105,13 @@ class LivePresenter(QObject):
         self.truth_label.setText("")
         self.plots.clear()
 
-    def _update_readouts(self, orientation) -> None:
+    def _update_level(self, orientation) -> None:
         if self.settings.hold:
             return
+        now = time.monotonic()
+        update_text = now - self._last_text_update >= 1.0 / self.settings.readout_rate_hz
+        if update_text:
+            self._last_text_update = now
         recent = orientation.window(
             self.settings.averaging_s,
             names=["quat", "ref_roll", "ref_pitch", "incl_error"],
@@ -110,6 +122,14 @@ class LivePresenter(QObject):
         unit = self.settings.unit
         self.level.setValid(True)
         self.level.setTilt(angles.roll_deg, angles.pitch_deg, angles.tilt_deg)
+        ref_roll, ref_pitch = recent["ref_roll"][-1], recent["ref_pitch"][-1]
+        has_reference = bool(np.isfinite(ref_roll))
+        if has_reference:
+            self.level.setReference(float(ref_roll), float(ref_pitch))
+        else:
+            self.level.clearReference()
+        if not update_text:
+            return
         self.readouts.setValid(True)
         self.readouts.setValues(
             float(slope_from_angle(angles.roll_deg, unit)),
@@ -118,34 +138,45 @@ class LivePresenter(QObject):
             angles.direction_deg,
             UNIT_LABELS[unit],
         )
-        ref_roll, ref_pitch = recent["ref_roll"][-1], recent["ref_pitch"][-1]
-        if np.isfinite(ref_roll):
-            self.level.setReference(float(ref_roll), float(ref_pitch))
-            error = recent["incl_error"]
-            rms = float(np.sqrt(np.nanmean(error**2)))
+        if has_reference:
+            rms = float(np.sqrt(np.nanmean(recent["incl_error"] ** 2)))
             self.truth_label.setText(
                 f"Simulator truth  roll {ref_roll:+.2f}°  pitch {ref_pitch:+.2f}°  ·  "
                 f"inclination error {rms:.3f}° RMS"
             )
         else:
-            self.level.clearReference()
             self.truth_label.setText("")
 
     def _update_plots(self, samples, orientation) -> None:
+        if self._sensor_trace is None or self._sensor_trace.ring is not samples:
+            self._sensor_trace = IncrementalMinMax(samples, ["accel", "gyro"])
+        if self._angle_trace is None or self._angle_trace.ring is not orientation:
+            self._angle_trace = IncrementalMinMax(orientation, ANGLE_TRACES)
         window = self.plots.window_s
-        data = samples.window(window, names=["t", "accel", "gyro"])
-        angles = orientation.window(window, names=["t", "roll", "pitch", "ref_roll", "ref_pitch"])
-        t = data["t"]
-        if len(t) == 0:
+        # A min/max pair per two pixel columns: all a plot can show at 1 px line width.
+        info = self.session.device_info
+        rate = info.odr_hz if info is not None else self._rate_hint(samples)
+        expected_rows = min(len(samples), window * rate)
+        factor = decimation_factor(int(expected_rows), max(self.plots.width(), 200))
+        sensor_t, sensor = self._sensor_trace.window(window, factor)
+        angle_t, angle_values = self._angle_trace.window(window, factor)
+        if len(sensor_t) == 0:
             return
-        newest = t[-1]
+        newest = sensor_t[-1]
         self.plots.set_data(
-            t - newest,
-            data["accel"] / STANDARD_GRAVITY_M_S2,
-            np.degrees(data["gyro"]),
-            angles["t"] - newest,
-            {key: angles[key] for key in ("roll", "pitch", "ref_roll", "ref_pitch")},
+            sensor_t - newest,
+            sensor[:, :3] / STANDARD_GRAVITY_M_S2,
+            np.degrees(sensor[:, 3:]),
+            angle_t - newest,
+            {key: angle_values[:, i] for i, key in enumerate(ANGLE_TRACES)},
         )
+
+    @staticmethod
+    def _rate_hint(samples) -> float:
+        """Rows per second in the buffer, from its newest second."""
+        recent = samples.window(1.0, ["t"])["t"]
+        span = recent[-1] - recent[0] if len(recent) > 1 else 0.0
+        return (len(recent) - 1) / span if span > 0 else 1.0
 
     def _count_frame(self) -> None:
         self.frames += 1
