@@ -196,8 +196,16 @@ class DeviceWorker(QObject):
 class DeviceSession(QObject):
     """The GUI-side handle: starts the worker thread and forwards requests to it.
 
-    Every request is a queued signal, so the GUI thread never blocks on the device.
+    Every request is a queued signal, so the GUI thread never blocks on the device. The
+    worker's events are re-emitted by the session's own signals in the GUI thread; connect
+    to those, never to the worker's.
     """
+
+    connected = Signal(object)  # DeviceInfo
+    disconnected = Signal(str)
+    error = Signal(str)
+    status = Signal(object)  # StreamStatus
+    filterChanged = Signal(str, dict)
 
     requestConnect = Signal(str)
     requestDisconnect = Signal()
@@ -219,8 +227,14 @@ class DeviceSession(QObject):
         self.requestFilterParameter.connect(self.worker.set_filter_parameter)
         self.requestSimulatorTarget.connect(self.worker.set_simulator_target)
         self.device_info: DeviceInfo | None = None
-        self.worker.connected.connect(self._on_connected)
-        self.worker.disconnected.connect(self._on_disconnected)
+        # Queued into the GUI thread (this object lives there).
+        self.worker.connected.connect(self.connected)
+        self.worker.disconnected.connect(self.disconnected)
+        self.worker.error.connect(self.error)
+        self.worker.status.connect(self.status)
+        self.worker.filterChanged.connect(self.filterChanged)
+        self.connected.connect(self._on_connected)
+        self.disconnected.connect(self._on_disconnected)
         self.thread.start()
 
     def _on_connected(self, info: DeviceInfo) -> None:

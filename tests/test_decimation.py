@@ -52,3 +52,11 @@ def test_incremental_decimation_restarts_after_clear_and_on_factor_change():
     assert v.max() == 0.0 and v.min() == -49.0
     t, v = trace.window(100.0, 1)
     assert len(t) == 50
+
+
+def test_an_empty_ring_gives_empty_traces():
+    ring = RingBuffer(100, {"t": 1, "v": 3})
+    trace = IncrementalMinMax(ring, ["v"])
+    for factor in (1, 5):
+        t, v = trace.window(10.0, factor)
+        assert t.shape == (0,) and v.shape == (0, 3)

@@ -53,7 +53,7 @@ def test_filter_switch_from_the_panel(qtbot, window):
     panel = window.filter_panel
     qtbot.waitUntil(lambda: panel.current_filter == "complementary", timeout=TIMEOUT_MS)
     index = panel.combo.findData("accel")
-    with qtbot.waitSignal(window.session.worker.filterChanged, timeout=TIMEOUT_MS):
+    with qtbot.waitSignal(window.session.filterChanged, timeout=TIMEOUT_MS):
         panel.combo.setCurrentIndex(index)
         panel.combo.activated.emit(index)
     assert window.session.pipeline.filter.name == "accel"
@@ -61,24 +61,28 @@ def test_filter_switch_from_the_panel(qtbot, window):
 
 
 def test_interactive_simulator_follows_the_sliders(qtbot, window):
-    with qtbot.waitSignal(window.session.worker.connected, timeout=TIMEOUT_MS):
+    with qtbot.waitSignal(window.session.connected, timeout=TIMEOUT_MS):
         window.connect_device("sim://interactive?odr=208")
     qtbot.waitUntil(window.simulator_panel.roll_slider.isEnabled, timeout=TIMEOUT_MS)
     window.simulator_panel.set_target(12.0, -7.0, emit=True)
-    orientation = lambda: window.session.pipeline.orientation.latest(1)  # noqa: E731
-    qtbot.waitUntil(lambda: abs(orientation()["ref_roll"][0] - 12.0) < 0.01, timeout=TIMEOUT_MS)
+
+    def true_roll() -> float:
+        latest = window.session.pipeline.orientation.latest(1)["ref_roll"]
+        return float(latest[0]) if len(latest) else float("nan")
+
+    qtbot.waitUntil(lambda: abs(true_roll() - 12.0) < 0.01, timeout=TIMEOUT_MS)
     qtbot.waitUntil(lambda: abs(window.level.roll() - 12.0) < 2.0, timeout=TIMEOUT_MS)
 
 
 def test_device_failure_shows_a_banner_and_the_app_keeps_running(qtbot, window):
-    with qtbot.waitSignal(window.session.worker.disconnected, timeout=TIMEOUT_MS):
+    with qtbot.waitSignal(window.session.disconnected, timeout=TIMEOUT_MS):
         window.connect_device("sim://static?fail_after=0.3")
     qtbot.waitUntil(lambda: window.banner.isVisible(), timeout=TIMEOUT_MS)
     assert "unplugged" in window.banner.label.text()
     assert "error" in window.device_bar.status_label.text().lower()
     assert "unplugged" in window.messages.toPlainText()
     # Reconnecting clears the banner and streams again.
-    with qtbot.waitSignal(window.session.worker.connected, timeout=TIMEOUT_MS):
+    with qtbot.waitSignal(window.session.connected, timeout=TIMEOUT_MS):
         window.connect_device("sim://static")
     assert not window.banner.isVisible()
 

@@ -18,7 +18,7 @@ def session(qtbot):
 
 
 def connect(qtbot, session: DeviceSession, url: str):
-    with qtbot.waitSignal(session.worker.connected, timeout=TIMEOUT_MS) as blocker:
+    with qtbot.waitSignal(session.connected, timeout=TIMEOUT_MS) as blocker:
         session.requestConnect.emit(url)
     return blocker.args[0]
 
@@ -40,7 +40,7 @@ def test_devices_and_filters_switch_while_running(qtbot, session):
     connect(qtbot, session, "sim://static?odr=208")
     qtbot.waitUntil(lambda: session.pipeline.counters.samples > 100, timeout=TIMEOUT_MS)
 
-    with qtbot.waitSignal(session.worker.filterChanged, timeout=TIMEOUT_MS) as blocker:
+    with qtbot.waitSignal(session.filterChanged, timeout=TIMEOUT_MS) as blocker:
         session.requestFilter.emit("accel")
     assert blocker.args[0] == "accel"
     assert session.pipeline.filter.name == "accel"
@@ -53,15 +53,15 @@ def test_devices_and_filters_switch_while_running(qtbot, session):
     qtbot.waitUntil(lambda: session.pipeline.counters.samples > 500, timeout=TIMEOUT_MS)
     assert session.pipeline.filter.name == "accel"  # the filter choice survives the switch
 
-    with qtbot.waitSignal(session.worker.filterChanged, timeout=TIMEOUT_MS):
+    with qtbot.waitSignal(session.filterChanged, timeout=TIMEOUT_MS):
         session.requestFilterParameter.emit("average_samples", 8)
     assert session.pipeline.filter.get_parameter("average_samples") == 8
 
 
 def test_a_device_failing_mid_stream_reports_and_the_session_recovers(qtbot, session):
     errors: list[str] = []
-    session.worker.error.connect(errors.append)
-    with qtbot.waitSignal(session.worker.disconnected, timeout=TIMEOUT_MS) as blocker:
+    session.error.connect(errors.append)
+    with qtbot.waitSignal(session.disconnected, timeout=TIMEOUT_MS) as blocker:
         session.requestConnect.emit("sim://static?odr=416&fail_after=0.3")
     assert "unplugged" in blocker.args[0]
     assert errors and "unplugged" in errors[0]
@@ -74,10 +74,10 @@ def test_a_device_failing_mid_stream_reports_and_the_session_recovers(qtbot, ses
 
 
 def test_a_bad_url_gives_a_message_not_a_crash(qtbot, session):
-    with qtbot.waitSignal(session.worker.error, timeout=TIMEOUT_MS) as blocker:
+    with qtbot.waitSignal(session.error, timeout=TIMEOUT_MS) as blocker:
         session.requestConnect.emit("nosuch://thing")
     assert "no driver for nosuch://" in blocker.args[0]
-    with qtbot.waitSignal(session.worker.error, timeout=TIMEOUT_MS) as blocker:
+    with qtbot.waitSignal(session.error, timeout=TIMEOUT_MS) as blocker:
         session.requestConnect.emit("sim://static?odr=banana")
     assert "odr" in blocker.args[0]
 
@@ -85,7 +85,7 @@ def test_a_bad_url_gives_a_message_not_a_crash(qtbot, session):
 def test_status_reports_the_measured_rate(qtbot, session):
     connect(qtbot, session, "sim://static?odr=417")
     statuses = []
-    session.worker.status.connect(statuses.append)
+    session.status.connect(statuses.append)
     qtbot.waitUntil(lambda: len(statuses) >= 6, timeout=TIMEOUT_MS)
     info = session.device_info
     assert statuses[-1].measured_rate_hz == pytest.approx(info.odr_hz, rel=0.15)

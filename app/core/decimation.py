@@ -73,20 +73,24 @@ class IncrementalMinMax:
         self._run_values = np.empty((0, 2, self._width))
         self._seen_total = 0
 
+    def _stack(self, rows: dict[str, np.ndarray], count: int) -> np.ndarray:
+        columns = self.ring.columns
+        return np.hstack([rows[name].reshape(count, columns[name]) for name in self.names])
+
     def window(self, duration_s: float, factor: int) -> tuple[np.ndarray, np.ndarray]:
         """Times (M,) and values (M, width) of the newest ``duration_s`` seconds."""
         ring = self.ring
         if factor <= 1:
             rows = ring.window(duration_s, [ring.time_column, *self.names])
             t = rows[ring.time_column]
-            return t, np.hstack([rows[name].reshape(len(t), -1) for name in self.names])
+            return t, self._stack(rows, len(t))
         if factor != self._factor or ring.total_written < self._seen_total:
             self._factor = factor
             self._reset()
         self._seen_total = ring.total_written
         first, rows = ring.since(self._next, [ring.time_column, *self.names])
         t = rows[ring.time_column]
-        values = np.hstack([rows[name].reshape(len(t), -1) for name in self.names])
+        values = self._stack(rows, len(t))
         if first > self._next:  # rows were overwritten before we saw them: start afresh
             self._run_t = self._run_t[:0]
             self._run_values = self._run_values[:0]

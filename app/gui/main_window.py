@@ -153,12 +153,11 @@ class MainWindow(QMainWindow):
         self.filter_panel.parameterChanged.connect(session.requestFilterParameter)
         self.simulator_panel.deviceRequested.connect(self.connect_device)
         self.simulator_panel.targetChanged.connect(session.requestSimulatorTarget)
-        worker = session.worker
-        worker.connected.connect(self._on_connected)
-        worker.disconnected.connect(self._on_disconnected)
-        worker.error.connect(self.show_error)
-        worker.status.connect(self._on_status)
-        worker.filterChanged.connect(self._on_filter_changed)
+        session.connected.connect(self._on_connected)
+        session.disconnected.connect(self._on_disconnected)
+        session.error.connect(self.show_error)
+        session.status.connect(self._on_status)
+        session.filterChanged.connect(self._on_filter_changed)
 
         self._restore_settings()
         self.refresh_devices()
