@@ -49,6 +49,7 @@ class DeviceWorker(QObject):
     error = Signal(str)
     status = Signal(object)  # StreamStatus
     filterChanged = Signal(str, dict)  # name, parameter values
+    comparisonsChanged = Signal(list)  # names of the filters running side by side
 
     def __init__(self, pipeline: Pipeline) -> None:
         super().__init__()
@@ -128,6 +129,16 @@ class DeviceWorker(QObject):
         current = self.pipeline.filter
         self.filterChanged.emit(current.name, current.parameter_values())
 
+    @Slot(list)
+    def set_comparisons(self, names: list) -> None:
+        """Run these filters side by side with the main one."""
+        try:
+            running = self.pipeline.set_comparisons([str(n) for n in names])
+        except (KeyError, ValueError) as exc:
+            self.error.emit(str(exc))
+            running = list(self.pipeline.comparisons)
+        self.comparisonsChanged.emit(running)
+
     @Slot(float, float)
     def set_simulator_target(self, roll_deg: float, pitch_deg: float) -> None:
         """Tilt an interactive simulator (ignored by devices that cannot be tilted)."""
@@ -206,12 +217,14 @@ class DeviceSession(QObject):
     error = Signal(str)
     status = Signal(object)  # StreamStatus
     filterChanged = Signal(str, dict)
+    comparisonsChanged = Signal(list)
 
     requestConnect = Signal(str)
     requestDisconnect = Signal()
     requestFilter = Signal(str)
     requestFilterParameter = Signal(str, object)
     requestSimulatorTarget = Signal(float, float)
+    requestComparisons = Signal(list)
 
     def __init__(self, pipeline: Pipeline | None = None, parent: QObject | None = None) -> None:
         super().__init__(parent)
@@ -226,6 +239,7 @@ class DeviceSession(QObject):
         self.requestFilter.connect(self.worker.set_filter)
         self.requestFilterParameter.connect(self.worker.set_filter_parameter)
         self.requestSimulatorTarget.connect(self.worker.set_simulator_target)
+        self.requestComparisons.connect(self.worker.set_comparisons)
         self.device_info: DeviceInfo | None = None
         # Queued into the GUI thread (this object lives there).
         self.worker.connected.connect(self.connected)
@@ -233,6 +247,7 @@ class DeviceSession(QObject):
         self.worker.error.connect(self.error)
         self.worker.status.connect(self.status)
         self.worker.filterChanged.connect(self.filterChanged)
+        self.worker.comparisonsChanged.connect(self.comparisonsChanged)
         self.connected.connect(self._on_connected)
         self.disconnected.connect(self._on_disconnected)
         self.thread.start()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 
 import pytest
-from PySide6.QtCore import QSettings
+from PySide6.QtCore import QSettings, Qt
 
 from app.gui import theme
 from app.gui.main_window import MainWindow
@@ -95,3 +95,20 @@ def test_display_units_and_hold(qtbot, window):
     assert window.presenter.settings.hold
     window.range_combo.setCurrentIndex(window.range_combo.findData(30.0))
     assert window.level.fullScale() == 30.0
+
+
+def test_compared_filters_are_overlaid_and_scored(qtbot, window):
+    panel = window.filter_panel
+    qtbot.waitUntil(lambda: panel.current_filter == "complementary", timeout=TIMEOUT_MS)
+    item = next(
+        panel.compare_list.item(row) for row in range(panel.compare_list.count())
+        if panel.compare_list.item(row).data(Qt.ItemDataRole.UserRole) == "accel"
+    )
+    with qtbot.waitSignal(window.session.comparisonsChanged, timeout=TIMEOUT_MS) as blocker:
+        item.setCheckState(Qt.CheckState.Checked)
+    assert blocker.args[0] == ["accel"]
+    curves = window.plots.comparison_curves["accel"]
+    qtbot.waitUntil(lambda: curve_points(curves[0]) > 10, timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: panel.error_table.rowCount() == 2, timeout=TIMEOUT_MS)
+    assert panel.error_table.item(1, 0).text() == "Accelerometer only"
+    assert panel.error_table.item(1, 1).text().endswith("°")

@@ -98,3 +98,23 @@ def test_buffers_are_sized_for_the_longest_window():
     assert capacity_for(6667.0) >= 6667 * 60
     pipeline = Pipeline(odr_hz=6667.0)
     assert pipeline.samples.capacity == capacity_for(6667.0)
+
+
+def test_comparison_filters_run_side_by_side_with_their_own_buffers():
+    pipeline = Pipeline(odr_hz=104.0, filter_name="complementary")
+    pipeline.process(raw_block(0, 100, roll=4.0))
+    running = pipeline.set_comparisons(["accel", "accel"])
+    assert running == ["accel"]
+    pipeline.process(raw_block(100, 100, roll=4.0))
+    buffer = pipeline.comparison_buffers["accel"]
+    assert len(buffer) == 100  # it started when it was added
+    latest = buffer.latest(1)
+    assert latest["roll"][0] == pytest.approx(4.0, abs=0.01)
+    assert latest["incl_error"][0] < 0.01
+    # Keeping a comparison keeps its state and buffer; dropping it frees both.
+    pipeline.set_comparisons(["accel"])
+    assert pipeline.comparison_buffers["accel"] is buffer
+    pipeline.set_comparisons([])
+    assert pipeline.comparison_buffers == {}
+    with pytest.raises(KeyError):
+        pipeline.set_comparisons(["nonsense"])

@@ -31,6 +31,7 @@ ORIENTATION_COLUMNS = {
 
 
 REFERENCE_COLUMNS = ("ref_roll", "ref_pitch", "ref_tilt", "incl_error")
+COMPARISON_COLUMNS = {"t": 1, "roll": 1, "pitch": 1, "tilt": 1, "incl_error": 1}
 
 
 def capacity_for(odr_hz: float, window_s: float = MAX_WINDOW_S) -> int:
@@ -65,15 +66,25 @@ class Pipeline:
         self.counters = PipelineCounters()
         self.samples = RingBuffer(1024, SAMPLE_COLUMNS)
         self.orientation = RingBuffer(1024, ORIENTATION_COLUMNS)
+        self.comparisons: dict[str, OrientationFilter] = {}
+        """Filters run side by side with the main one, on the same calibrated samples."""
+        self.comparison_buffers: dict[str, RingBuffer] = {}
+        self._capacity = 1024
         self.configure(odr_hz)
 
     def configure(self, odr_hz: float) -> None:
         """Size the buffers for a sample rate and start afresh (a new device connected)."""
         capacity = capacity_for(odr_hz)
+        self._capacity = capacity
         self.samples = RingBuffer(capacity, SAMPLE_COLUMNS)
         self.orientation = RingBuffer(capacity, ORIENTATION_COLUMNS)
+        self.comparison_buffers = {
+            name: RingBuffer(capacity, COMPARISON_COLUMNS) for name in self.comparisons
+        }
         self.counters = PipelineCounters()
         self.filter.reset()
+        for comparison in self.comparisons.values():
+            comparison.reset()
 
     # -- configuration ----------------------------------------------------------------------
     def set_filter(self, name: str, **values: Any) -> OrientationFilter:
@@ -87,6 +98,30 @@ class Pipeline:
 
     def set_filter_parameter(self, name: str, value: Any) -> None:
         self.filter.set_parameter(name, value)
+
+    def set_comparisons(self, names: list[str]) -> list[str]:
+        """Run these filters side by side with the main one (by registry name).
+
+        Filters already running keep their state; new ones start from the main filter's
+        current orientation. Returns the names now running.
+        """
+        running = {}
+        buffers = {}
+        for name in dict.fromkeys(names):
+            if name in self.comparisons:
+                running[name] = self.comparisons[name]
+                buffers[name] = self.comparison_buffers[name]
+                continue
+            new_filter = create_filter(name)
+            new_filter.warm_up()
+            if self.counters.samples:
+                new_filter.reset(self.filter.quaternion, self.filter.last_time_s)
+            running[name] = new_filter
+            buffers[name] = RingBuffer(self._capacity, COMPARISON_COLUMNS)
+        # Replace whole dicts: a reader in another thread sees either the old or the new one.
+        self.comparison_buffers = buffers
+        self.comparisons = running
+        return list(running)
 
     def set_calibration(self, calibration: SensorCalibration) -> None:
         self.calibration = calibration
@@ -129,6 +164,19 @@ class Pipeline:
                 "direction": angles.direction_deg, **ref_columns,
             }
         )
+        for name, comparison in self.comparisons.items():
+            output = comparison.process(block)
+            error = (
+                ref_columns["incl_error"] if block.reference_quat is None
+                else inclination_error_deg(output.quat, block.reference_quat)
+            )
+            self.comparison_buffers[name].write(
+                {
+                    "t": block.t_s, "roll": output.angles.roll_deg,
+                    "pitch": output.angles.pitch_deg, "tilt": output.angles.tilt_deg,
+                    "incl_error": error,
+                }
+            )
         self.counters.samples += n
         self.counters.blocks += 1
         self.counters.filter_cpu_s += time.thread_time() - cpu_start

@@ -15,9 +15,15 @@ from PySide6.QtWidgets import (
     QComboBox,
     QDoubleSpinBox,
     QFormLayout,
+    QGroupBox,
     QHBoxLayout,
+    QHeaderView,
     QLabel,
+    QListWidget,
+    QListWidgetItem,
     QSpinBox,
+    QTableWidget,
+    QTableWidgetItem,
     QVBoxLayout,
     QWidget,
 )
@@ -31,10 +37,11 @@ def _decimals_for(spec: ParameterSpec) -> int:
 
 
 class FilterPanel(QWidget):
-    """Filter chooser plus a form of parameter controls."""
+    """Filter chooser, a form of parameter controls, and filters to compare side by side."""
 
     filterRequested = Signal(str)
     parameterChanged = Signal(str, object)
+    comparisonsRequested = Signal(list)
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -54,6 +61,39 @@ class FilterPanel(QWidget):
         self.form = QFormLayout(self.form_host)
         self.form.setContentsMargins(0, 4, 0, 0)
         layout.addWidget(self.form_host)
+
+        compare = QGroupBox("Compare with")
+        compare_layout = QVBoxLayout(compare)
+        self.compare_list = QListWidget()
+        self.compare_list.setToolTip(
+            "Run these filters on the same data; their roll and pitch are overlaid on the plot"
+        )
+        for name, cls in FILTERS.items():
+            item = QListWidgetItem(cls.title)
+            item.setData(Qt.ItemDataRole.UserRole, name)
+            item.setFlags(item.flags() | Qt.ItemFlag.ItemIsUserCheckable)
+            item.setCheckState(Qt.CheckState.Unchecked)
+            item.setToolTip(cls.description)
+            self.compare_list.addItem(item)
+        self.compare_list.setMaximumHeight(22 * max(3, len(FILTERS)) + 6)
+        self.compare_list.itemChanged.connect(self._on_compare_changed)
+        compare_layout.addWidget(self.compare_list)
+        self.error_table = QTableWidget(0, 3)
+        self.error_table.setHorizontalHeaderLabels(["Filter", "RMS error", "Max error"])
+        self.error_table.verticalHeader().setVisible(False)
+        self.error_table.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
+        self.error_table.setSelectionMode(QTableWidget.SelectionMode.NoSelection)
+        self.error_table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
+        self.error_table.setToolTip(
+            "Inclination error against the reference orientation (the simulator's truth) "
+            "over the plot window"
+        )
+        compare_layout.addWidget(self.error_table)
+        self.error_note = QLabel("Errors appear when the source knows its true orientation.")
+        self.error_note.setObjectName("dimLabel")
+        self.error_note.setWordWrap(True)
+        compare_layout.addWidget(self.error_note)
+        layout.addWidget(compare)
         layout.addStretch(1)
         self._controls: dict[str, QWidget] = {}
         self._current = ""
@@ -66,6 +106,12 @@ class FilterPanel(QWidget):
         """Show ``name`` as the running filter with these parameter values."""
         cls = FILTERS[name]
         self.combo.setCurrentIndex(self.combo.findData(name))
+        for row in range(self.compare_list.count()):
+            item = self.compare_list.item(row)
+            is_main = item.data(Qt.ItemDataRole.UserRole) == name
+            flags = item.flags()
+            item.setFlags(flags & ~Qt.ItemFlag.ItemIsEnabled if is_main
+                          else flags | Qt.ItemFlag.ItemIsEnabled)
         self.description.setText(cls.description)
         if name != self._current:
             self._current = name
@@ -80,6 +126,40 @@ class FilterPanel(QWidget):
             else:
                 control.setValue(value)
             control.blockSignals(False)
+
+    def compared_filters(self) -> list[str]:
+        """Names of the filters ticked for comparison (the main filter excluded)."""
+        names = []
+        for row in range(self.compare_list.count()):
+            item = self.compare_list.item(row)
+            name = item.data(Qt.ItemDataRole.UserRole)
+            if item.checkState() == Qt.CheckState.Checked and name != self._current:
+                names.append(name)
+        return names
+
+    def show_comparisons(self, names: list[str]) -> None:
+        """Tick exactly ``names`` (what the worker reports as running)."""
+        self.compare_list.blockSignals(True)
+        for row in range(self.compare_list.count()):
+            item = self.compare_list.item(row)
+            checked = item.data(Qt.ItemDataRole.UserRole) in names
+            item.setCheckState(Qt.CheckState.Checked if checked else Qt.CheckState.Unchecked)
+        self.compare_list.blockSignals(False)
+
+    def show_errors(self, rows: list[tuple[str, float, float]]) -> None:
+        """Fill the error table: (title, RMS degrees, max degrees); NaN shows as a dash."""
+        self.error_table.setRowCount(len(rows))
+        known = False
+        for row, (title, rms, worst) in enumerate(rows):
+            known |= rms == rms
+            cells = (title, f"{rms:.3f}°" if rms == rms else "—",
+                     f"{worst:.3f}°" if worst == worst else "—")
+            for column, text in enumerate(cells):
+                self.error_table.setItem(row, column, QTableWidgetItem(text))
+        self.error_note.setVisible(not known)
+
+    def _on_compare_changed(self, _item: QListWidgetItem) -> None:
+        self.comparisonsRequested.emit(self.compared_filters())
 
     def _on_activated(self, index: int) -> None:
         name = self.combo.itemData(index)

@@ -139,7 +139,8 @@ class MainWindow(QMainWindow):
 
         # Live presenter.
         self.presenter = LivePresenter(
-            session, self.level, self.readouts, self.plots, self.truth_label, self
+            session, self.level, self.readouts, self.plots, self.truth_label, self.filter_panel,
+            self,
         )
         self.presenter.framesPerSecond.connect(
             lambda fps: self.status_fps.setText(f"{fps:.0f} fps")
@@ -151,6 +152,8 @@ class MainWindow(QMainWindow):
         self.device_bar.refreshRequested.connect(self.refresh_devices)
         self.filter_panel.filterRequested.connect(session.requestFilter)
         self.filter_panel.parameterChanged.connect(session.requestFilterParameter)
+        self.filter_panel.comparisonsRequested.connect(session.requestComparisons)
+        session.comparisonsChanged.connect(self._on_comparisons_changed)
         self.simulator_panel.deviceRequested.connect(self.connect_device)
         self.simulator_panel.targetChanged.connect(session.requestSimulatorTarget)
         session.connected.connect(self._on_connected)
@@ -165,6 +168,10 @@ class MainWindow(QMainWindow):
         if chosen_filter not in FILTERS:
             chosen_filter = DEFAULT_FILTER
         session.requestFilter.emit(chosen_filter)
+        saved = str(self.settings.value("comparisons", "")).split(",")
+        compared = [name for name in saved if name in FILTERS]
+        if compared:
+            session.requestComparisons.emit(compared)
         url = device_url or str(self.settings.value("device_url", DEFAULT_DEVICE_URL))
         self.presenter.start()
         self.connect_device(url)
@@ -315,6 +322,11 @@ class MainWindow(QMainWindow):
         self.filter_panel.show_filter(name, values)
         self.status_filter.setText(f"Filter: {FILTERS[name].title}")
         self.settings.setValue("filter", name)
+
+    def _on_comparisons_changed(self, names: list) -> None:
+        self.filter_panel.show_comparisons(names)
+        self.plots.set_comparisons([(name, FILTERS[name].title) for name in names])
+        self.settings.setValue("comparisons", ",".join(names))
 
     def _on_display_changed(self) -> None:
         self.presenter.settings.unit = self.unit_combo.currentData()

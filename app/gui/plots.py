@@ -75,7 +75,37 @@ class LivePlots(QWidget):
                 pen=pen(theme.TRACE_PITCH, Qt.PenStyle.DashLine), name="true pitch"
             ),
         }
+        self.comparison_curves: dict[str, tuple[pg.PlotDataItem, pg.PlotDataItem]] = {}
         self.set_window(self._window_s)
+
+    def set_comparisons(self, filters: list[tuple[str, str]]) -> None:
+        """Show roll and pitch curves for these (name, title) filters; drop the others."""
+        wanted = dict(filters)
+        for name in list(self.comparison_curves):
+            if name not in wanted:
+                for curve in self.comparison_curves.pop(name):
+                    self.angle_plot.removeItem(curve)
+        for index, (name, title) in enumerate(filters):
+            if name in self.comparison_curves:
+                continue
+            colour = theme.COMPARISON_COLORS[index % len(theme.COMPARISON_COLORS)]
+            roll = self.angle_plot.plot(
+                pen=pg.mkPen(colour, width=1), name=f"{title} roll"
+            )
+            pitch = self.angle_plot.plot(
+                pen=pg.mkPen(colour, width=1, style=Qt.PenStyle.DotLine), name=f"{title} pitch"
+            )
+            self.comparison_curves[name] = (roll, pitch)
+
+    def set_comparison_data(
+        self, name: str, t_rel: np.ndarray, roll: np.ndarray, pitch: np.ndarray
+    ) -> None:
+        """Replace one compared filter's roll and pitch traces."""
+        curves = self.comparison_curves.get(name)
+        if curves is None:
+            return
+        curves[0].setData(t_rel, roll, skipFiniteCheck=True)
+        curves[1].setData(t_rel, pitch, skipFiniteCheck=True)
 
     def set_window(self, seconds: float) -> None:
         """Show the last ``seconds`` of data."""
@@ -87,7 +117,10 @@ class LivePlots(QWidget):
         return self._window_s
 
     def clear(self) -> None:
-        for curve in (*self.accel_curves, *self.gyro_curves, *self.angle_curves.values()):
+        compared = [curve for pair in self.comparison_curves.values() for curve in pair]
+        for curve in (
+            *self.accel_curves, *self.gyro_curves, *self.angle_curves.values(), *compared
+        ):
             curve.setData([], [])
 
     def set_data(

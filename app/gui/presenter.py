@@ -13,16 +13,20 @@ import numpy as np
 from PySide6.QtCore import QObject, QTimer, Signal
 from PySide6.QtWidgets import QLabel
 
+from app.core.comparison import summarize_errors
 from app.core.decimation import IncrementalMinMax, decimation_factor
+from app.core.filters import FILTERS
 from app.core.orientation import slope_from_angle
 from app.core.readout import averaged_angles
 from app.core.samples import STANDARD_GRAVITY_M_S2
 from app.gui.bubble_level import BubbleLevel
+from app.gui.filter_panel import FilterPanel
 from app.gui.plots import LivePlots
 from app.gui.readouts import TiltReadouts
 from app.worker import DeviceSession
 
 ANGLE_TRACES = ["roll", "pitch", "ref_roll", "ref_pitch"]
+ERROR_TABLE_INTERVAL_S = 0.5
 UNIT_LABELS = {"deg": "°", "percent": "%", "mm/m": "mm/m"}
 
 
@@ -51,9 +55,11 @@ class LivePresenter(QObject):
         readouts: TiltReadouts,
         plots: LivePlots,
         truth_label: QLabel,
+        filter_panel: FilterPanel,
         parent: QObject | None = None,
     ) -> None:
         super().__init__(parent)
+        self.filter_panel = filter_panel
         self.session = session
         self.level = level
         self.readouts = readouts
@@ -69,6 +75,8 @@ class LivePresenter(QObject):
         self._last_text_update = 0.0
         self._sensor_trace: IncrementalMinMax | None = None
         self._angle_trace: IncrementalMinMax | None = None
+        self._comparison_traces: dict[str, IncrementalMinMax] = {}
+        self._last_error_update = 0.0
 
     def start(self) -> None:
         self.timer.start(round(1000.0 / self.settings.frame_rate_hz))
@@ -97,6 +105,10 @@ class LivePresenter(QObject):
                     self._update_plots(samples, orientation)
         if not connected and total == 0:
             self._show_no_data()
+        now = time.monotonic()
+        if now - self._last_error_update >= ERROR_TABLE_INTERVAL_S:
+            self._last_error_update = now
+            self.update_error_table()
         self._count_frame()
 
     def _show_no_data(self) -> None:
@@ -163,6 +175,7 @@ class LivePresenter(QObject):
         if len(sensor_t) == 0:
             return
         newest = sensor_t[-1]
+        self._update_comparisons(window, factor, newest)
         self.plots.set_data(
             sensor_t - newest,
             sensor[:, :3] / STANDARD_GRAVITY_M_S2,
@@ -170,6 +183,27 @@ class LivePresenter(QObject):
             angle_t - newest,
             {key: angle_values[:, i] for i, key in enumerate(ANGLE_TRACES)},
         )
+
+    def _update_comparisons(self, window: float, factor: int, newest: float) -> None:
+        buffers = self.session.pipeline.comparison_buffers
+        traces = {}
+        for name, ring in buffers.items():
+            trace = self._comparison_traces.get(name)
+            traces[name] = trace if trace is not None and trace.ring is ring else (
+                IncrementalMinMax(ring, ["roll", "pitch"])
+            )
+            t, values = traces[name].window(window, factor)
+            self.plots.set_comparison_data(name, t - newest, values[:, 0], values[:, 1])
+        self._comparison_traces = traces
+
+    def update_error_table(self) -> None:
+        """Refresh the filter panel's error table (called at a low rate)."""
+        pipeline = self.session.pipeline
+        window = self.plots.window_s
+        rows = [summarize_errors(pipeline.orientation, pipeline.filter.title, window)]
+        for name, ring in pipeline.comparison_buffers.items():
+            rows.append(summarize_errors(ring, FILTERS[name].title, window))
+        self.filter_panel.show_errors([(r.name, r.rms_deg, r.max_deg) for r in rows])
 
     @staticmethod
     def _rate_hint(samples) -> float:

@@ -41,6 +41,10 @@ TRACE_TILT = "#e8c468"
 TRACE_DIRECTION = "#a0a8b2"
 TRACE_REFERENCE = "#9aa0a6"  # truth / reference curves, drawn dashed
 PLOT_GRID = "#30353b"
+# Filters compared side by side on the angle plot, in order.
+COMPARISON_COLORS: tuple[str, ...] = (
+    "#f0a35e", "#7fd18b", "#e06c9f", "#8fb3ff", "#d8d36a", "#6fd6c9", "#b89cff",
+)
 
 COLORS: dict[str, str] = {
     "BASE_BG": BASE_BG,
