@@ -112,3 +112,13 @@ def test_compared_filters_are_overlaid_and_scored(qtbot, window):
     qtbot.waitUntil(lambda: panel.error_table.rowCount() == 2, timeout=TIMEOUT_MS)
     assert panel.error_table.item(1, 0).text() == "Accelerometer only"
     assert panel.error_table.item(1, 1).text().endswith("°")
+
+
+def test_simulator_panel_shows_the_connected_units_attitude(qtbot, window):
+    with qtbot.waitSignal(window.session.connected, timeout=TIMEOUT_MS):
+        window.connect_device("sim://interactive?roll=4&pitch=-2.5&seed=9")
+    panel = window.simulator_panel
+    assert panel.roll_spin.value() == 4.0
+    assert panel.pitch_spin.value() == -2.5
+    assert panel.seed_spin.value() == 9
+    assert panel.url().startswith("sim://interactive?")

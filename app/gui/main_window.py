@@ -292,6 +292,9 @@ class MainWindow(QMainWindow):
         is_sim = urlsplit(info.url).scheme == "sim"
         if is_sim:
             self.simulator_panel.show_url(info.url)
+            params = info.extra.get("scenario_params", {})
+            if "roll" in params and "pitch" in params:
+                self.simulator_panel.set_target(float(params["roll"]), float(params["pitch"]))
         else:
             self.simulator_panel.set_interactive(False)
         self.settings.setValue("device_url", info.url)
