@@ -132,3 +132,14 @@ def test_every_filter_has_a_complete_schema_and_handles_empty_blocks(name):
 def test_unknown_filter_names_are_reported():
     with pytest.raises(KeyError, match="available"):
         create_filter("nonsense")
+
+
+def test_complementary_survives_non_finite_samples():
+    f = create_filter("complementary")
+    accel = np.tile(accel_for(5.0, 0.0), (10, 1))
+    accel[3] = np.nan
+    gyro = np.zeros((10, 3))
+    gyro[6] = np.inf
+    out = f.process(block(np.arange(10) * 0.01, accel, gyro))
+    assert np.all(np.isfinite(out.quat))
+    assert out.angles.roll_deg[-1] == pytest.approx(5.0, abs=0.01)

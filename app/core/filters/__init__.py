@@ -7,9 +7,15 @@ from typing import Any
 from app.core.filters.accel_tilt import AccelerometerTilt
 from app.core.filters.base import OrientationBlock, OrientationFilter, ParameterSpec
 from app.core.filters.complementary import ComplementaryFilter
+from app.core.filters.gyro_integration import GyroIntegration
+from app.core.filters.madgwick import MadgwickFilter
+from app.core.filters.mahony import MahonyFilter
 
 FILTERS: dict[str, type[OrientationFilter]] = {
-    cls.name: cls for cls in (ComplementaryFilter, AccelerometerTilt)
+    cls.name: cls
+    for cls in (
+        ComplementaryFilter, MadgwickFilter, MahonyFilter, AccelerometerTilt, GyroIntegration,
+    )
 }
 DEFAULT_FILTER = ComplementaryFilter.name
 

@@ -32,8 +32,8 @@ def _quat_mul(aw, ax, ay, az, bw, bx, by, bz):  # pragma: no cover - compiled
 def tilt_correct(qw, qx, qy, qz, ax, ay, az, fraction):  # pragma: no cover - compiled
     """Rotate q about a horizontal earth axis ``fraction`` of the way to the measured up."""
     norm = math.sqrt(ax * ax + ay * ay + az * az)
-    if norm == 0.0 or fraction <= 0.0:
-        return qw, qx, qy, qz
+    if not (norm > 0.0 and math.isfinite(norm)) or fraction <= 0.0:
+        return qw, qx, qy, qz  # no usable gravity direction: keep the attitude
     ax /= norm
     ay /= norm
     az /= norm
@@ -67,7 +67,7 @@ def gyro_step(qw, qx, qy, qz, gx, gy, gz, dt):  # pragma: no cover - compiled
     ry = gy * dt
     rz = gz * dt
     angle = math.sqrt(rx * rx + ry * ry + rz * rz)
-    if angle < 1e-12:
+    if not angle >= 1e-12 or not math.isfinite(angle):  # no rotation, or an unusable sample
         return qw, qx, qy, qz
     half = 0.5 * angle
     k = math.sin(half) / angle

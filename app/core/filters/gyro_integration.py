@@ -7,13 +7,15 @@ the gyro's own errors (bias, noise, scale) shows. The attitude starts, and after
 (first sample, gap, bad or long step) starts again, from the accelerometer's tilt with the
 heading kept, unless that is switched off; then it starts level and holds across restarts.
 
-The small njit helpers here (:func:`unit_positive`, :func:`usable_vector`,
-:func:`restart_tilt`) are shared by the Madgwick and Mahony kernels.
+The small njit helpers here (:func:`unit_positive`, :func:`usable_vector`, :func:`restart_tilt`)
+and the base class :class:`AccelStartedFilter` are shared with the Madgwick and Mahony filters.
 """
 
 from __future__ import annotations
 
+import copy
 import math
+from typing import ClassVar
 
 import numpy as np
 from numba import njit
@@ -48,24 +50,62 @@ def restart_tilt(qw, qx, qy, qz, ax, ay, az):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _gyro_kernel(accel, gyro, dt, q0, from_accel, out):  # pragma: no cover - compiled
+def _gyro_kernel(accel, gyro, dt, q0, from_accel, pending, out):  # pragma: no cover - compiled
     qw, qx, qy, qz = q0[0], q0[1], q0[2], q0[3]
     for i in range(accel.shape[0]):
         step = dt[i]
-        if step > 0.0:
+        ax, ay, az = accel[i, 0], accel[i, 1], accel[i, 2]
+        if from_accel and (step <= 0.0 or pending) and usable_vector(ax, ay, az):
+            qw, qx, qy, qz = tilt_correct(qw, qx, qy, qz, ax, ay, az, 1.0)
+            pending = False
+        elif step <= 0.0:
+            pending = from_accel  # hold until a usable accelerometer sample
+        else:
             gx, gy, gz = gyro[i, 0], gyro[i, 1], gyro[i, 2]
             if usable_vector(gx, gy, gz):  # a zero rate is a no-op; NaN must not spread
                 qw, qx, qy, qz = gyro_step(qw, qx, qy, qz, gx, gy, gz, step)
-        elif from_accel:
-            qw, qx, qy, qz = restart_tilt(qw, qx, qy, qz, accel[i, 0], accel[i, 1], accel[i, 2])
         qw, qx, qy, qz = unit_positive(qw, qx, qy, qz)
         out[i, 0] = qw
         out[i, 1] = qx
         out[i, 2] = qy
         out[i, 3] = qz
+    return pending
 
 
-class GyroIntegration(OrientationFilter):
+class AccelStartedFilter(OrientationFilter):
+    """A filter whose restarts take the tilt from the next usable accelerometer sample.
+
+    A restart (``dt == 0``) whose accelerometer sample is zero or not finite holds the attitude
+    and leaves the restart pending, also across blocks, until a usable sample arrives (the gyro
+    keeps propagating meanwhile). ``_extra_state`` names attributes that :meth:`warm_up` must
+    leave untouched.
+    """
+
+    _extra_state: ClassVar[tuple[str, ...]] = ("_restart_pending",)
+
+    def reset(
+        self, initial_quat: np.ndarray | None = None, last_time_s: float | None = None
+    ) -> None:
+        super().reset(initial_quat, last_time_s)
+        self._restart_pending = False
+
+    def warm_up(self) -> None:
+        saved = {key: copy.copy(getattr(self, key)) for key in self._extra_state}
+        super().warm_up()
+        for key, value in saved.items():
+            setattr(self, key, value)
+
+    def _inputs(self, block: SampleBlock) -> tuple[np.ndarray, ...]:
+        """Contiguous float64 accel and gyro, the time steps and a copy of the attitude."""
+        return (
+            np.ascontiguousarray(block.accel_m_s2, dtype=np.float64),
+            np.ascontiguousarray(block.gyro_rad_s, dtype=np.float64),
+            self.time_steps(block),
+            np.array(self._quat, dtype=np.float64),
+        )
+
+
+class GyroIntegration(AccelStartedFilter):
     """Pure gyro integration (exact quaternion exponential), started from the accelerometer."""
 
     name = "gyro"
@@ -85,12 +125,8 @@ class GyroIntegration(OrientationFilter):
 
     def _process(self, block: SampleBlock) -> np.ndarray:
         out = np.empty((len(block), 4))
-        _gyro_kernel(
-            np.ascontiguousarray(block.accel_m_s2, dtype=np.float64),
-            np.ascontiguousarray(block.gyro_rad_s, dtype=np.float64),
-            self.time_steps(block),
-            np.ascontiguousarray(self._quat, dtype=np.float64),
-            bool(self._values["init_from_accel"]),
-            out,
+        self._restart_pending = _gyro_kernel(
+            *self._inputs(block), bool(self._values["init_from_accel"]),
+            self._restart_pending, out,
         )
         return out
