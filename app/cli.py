@@ -3,15 +3,21 @@
 ``inclinometer``                    the GUI on the simulated device
 ``inclinometer --device URL``       the GUI on another device
 ``inclinometer devices``            list what can be connected
+``inclinometer evaluate SOURCE``    score the orientation filters against a known truth
 ``inclinometer --version``
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+from typing import TYPE_CHECKING, TextIO
 
 from app import __version__
+
+if TYPE_CHECKING:
+    from app.core.evaluation import FilterScore
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -27,7 +33,47 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--filter", metavar="NAME", help="orientation filter to start with")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
     commands.add_parser("devices", help="list the devices that can be connected")
+    add_evaluate_parser(commands)
     return parser
+
+
+EVALUATE_DEFAULT_SECONDS = 60.0
+
+
+def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
+    evaluate = commands.add_parser(
+        "evaluate",
+        help="score the orientation filters on a source with a known true orientation",
+        description=(
+            "Run orientation filters over a stream whose true orientation is known and print, "
+            "per filter, the inclination error (RMSE and maximum, after the first seconds of "
+            "convergence), the batch throughput and a flag (ok, NaN, diverged or error). "
+            "The simulator's static sensor errors are compensated with their true values "
+            "unless --raw is given."
+        ),
+    )
+    evaluate.add_argument(
+        "source", metavar="SOURCE",
+        help="a simulator URL such as 'sim://translation?odr=208' (never paced in real time), "
+        "or 'scenarios': every simulator scenario with motion plus the hard cases (an hour at "
+        "rest, 90 degrees of pitch, upside down, a stream with a gap)",
+    )
+    evaluate.add_argument(
+        "--filter", dest="filters", metavar="NAME", action="extend", nargs="+",
+        help="filter(s) to evaluate (repeatable; default: all)",
+    )
+    evaluate.add_argument(
+        "--seconds", type=float, default=EVALUATE_DEFAULT_SECONDS, metavar="S",
+        help="length of each stream (default %(default)g; the hour at rest is always an hour)",
+    )
+    evaluate.add_argument(
+        "--skip", type=float, default=None, metavar="S",
+        help="seconds at the start not scored while filters converge (default 2)",
+    )
+    evaluate.add_argument(
+        "--raw", action="store_true",
+        help="leave the sensor's static errors (bias, scale, cross-axis) uncompensated",
+    )
 
 
 def list_devices(out=sys.stdout) -> int:
@@ -44,10 +90,74 @@ def list_devices(out=sys.stdout) -> int:
     return 0
 
 
+def _format_score(score: FilterScore, width: int) -> str:
+    def number(value: float, spec: str) -> str:
+        return format(value, spec) if math.isfinite(value) else "-"
+
+    rate = number(score.samples_per_s, ",.0f")
+    flag = score.flag if not score.message else f"{score.flag}: {score.message}"
+    return (f"  {score.name:<{width}}  {number(score.rmse_deg, '.3f'):>9}  "
+            f"{number(score.max_deg, '.3f'):>9}  {rate:>14}  {flag}")
+
+
+def evaluate_sources(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """The ``evaluate`` sub-command: one table per source."""
+    from app.core import evaluation
+    from app.core.filters import FILTERS
+    from drivers.errors import DeviceError
+    from drivers.registry import scheme_of
+
+    out = sys.stdout if out is None else out
+
+    filters = args.filters or list(FILTERS)
+    unknown = [name for name in filters if name not in FILTERS]
+    if unknown:
+        print(f"inclinometer: no filter {unknown[0]!r}; choose from {', '.join(FILTERS)}",
+              file=sys.stderr)
+        return 2
+    if args.seconds <= 0:
+        print("inclinometer: --seconds must be positive", file=sys.stderr)
+        return 2
+    skip = evaluation.DEFAULT_SKIP_S if args.skip is None else args.skip
+    compensate = not args.raw
+    if args.source == "scenarios":
+        sources = evaluation.standard_sources(args.seconds, compensate=compensate)
+    else:
+        try:
+            if scheme_of(args.source) != "sim":
+                print(f"inclinometer: {args.source}: only sources that know their true "
+                      "orientation can be evaluated (sim:// URLs)", file=sys.stderr)
+                return 2
+            sources = [evaluation.simulator_source(args.source, args.seconds,
+                                                   compensate=compensate)]
+        except DeviceError as exc:
+            print(f"inclinometer: {exc}", file=sys.stderr)
+            return 2
+    width = max(6, *(len(name) for name in filters))
+    errors = "static errors uncompensated" if args.raw else "static errors compensated"
+    for source in sources:
+        stream = evaluation.concatenate_blocks(source.blocks())
+        info = evaluation.stream_summary(stream)
+        about = f" ({source.description})" if source.description else ""
+        print(f"{source.label}{about}", file=out)
+        print(f"  {info['duration_s']:.0f} s, {info['samples']} samples at "
+              f"{info['rate_hz']:.4g} Hz, {info['gaps']} gap(s), {errors}, "
+              f"first {skip:g} s not scored", file=out)
+        print(f"  {'filter':<{width}}  {'RMSE deg':>9}  {'max deg':>9}  {'samples/s':>14}  flag",
+              file=out)
+        for score in evaluation.evaluate(stream, filters, skip_s=skip):
+            print(_format_score(score, width), file=out)
+        print(file=out)
+        out.flush()
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.command == "devices":
         return list_devices()
+    if args.command == "evaluate":
+        return evaluate_sources(args)
     if args.filter is not None:
         from app.core.filters import FILTERS
 

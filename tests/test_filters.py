@@ -143,3 +143,10 @@ def test_complementary_survives_non_finite_samples():
     out = f.process(block(np.arange(10) * 0.01, accel, gyro))
     assert np.all(np.isfinite(out.quat))
     assert out.angles.roll_deg[-1] == pytest.approx(5.0, abs=0.01)
+
+
+def test_warm_up_leaves_no_trace_in_the_filter_state():
+    f = create_filter("accel", average_samples=4)
+    f.warm_up()
+    out = f.process(block([0.0], [G, 0.0, 0.0]))  # +x straight up
+    assert out.angles.pitch_deg[0] == pytest.approx(90.0, abs=1e-9)

@@ -10,11 +10,13 @@ from app.core.filters.complementary import ComplementaryFilter
 from app.core.filters.gyro_integration import GyroIntegration
 from app.core.filters.madgwick import MadgwickFilter
 from app.core.filters.mahony import MahonyFilter
+from app.core.filters.vqf_filter import VQFFilter
 
 FILTERS: dict[str, type[OrientationFilter]] = {
     cls.name: cls
     for cls in (
-        ComplementaryFilter, MadgwickFilter, MahonyFilter, AccelerometerTilt, GyroIntegration,
+        ComplementaryFilter, VQFFilter, MadgwickFilter, MahonyFilter, AccelerometerTilt,
+        GyroIntegration,
     )
 }
 DEFAULT_FILTER = ComplementaryFilter.name

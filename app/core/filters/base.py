@@ -8,6 +8,7 @@ controls; changing one mid-stream keeps the state continuous.
 
 from __future__ import annotations
 
+import copy
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -161,12 +162,14 @@ class OrientationFilter(ABC):
         """Return (N, 4) quaternions for the block."""
 
     def warm_up(self) -> None:
-        """Compile or prepare whatever the first block would (called off the GUI thread)."""
+        """Compile or prepare whatever the first block would (called off the GUI thread).
+
+        Runs on a copy, so no state of this filter (averaging history, bias estimates...)
+        sees the made-up samples.
+        """
         t = np.arange(4) * 0.01
         block = SampleBlock(
             t, np.tile([0.0, 0.0, 9.81], (4, 1)), np.zeros((4, 3)), np.zeros(4),
             np.zeros(4, dtype=bool),
         )
-        state = (self._quat.copy(), self._last_t, self._has_state)
-        self._process(block)
-        self._quat, self._last_t, self._has_state = state
+        copy.deepcopy(self)._process(block)

@@ -1,0 +1,354 @@
+"""Filter evaluation: run orientation filters over a stream with a known true orientation.
+
+A *stream* is any iterable of :class:`~app.core.samples.SampleBlock` s that carry
+``reference_quat``: the simulator (:func:`simulator_blocks`) today, a recording with reference
+columns later. :func:`evaluate` joins the stream, runs each filter over it in large blocks and
+scores it:
+
+- **inclination error**: the angle between estimated and true gravity directions
+  (:func:`app.core.orientation.inclination_error_deg`), as RMSE and maximum in degrees. The
+  first ``skip_s`` seconds (default :data:`DEFAULT_SKIP_S`, 2 s) after the stream's first sample
+  are not scored: every filter starts from the accelerometer and needs time to converge.
+  Re-convergence after a gap *is* scored (that is what a gap costs).
+- **throughput**: samples per second of wall time inside ``filter.process`` only.
+- **flag**: ``ok``; ``NaN`` when an estimate is not finite; ``diverged`` when the error RMS over
+  the last 10 % of the scored samples exceeds :data:`DIVERGED_DEG` and
+  :data:`DIVERGED_RATIO` times that over the rest (the estimate runs away); ``error`` when the
+  filter raised (``message`` says what).
+
+This module is numpy only (no Qt). It imports ``drivers`` lazily, only in the simulator helper.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from app.core.calibration import SensorCalibration
+from app.core.filters import FILTERS, OrientationFilter
+from app.core.orientation import inclination_error_deg
+from app.core.samples import SampleBlock, convert_raw_block
+
+DEFAULT_SKIP_S = 2.0
+"""Seconds at the start of a stream that are not scored (filter convergence)."""
+DEFAULT_BLOCK = 65536
+"""Samples per ``filter.process`` call during evaluation (large: a batch, as a recording)."""
+DEFAULT_REPEATS = 3
+"""Runs per filter and stream; the throughput is that of the fastest."""
+DIVERGED_DEG = 5.0
+DIVERGED_RATIO = 1.5
+LATE_FRACTION = 0.1
+
+FilterSpec = str | type[OrientationFilter]
+"""A filter to evaluate: a registry name (:data:`app.core.filters.FILTERS`) or a class."""
+
+
+@dataclass(slots=True)
+class FilterScore:
+    """How one filter did on one stream (angles in degrees)."""
+
+    name: str
+    title: str
+    rmse_deg: float = math.nan
+    max_deg: float = math.nan
+    samples_per_s: float = math.nan
+    samples: int = 0
+    scored_samples: int = 0
+    nan_samples: int = 0
+    flag: str = "ok"
+    message: str = ""
+
+
+@dataclass(slots=True)
+class StreamSource:
+    """A named stream factory: ``blocks()`` yields the stream afresh each time it is called."""
+
+    label: str
+    blocks: Callable[[], Iterable[SampleBlock]]
+    description: str = ""
+
+
+# -- streams ---------------------------------------------------------------------------------
+def concatenate_blocks(blocks: Iterable[SampleBlock]) -> SampleBlock:
+    """One SampleBlock holding a whole stream (reference kept only if every block has one)."""
+    blocks = [b for b in blocks if len(b)]
+    if not blocks:
+        empty3 = np.empty((0, 3))
+        return SampleBlock(np.empty(0), empty3, empty3.copy(), np.empty(0), np.empty(0, bool))
+    references = [b.reference_quat for b in blocks]
+    has_reference = all(r is not None for r in references)
+    return SampleBlock(
+        t_s=np.concatenate([b.t_s for b in blocks]),
+        accel_m_s2=np.concatenate([b.accel_m_s2 for b in blocks]),
+        gyro_rad_s=np.concatenate([b.gyro_rad_s for b in blocks]),
+        temp_degc=np.concatenate([b.temp_degc for b in blocks]),
+        gap=np.concatenate([b.gap for b in blocks]),
+        reference_quat=np.concatenate(references) if has_reference else None,
+    )
+
+
+def split_block(block: SampleBlock, size: int) -> Iterator[SampleBlock]:
+    """Consecutive slices of ``block`` with at most ``size`` samples (views, no copies)."""
+    ref = block.reference_quat
+    for start in range(0, len(block), size):
+        stop = start + size
+        yield SampleBlock(
+            block.t_s[start:stop], block.accel_m_s2[start:stop], block.gyro_rad_s[start:stop],
+            block.temp_degc[start:stop], block.gap[start:stop],
+            None if ref is None else ref[start:stop],
+        )
+
+
+def with_gap(block: SampleBlock, start_s: float, length_s: float) -> SampleBlock:
+    """``block`` with the samples in ``[start_s, start_s + length_s)`` lost, as a FIFO overflow.
+
+    The first sample after the hole gets ``gap = True``; times and reference are untouched.
+    """
+    lost = (block.t_s >= start_s) & (block.t_s < start_s + length_s)
+    keep = ~lost
+    gap = block.gap.copy()
+    after = np.flatnonzero(block.t_s >= start_s + length_s)
+    if lost.any() and len(after):
+        gap[after[0]] = True
+    ref = block.reference_quat
+    return SampleBlock(
+        block.t_s[keep], block.accel_m_s2[keep], block.gyro_rad_s[keep], block.temp_degc[keep],
+        gap[keep], None if ref is None else ref[keep],
+    )
+
+
+def calibration_from_unit_errors(unit: Any) -> SensorCalibration:
+    """The calibration that undoes a simulated unit's static errors at 25 degC.
+
+    ``unit`` is a :class:`drivers.sim.error_model.UnitErrors`: ``measured = M @ true + bias``
+    gives ``A = inv(M)`` and ``b = bias``, for the accelerometer and the gyroscope alike.
+    Temperature terms, random walks and noise stay: no calibration can remove them.
+    """
+    return SensorCalibration(
+        accel_bias_m_s2=np.asarray(unit.accel_bias_m_s2, dtype=np.float64),
+        accel_matrix=np.linalg.inv(unit.accel_matrix),
+        gyro_bias_rad_s=np.asarray(unit.gyro_bias_rad_s, dtype=np.float64),
+        gyro_matrix=np.linalg.inv(unit.gyro_matrix),
+        name=f"true errors of seed {unit.seed}",
+    )
+
+
+def simulator_blocks(
+    url: str, seconds: float, *, compensate: bool = True, block: int = 65536
+) -> Iterator[SampleBlock]:
+    """The first ``seconds`` of a ``sim://`` URL as SampleBlocks (not paced: realtime off).
+
+    A ``fail_after`` option in the URL ends the stream early.
+
+    With ``compensate`` (the default) the unit's static errors (scale, cross-axis, bias) are
+    removed with its true values (:func:`calibration_from_unit_errors`), so the scores show the
+    filters rather than an uncalibrated sensor.
+    """
+    from drivers.errors import DeviceIOError  # drivers sit above app.core: import late
+    from drivers.sim.device import SimulatedDevice
+
+    device = SimulatedDevice(url, realtime=False, block=block)
+    calibration = (
+        calibration_from_unit_errors(device.unit_errors) if compensate else SensorCalibration()
+    )
+    device.open()
+    try:
+        remaining = max(1, round(seconds * device.odr_hz))
+        while remaining > 0:
+            try:
+                raw = device.read(1.0)
+            except DeviceIOError:  # fail_after: the stream ends there, as a recording would
+                break
+            if raw is None or len(raw) == 0:
+                break
+            samples = calibration.apply(convert_raw_block(raw))
+            if len(samples) > remaining:
+                samples = next(split_block(samples, remaining))
+            remaining -= len(samples)
+            yield samples
+    finally:
+        device.close()
+
+
+def simulator_source(
+    url: str, seconds: float, *, compensate: bool = True, gap: tuple[float, float] | None = None,
+    label: str | None = None, description: str = "",
+) -> StreamSource:
+    """A :class:`StreamSource` for a simulator URL; ``gap`` = (start s, length s) drops samples.
+
+    Raises :class:`drivers.errors.DeviceUrlError` at once for a bad URL.
+    """
+    from drivers.sim.options import parse_sim_url
+
+    parse_sim_url(url)
+
+    def blocks() -> Iterable[SampleBlock]:
+        stream = simulator_blocks(url, seconds, compensate=compensate)
+        if gap is None:
+            return stream
+        return [with_gap(concatenate_blocks(stream), *gap)]
+
+    return StreamSource(label or url, blocks, description)
+
+
+# -- scoring ---------------------------------------------------------------------------------
+def error_statistics(
+    quat: np.ndarray, reference: np.ndarray, t_s: np.ndarray, skip_s: float = DEFAULT_SKIP_S
+) -> dict[str, Any]:
+    """RMSE and maximum inclination error (degrees) after the first ``skip_s`` seconds.
+
+    Returns ``rmse_deg``, ``max_deg``, ``scored`` (samples scored), ``nan`` (samples whose
+    estimate is not finite, counted over the whole stream) and ``diverged`` (see the module
+    docstring). Non-finite estimates are left out of RMSE and maximum.
+    """
+    finite = np.all(np.isfinite(quat), axis=1)
+    nan_count = int(np.count_nonzero(~finite))
+    if len(t_s) == 0:
+        return {"rmse_deg": math.nan, "max_deg": math.nan, "scored": 0, "nan": 0,
+                "diverged": False}
+    scored = (t_s >= t_s[0] + skip_s) & finite
+    errors = inclination_error_deg(quat[scored], reference[scored])
+    if len(errors) == 0:
+        return {"rmse_deg": math.nan, "max_deg": math.nan, "scored": 0, "nan": nan_count,
+                "diverged": False}
+    late_count = max(1, int(len(errors) * LATE_FRACTION))
+    late = float(np.sqrt(np.mean(errors[-late_count:] ** 2)))
+    early_errors = errors[:-late_count]
+    early = float(np.sqrt(np.mean(early_errors**2))) if len(early_errors) else 0.0
+    return {
+        "rmse_deg": float(np.sqrt(np.mean(errors**2))),
+        "max_deg": float(errors.max()),
+        "scored": len(errors),
+        "nan": nan_count,
+        "diverged": late > DIVERGED_DEG and late > DIVERGED_RATIO * early,
+    }
+
+
+def _resolve(spec: FilterSpec) -> type[OrientationFilter]:
+    if isinstance(spec, str):
+        try:
+            return FILTERS[spec]
+        except KeyError:
+            raise KeyError(f"no filter named {spec!r} (available: {', '.join(FILTERS)})") from None
+    return spec
+
+
+def run_filter(
+    orientation_filter: OrientationFilter, stream: SampleBlock, block: int = DEFAULT_BLOCK
+) -> tuple[np.ndarray, float]:
+    """Quaternions (N, 4) of a filter over ``stream`` and the seconds spent in ``process``."""
+    orientation_filter.warm_up()
+    out = np.empty((len(stream), 4))
+    elapsed = 0.0
+    row = 0
+    for piece in split_block(stream, block):
+        start = time.perf_counter()
+        result = orientation_filter.process(piece)
+        elapsed += time.perf_counter() - start
+        out[row : row + len(piece)] = result.quat
+        row += len(piece)
+    return out, elapsed
+
+
+def evaluate_filter(
+    spec: FilterSpec, stream: SampleBlock, *, skip_s: float = DEFAULT_SKIP_S,
+    block: int = DEFAULT_BLOCK, repeats: int = DEFAULT_REPEATS, **values: Any,
+) -> FilterScore:
+    """Score one filter (fresh, with parameter ``values``) on a stream with a reference.
+
+    The stream is run ``repeats`` times by fresh filters; the errors come from the first run,
+    the throughput from the fastest (short streams time noisily).
+    """
+    if stream.reference_quat is None:
+        raise ValueError("the stream has no reference orientation to compare with")
+    cls = _resolve(spec)
+    score = FilterScore(cls.name, cls.title or cls.name, samples=len(stream))
+    try:
+        quat, elapsed = run_filter(cls(**values), stream, block)
+        for _ in range(repeats - 1):
+            elapsed = min(elapsed, run_filter(cls(**values), stream, block)[1])
+    except Exception as exc:  # one broken filter must not end the evaluation
+        score.flag = "error"
+        score.message = f"{type(exc).__name__}: {exc}"
+        return score
+    stats = error_statistics(quat, stream.reference_quat, stream.t_s, skip_s)
+    score.rmse_deg = stats["rmse_deg"]
+    score.max_deg = stats["max_deg"]
+    score.scored_samples = stats["scored"]
+    score.nan_samples = stats["nan"]
+    score.samples_per_s = len(stream) / elapsed if elapsed > 0.0 else math.inf
+    if score.nan_samples:
+        score.flag = "NaN"
+    elif stats["diverged"]:
+        score.flag = "diverged"
+    return score
+
+
+def evaluate(
+    blocks: Iterable[SampleBlock] | SampleBlock,
+    filters: Sequence[FilterSpec] | None = None,
+    *,
+    skip_s: float = DEFAULT_SKIP_S,
+    block: int = DEFAULT_BLOCK,
+    repeats: int = DEFAULT_REPEATS,
+) -> list[FilterScore]:
+    """Score each filter (default: every registered one) on the same stream."""
+    stream = blocks if isinstance(blocks, SampleBlock) else concatenate_blocks(blocks)
+    names: Sequence[FilterSpec] = list(FILTERS) if filters is None else filters
+    return [
+        evaluate_filter(spec, stream, skip_s=skip_s, block=block, repeats=repeats)
+        for spec in names
+    ]
+
+
+def stream_summary(stream: SampleBlock) -> dict[str, float]:
+    """Duration (s), samples, median rate (Hz) and gaps of a stream."""
+    n = len(stream)
+    duration = float(stream.t_s[-1] - stream.t_s[0]) if n > 1 else 0.0
+    steps = np.diff(stream.t_s)
+    rate = 1.0 / float(np.median(steps)) if len(steps) else math.nan
+    return {"duration_s": duration, "samples": n, "rate_hz": rate,
+            "gaps": int(np.count_nonzero(stream.gap))}
+
+
+# -- the standard set ------------------------------------------------------------------------
+MOTION_SCENARIOS = ("static", "slow-tilt", "wobble", "vibration", "translation", "tour")
+"""Simulator scenarios with a scripted motion (``interactive`` waits for the user)."""
+SCENARIO_ODR_HZ = 208
+LONG_REST_S = 3600.0
+
+
+def standard_sources(
+    seconds: float = 60.0, *, compensate: bool = True, seed: int = 1
+) -> list[StreamSource]:
+    """Every motion scenario for ``seconds``, plus the hard cases.
+
+    Hard cases: an hour at rest at 26 Hz (always an hour: slow drifts show there), a hand-held
+    wobble around 90 degrees of pitch, one upside down, and the six-face tour with 2.5 s of
+    samples lost over its half turn from +x up to -x up (the filter must find the new attitude
+    after the gap).
+    """
+    def url(name: str, odr: float = SCENARIO_ODR_HZ, **params: float) -> str:
+        query = "&".join([f"odr={odr:g}", f"seed={seed}", *(f"{k}={v:g}" for k, v in
+                                                            params.items())])
+        return f"sim://{name}?{query}"
+
+    sources = [simulator_source(url(name), seconds, compensate=compensate)
+               for name in MOTION_SCENARIOS]
+    sources += [
+        simulator_source(url("static", 26), LONG_REST_S, compensate=compensate,
+                         description="an hour at rest"),
+        simulator_source(url("wobble", pitch=90, roll=0), seconds, compensate=compensate,
+                         description="hand-held at 90 degrees of pitch"),
+        simulator_source(url("wobble", roll=180, pitch=0), seconds, compensate=compensate,
+                         description="hand-held upside down"),
+        simulator_source(url("tour"), max(seconds, 30.0), compensate=compensate,
+                         gap=(21.5, 2.5), label=url("tour") + " + gap 21.5-24 s",
+                         description="2.5 s of samples lost during a half turn"),
+    ]
+    return sources
