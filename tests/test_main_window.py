@@ -7,6 +7,7 @@ import os
 import pytest
 from PySide6.QtCore import QSettings, Qt
 
+from app.core.filters import DEFAULT_FILTER
 from app.gui import theme
 from app.gui.main_window import MainWindow
 from app.worker import DeviceSession
@@ -51,7 +52,7 @@ def test_window_shows_live_data(qtbot, window, artifacts_dir):
 
 def test_filter_switch_from_the_panel(qtbot, window):
     panel = window.filter_panel
-    qtbot.waitUntil(lambda: panel.current_filter == "complementary", timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: panel.current_filter == DEFAULT_FILTER, timeout=TIMEOUT_MS)
     index = panel.combo.findData("accel")
     with qtbot.waitSignal(window.session.filterChanged, timeout=TIMEOUT_MS):
         panel.combo.setCurrentIndex(index)
@@ -99,7 +100,7 @@ def test_display_units_and_hold(qtbot, window):
 
 def test_compared_filters_are_overlaid_and_scored(qtbot, window):
     panel = window.filter_panel
-    qtbot.waitUntil(lambda: panel.current_filter == "complementary", timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: panel.current_filter == DEFAULT_FILTER, timeout=TIMEOUT_MS)
     item = next(
         panel.compare_list.item(row) for row in range(panel.compare_list.count())
         if panel.compare_list.item(row).data(Qt.ItemDataRole.UserRole) == "accel"
@@ -122,3 +123,18 @@ def test_simulator_panel_shows_the_connected_units_attitude(qtbot, window):
     assert panel.pitch_spin.value() == -2.5
     assert panel.seed_spin.value() == 9
     assert panel.url().startswith("sim://interactive?")
+
+
+def test_parameters_spanning_decades_are_edited_in_scientific_notation(qtbot, window):
+    panel = window.filter_panel
+    index = panel.combo.findData("kalman-thesis")
+    with qtbot.waitSignal(window.session.filterChanged, timeout=TIMEOUT_MS):
+        panel.combo.setCurrentIndex(index)
+        panel.combo.activated.emit(index)
+    qtbot.waitUntil(lambda: panel.current_filter == "kalman-thesis", timeout=TIMEOUT_MS)
+    spin = panel._controls["q"]
+    assert spin.text().startswith("1e-05")
+    with qtbot.waitSignal(window.session.filterChanged, timeout=TIMEOUT_MS):
+        spin.lineEdit().setText("3e-7")
+        spin.interpretText()
+    assert window.session.pipeline.filter.get_parameter("q") == pytest.approx(3e-7)

@@ -10,6 +10,7 @@ import math
 from typing import Any
 
 from PySide6.QtCore import Qt, Signal
+from PySide6.QtGui import QValidator
 from PySide6.QtWidgets import (
     QCheckBox,
     QComboBox,
@@ -29,6 +30,38 @@ from PySide6.QtWidgets import (
 )
 
 from app.core.filters import FILTERS, ParameterSpec
+
+
+class ScientificSpinBox(QDoubleSpinBox):
+    """A spin box that shows and accepts numbers like 1e-05 (for parameters spanning decades)."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setDecimals(15)  # Qt rounds values to this many decimals internally
+
+    def textFromValue(self, value: float) -> str:
+        return f"{value:.4g}"
+
+    def valueFromText(self, text: str) -> float:
+        try:
+            return float(text.replace(self.suffix(), "").strip())
+        except ValueError:
+            return self.value()
+
+    def validate(self, text: str, position: int):
+        body = text.replace(self.suffix(), "").strip()
+        try:
+            float(body)
+        except ValueError:
+            partial = body in ("", "-", "+", ".") or body[-1:] in ("e", "E", "-", "+")
+            state = QValidator.State.Intermediate if partial else QValidator.State.Invalid
+            return state, text, position
+        return QValidator.State.Acceptable, text, position
+
+    def stepBy(self, steps: int) -> None:
+        # A step is a factor of about 1.26 (ten steps per decade).
+        value = self.value() or self.minimum() or 1e-6
+        self.setValue(value * 10 ** (0.1 * steps))
 
 
 def _decimals_for(spec: ParameterSpec) -> int:
@@ -212,6 +245,10 @@ class FilterPanel(QWidget):
             spin = QSpinBox()
             spin.setRange(int(spec.minimum), int(spec.maximum))
             spin.setValue(int(spec.default))
+        elif spec.log_scale and spec.maximum / max(spec.minimum, 1e-300) > 1e5:
+            spin = ScientificSpinBox()
+            spin.setRange(spec.minimum, spec.maximum)
+            spin.setValue(spec.default)
         else:
             spin = QDoubleSpinBox()
             spin.setDecimals(_decimals_for(spec))

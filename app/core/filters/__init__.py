@@ -7,7 +7,9 @@ from typing import Any
 from app.core.filters.accel_tilt import AccelerometerTilt
 from app.core.filters.base import OrientationBlock, OrientationFilter, ParameterSpec
 from app.core.filters.complementary import ComplementaryFilter
+from app.core.filters.ekf import QuaternionEKF
 from app.core.filters.gyro_integration import GyroIntegration
+from app.core.filters.kalman_thesis import ThesisKalman
 from app.core.filters.madgwick import MadgwickFilter
 from app.core.filters.mahony import MahonyFilter
 from app.core.filters.vqf_filter import VQFFilter
@@ -15,11 +17,11 @@ from app.core.filters.vqf_filter import VQFFilter
 FILTERS: dict[str, type[OrientationFilter]] = {
     cls.name: cls
     for cls in (
-        ComplementaryFilter, VQFFilter, MadgwickFilter, MahonyFilter, AccelerometerTilt,
-        GyroIntegration,
+        QuaternionEKF, VQFFilter, ComplementaryFilter, MadgwickFilter, MahonyFilter,
+        ThesisKalman, AccelerometerTilt, GyroIntegration,
     )
 }
-DEFAULT_FILTER = ComplementaryFilter.name
+DEFAULT_FILTER = QuaternionEKF.name
 
 
 def create_filter(name: str, **values: Any) -> OrientationFilter:
