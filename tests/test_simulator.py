@@ -676,3 +676,23 @@ def test_reopening_restarts_the_stream() -> None:
     again = collect(device, 128)
     assert np.array_equal(first.accel_raw, again.accel_raw)
     assert np.array_equal(first.t_s, again.t_s)
+
+
+def test_speed_option_runs_the_device_clock_faster_than_the_wall_clock():
+    now = [100.0]
+    device = SimulatedDevice("sim://static?odr=104&speed=10", clock=lambda: now[0])
+    device.open()
+    try:
+        now[0] += 0.5  # half a wall-clock second = five seconds of data
+        total = 0
+        while True:
+            block = device.read(0.0)
+            if block is None:
+                break
+            total += len(block)
+            assert block.lost_samples == 0
+        assert abs(total - 5 * device.odr_hz) <= 2
+    finally:
+        device.close()
+    with pytest.raises(DeviceUrlError, match="speed"):
+        SimulatedDevice("sim://static?speed=1000").open()

@@ -196,7 +196,7 @@ class SimulatedDevice(Device):
         if due <= 0:
             return None
         due = min(due, limit - self._next_index)
-        capacity = max(1, round(FIFO_SPAN_S * self.true_odr_hz))
+        capacity = max(1, round(FIFO_SPAN_S * self.true_odr_hz * self.options.speed))
         lost = max(0, due - capacity)
         return self._generate(due - lost, lost)
 
@@ -225,14 +225,16 @@ class SimulatedDevice(Device):
 
     def _due(self) -> int:
         """Samples whose true time has come and that were not generated yet."""
-        elapsed = self._clock() - self._start_wall_s
+        elapsed = (self._clock() - self._start_wall_s) * self.options.speed
         return math.floor(elapsed * self.true_odr_hz + 1e-9) + 1 - self._next_index
 
     def _wait_for_samples(self, timeout_s: float) -> int:
         due = self._due()
-        wanted = max(1, math.ceil(MIN_BLOCK_S * self.true_odr_hz))
+        wanted = max(1, math.ceil(MIN_BLOCK_S * self.true_odr_hz * self.options.speed))
         if due < wanted:
-            ready_at = self._start_wall_s + (self._next_index + wanted - 1) / self.true_odr_hz
+            ready_at = self._start_wall_s + (self._next_index + wanted - 1) / (
+                self.true_odr_hz * self.options.speed
+            )
             wait_s = min(max(0.0, timeout_s), ready_at - self._clock())
             if wait_s > 0.0 and self._stop.wait(wait_s):
                 return 0

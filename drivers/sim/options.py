@@ -24,6 +24,7 @@ GENERAL_OPTIONS: dict[str, str] = {
     "gyro_fs": "gyroscope full scale: 125, 250, 500, 1000 or 2000 dps",
     "seed": "integer >= 0 picking the simulated unit (its id and its errors)",
     "realtime": "1: paced by the wall clock; 0: blocks as fast as possible",
+    "speed": "time-lapse factor for realtime pacing (0.1 ... 100; 1 = real time)",
     "block": "samples per read when realtime=0",
     "errors": "0: an ideal chip (no bias, scale, cross-axis, drift or clock error)",
     "noise": "0: no white noise (quantisation stays)",
@@ -45,6 +46,7 @@ class SimOptions:
     gyro_fs_dps: int = DEFAULT_GYRO_FS_DPS
     seed: int = DEFAULT_SEED
     realtime: bool = True
+    speed: float = 1.0
     block: int = DEFAULT_BLOCK
     errors: bool = True
     noise: bool = True
@@ -155,6 +157,11 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
         options["gyro_fs_dps"] = _choice(url, "gyro_fs", raw["gyro_fs"], allowed, "dps")
     if "seed" in raw:
         options["seed"] = _integer(url, "seed", raw["seed"], 0, 2**63 - 1)
+    if "speed" in raw:
+        speed = _number(url, "speed", raw["speed"])
+        if not 0.1 <= speed <= 100.0:
+            raise _fail(url, f"speed={raw['speed']!r} is out of range [0.1, 100]")
+        options["speed"] = speed
     if "block" in raw:
         options["block"] = _integer(url, "block", raw["block"], 1, MAX_BLOCK)
     for key in ("realtime", "errors", "noise"):
