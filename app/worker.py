@@ -16,6 +16,14 @@ from typing import Any
 
 from PySide6.QtCore import QMetaObject, QObject, Qt, QThread, QTimer, Signal, Slot
 
+from app.core.calibration import IDENTITY_CALIBRATION
+from app.core.calibration_procedures import (
+    CalibrationProfile,
+    ProfileError,
+    ProfileStore,
+    SensorSettings,
+    TareReference,
+)
 from app.core.pipeline import Pipeline
 from drivers.base import Device, DeviceInfo
 from drivers.errors import DeviceError
@@ -50,10 +58,14 @@ class DeviceWorker(QObject):
     status = Signal(object)  # StreamStatus
     filterChanged = Signal(str, dict)  # name, parameter values
     comparisonsChanged = Signal(list)  # names of the filters running side by side
+    calibrationChanged = Signal(object)  # the active CalibrationProfile, or None
+    tareChanged = Signal(object)  # the active TareReference, or None
 
-    def __init__(self, pipeline: Pipeline) -> None:
+    def __init__(self, pipeline: Pipeline, profile_store: ProfileStore | None = None) -> None:
         super().__init__()
         self.pipeline = pipeline
+        self.profile_store = profile_store or ProfileStore()
+        self.profile: CalibrationProfile | None = None
         self._device: Device | None = None
         self._poll_timer: QTimer | None = None
         self._status_timer: QTimer | None = None
@@ -99,6 +111,7 @@ class DeviceWorker(QObject):
             return
         self._device = device
         self.pipeline.configure(info.odr_hz)
+        self._load_profile(info)
         self._rate_history.clear()
         self._last_cpu = (time.monotonic(), self.pipeline.counters.filter_cpu_s)
         assert self._poll_timer is not None and self._status_timer is not None
@@ -109,6 +122,63 @@ class DeviceWorker(QObject):
     @Slot()
     def disconnect_device(self) -> None:
         self._close_device("")
+
+    # -- calibration ------------------------------------------------------------------------
+    def _load_profile(self, info: DeviceInfo) -> None:
+        """Apply the device's stored profile, if any; a bad file is reported, never fatal."""
+        profile = None
+        try:
+            profile = self.profile_store.load_for_device(info.unique_id)
+        except ProfileError as exc:
+            self.error.emit(f"Calibration profile not loaded: {exc}")
+        if profile is not None:
+            differences = profile.settings.differences(
+                SensorSettings(info.odr_hz, info.accel_fs_g, info.gyro_fs_dps, info.sensor)
+            )
+            if differences:
+                self.error.emit(
+                    f"The calibration profile of {info.unique_id} was made with other sensor "
+                    f"settings ({'; '.join(differences)}); it is applied all the same"
+                )
+        self._apply_profile(profile)
+        self.pipeline.set_level_reference(None)
+        self.tareChanged.emit(None)
+
+    def _apply_profile(self, profile: CalibrationProfile | None) -> None:
+        self.profile = profile
+        self.pipeline.set_calibration(
+            IDENTITY_CALIBRATION if profile is None else profile.calibration
+        )
+        self.calibrationChanged.emit(profile)
+
+    @Slot(object)
+    def use_profile(self, profile: CalibrationProfile) -> None:
+        """Apply a new profile (from the wizard or an import) and store it for the device."""
+        try:
+            self.profile_store.save(profile)
+        except (OSError, ProfileError) as exc:
+            self.error.emit(f"The calibration is applied but could not be saved: {exc}")
+        self._apply_profile(profile)
+
+    @Slot()
+    def use_no_calibration(self) -> None:
+        """Run uncalibrated for now (the stored profile is kept)."""
+        self._apply_profile(None)
+
+    @Slot()
+    def tare(self) -> None:
+        """Take the current attitude as level (relative measurement)."""
+        if self.pipeline.counters.samples == 0:
+            self.error.emit("Nothing to tare yet: no data has arrived")
+            return
+        reference = TareReference.from_quaternion(self.pipeline.filter.quaternion)
+        self.pipeline.set_level_reference(reference)
+        self.tareChanged.emit(reference)
+
+    @Slot()
+    def clear_tare(self) -> None:
+        self.pipeline.set_level_reference(None)
+        self.tareChanged.emit(None)
 
     @Slot(str)
     def set_filter(self, name: str) -> None:
@@ -218,6 +288,8 @@ class DeviceSession(QObject):
     status = Signal(object)  # StreamStatus
     filterChanged = Signal(str, dict)
     comparisonsChanged = Signal(list)
+    calibrationChanged = Signal(object)
+    tareChanged = Signal(object)
 
     requestConnect = Signal(str)
     requestDisconnect = Signal()
@@ -225,11 +297,21 @@ class DeviceSession(QObject):
     requestFilterParameter = Signal(str, object)
     requestSimulatorTarget = Signal(float, float)
     requestComparisons = Signal(list)
+    requestProfile = Signal(object)  # CalibrationProfile to apply and store
+    requestNoCalibration = Signal()
+    requestTare = Signal()
+    requestClearTare = Signal()
 
-    def __init__(self, pipeline: Pipeline | None = None, parent: QObject | None = None) -> None:
+    def __init__(
+        self,
+        pipeline: Pipeline | None = None,
+        parent: QObject | None = None,
+        profile_store: ProfileStore | None = None,
+    ) -> None:
         super().__init__(parent)
         self.pipeline = pipeline or Pipeline()
-        self.worker = DeviceWorker(self.pipeline)
+        self.profile_store = profile_store or ProfileStore()
+        self.worker = DeviceWorker(self.pipeline, self.profile_store)
         self.thread = QThread()
         self.thread.setObjectName("device-worker")
         self.worker.moveToThread(self.thread)
@@ -240,6 +322,10 @@ class DeviceSession(QObject):
         self.requestFilterParameter.connect(self.worker.set_filter_parameter)
         self.requestSimulatorTarget.connect(self.worker.set_simulator_target)
         self.requestComparisons.connect(self.worker.set_comparisons)
+        self.requestProfile.connect(self.worker.use_profile)
+        self.requestNoCalibration.connect(self.worker.use_no_calibration)
+        self.requestTare.connect(self.worker.tare)
+        self.requestClearTare.connect(self.worker.clear_tare)
         self.device_info: DeviceInfo | None = None
         # Queued into the GUI thread (this object lives there).
         self.worker.connected.connect(self.connected)
@@ -248,6 +334,8 @@ class DeviceSession(QObject):
         self.worker.status.connect(self.status)
         self.worker.filterChanged.connect(self.filterChanged)
         self.worker.comparisonsChanged.connect(self.comparisonsChanged)
+        self.worker.calibrationChanged.connect(self.calibrationChanged)
+        self.worker.tareChanged.connect(self.tareChanged)
         self.connected.connect(self._on_connected)
         self.disconnected.connect(self._on_disconnected)
         self.thread.start()

@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import os
+import tempfile
 import traceback
 from weakref import WeakKeyDictionary
 
-os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
-
 import pytest
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+# Never read or write the user's real settings, profiles or recordings from a test.
+_USER_DIRS = tempfile.mkdtemp(prefix="inclinometer-tests-")
+for _variable in ("XDG_DATA_HOME", "XDG_CONFIG_HOME", "XDG_CACHE_HOME", "XDG_STATE_HOME"):
+    os.environ[_variable] = os.path.join(_USER_DIRS, _variable.lower())
 
 ARTIFACTS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "test-artifacts")
 

@@ -118,3 +118,24 @@ def test_comparison_filters_run_side_by_side_with_their_own_buffers():
     assert pipeline.comparison_buffers == {}
     with pytest.raises(KeyError):
         pipeline.set_comparisons(["nonsense"])
+
+
+def test_tare_shows_angles_relative_to_the_tared_attitude_and_keeps_raw_columns():
+    from app.core.calibration_procedures import TareReference
+
+    pipeline = Pipeline(odr_hz=104.0)
+    pipeline.process(raw_block(0, 300, roll=20.0, pitch=10.0))
+    pipeline.set_level_reference(TareReference.from_angles(20.0, 10.0))
+    pipeline.process(raw_block(300, 100, roll=20.0, pitch=10.0))
+    latest = pipeline.orientation.latest(1)
+    assert latest["roll"][0] == pytest.approx(0.0, abs=0.02)
+    assert latest["pitch"][0] == pytest.approx(0.0, abs=0.02)
+    # The error against the absolute reference is unaffected by the tare.
+    assert latest["incl_error"][0] < 0.02
+    pipeline.set_level_reference(None)
+    pipeline.process(raw_block(400, 10, roll=20.0, pitch=10.0))
+    assert pipeline.orientation.latest(1)["roll"][0] == pytest.approx(20.0, abs=0.02)
+    raw = raw_block(400, 1, roll=20.0, pitch=10.0)
+    np.testing.assert_allclose(
+        pipeline.samples.latest(1)["raw_accel"][0], raw.accel_raw[0] * ACCEL_LSB
+    )

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from app.core.calibration import IDENTITY_CALIBRATION, SensorCalibration
+from app.core.calibration_procedures.level_reference import TareReference
 from app.core.filters import DEFAULT_FILTER, OrientationFilter, create_filter
 from app.core.orientation import angles_from_quaternion, inclination_error_deg
 from app.core.ring_buffer import RingBuffer
@@ -22,7 +23,11 @@ from app.core.samples import RawBlock, SampleBlock, convert_raw_block
 MAX_WINDOW_S = 60.0
 """The longest time window the views may ask for."""
 
-SAMPLE_COLUMNS = {"t": 1, "accel": 3, "gyro": 3, "temp": 1, "gap": 1, "ref_quat": 4}
+SAMPLE_COLUMNS = {
+    "t": 1, "accel": 3, "gyro": 3, "temp": 1, "gap": 1, "ref_quat": 4,
+    # Before calibration (SI units): what calibration procedures and recordings need.
+    "raw_accel": 3, "raw_gyro": 3,
+}
 ORIENTATION_COLUMNS = {
     "t": 1, "quat": 4, "roll": 1, "pitch": 1, "tilt": 1, "direction": 1,
     # From the reference orientation when the source knows it (NaN otherwise):
@@ -62,6 +67,7 @@ class Pipeline:
 
     def __init__(self, odr_hz: float = 104.0, filter_name: str = DEFAULT_FILTER) -> None:
         self.calibration: SensorCalibration = IDENTITY_CALIBRATION
+        self.level_reference: TareReference | None = None
         self.filter: OrientationFilter = create_filter(filter_name)
         self.counters = PipelineCounters()
         self.samples = RingBuffer(1024, SAMPLE_COLUMNS)
@@ -126,11 +132,16 @@ class Pipeline:
     def set_calibration(self, calibration: SensorCalibration) -> None:
         self.calibration = calibration
 
+    def set_level_reference(self, reference: TareReference | None) -> None:
+        """Report angles relative to a tared attitude (None: relative to true vertical)."""
+        self.level_reference = None if reference is None or reference.is_identity else reference
+
     # -- processing -------------------------------------------------------------------------
     def process(self, raw: RawBlock) -> SampleBlock:
         """Run one device block through every stage and into the ring buffers."""
         cpu_start = time.thread_time()
-        block = self.calibration.apply(convert_raw_block(raw))
+        uncalibrated = convert_raw_block(raw)
+        block = self.calibration.apply(uncalibrated)
         n = len(block)
         if n == 0:
             return block
@@ -138,7 +149,13 @@ class Pipeline:
             self.counters.lost_samples += raw.lost_samples
         self.counters.gaps += int(np.count_nonzero(block.gap))
         orientation = self.filter.process(block)
+        shown_quat = orientation.quat
         angles = orientation.angles
+        if self.level_reference is not None:
+            # The tare changes what is shown, not what the filter tracks nor the error
+            # against the (absolute) reference.
+            shown_quat = self.level_reference.apply_quaternion(orientation.quat)
+            angles = angles_from_quaternion(shown_quat)
         if block.reference_quat is not None:
             ref = block.reference_quat
             ref_angles = angles_from_quaternion(ref)
@@ -155,11 +172,12 @@ class Pipeline:
             {
                 "t": block.t_s, "accel": block.accel_m_s2, "gyro": block.gyro_rad_s,
                 "temp": block.temp_degc, "gap": block.gap, "ref_quat": ref,
+                "raw_accel": uncalibrated.accel_m_s2, "raw_gyro": uncalibrated.gyro_rad_s,
             }
         )
         self.orientation.write(
             {
-                "t": block.t_s, "quat": orientation.quat, "roll": angles.roll_deg,
+                "t": block.t_s, "quat": shown_quat, "roll": angles.roll_deg,
                 "pitch": angles.pitch_deg, "tilt": angles.tilt_deg,
                 "direction": angles.direction_deg, **ref_columns,
             }

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import time
+from datetime import timedelta
+from pathlib import Path
 from urllib.parse import urlsplit
 
 from PySide6.QtCore import QSettings, Qt, QTimer
@@ -10,6 +12,7 @@ from PySide6.QtGui import QAction, QCloseEvent, QKeySequence, QShowEvent
 from PySide6.QtWidgets import (
     QComboBox,
     QDockWidget,
+    QFileDialog,
     QFrame,
     QHBoxLayout,
     QLabel,
@@ -25,9 +28,12 @@ from PySide6.QtWidgets import (
 )
 
 from app import __version__
+from app.core.calibration_procedures import CalibrationProfile, ProfileError
+from app.core.calibration_procedures.profiles import read_profile_file
 from app.core.filters import DEFAULT_FILTER, FILTERS
 from app.gui import theme
 from app.gui.bubble_level import BubbleLevel
+from app.gui.calibration_wizard import CalibrationWizard
 from app.gui.device_bar import DeviceBar
 from app.gui.device_panel import DevicePanel
 from app.gui.filter_panel import FilterPanel
@@ -42,6 +48,16 @@ from drivers.registry import DEFAULT_DEVICE_URL, available_devices
 PLOT_WINDOWS_S = (2, 5, 10, 20, 30, 60)
 AVERAGING_S = (0.05, 0.2, 0.5, 1.0, 2.0, 5.0)
 LEVEL_RANGES_DEG = (0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 90.0)
+
+
+def format_age(age: timedelta) -> str:
+    """A short human age: '5 min', '3 h', '12 d'."""
+    seconds = max(0.0, age.total_seconds())
+    if seconds < 3600:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 86400 * 2:
+        return f"{seconds / 3600:.0f} h"
+    return f"{seconds / 86400:.0f} d"
 
 
 class ErrorBanner(QFrame):
@@ -131,7 +147,13 @@ class MainWindow(QMainWindow):
         self.status_rate = QLabel()
         self.status_filter = QLabel()
         self.status_fps = QLabel()
-        for widget in (self.status_device, self.status_rate, self.status_filter):
+        self.status_calibration = QLabel()
+        self.status_calibration.setObjectName("calibrationStatus")
+        self.status_tare = QLabel()
+        for widget in (
+            self.status_device, self.status_rate, self.status_filter, self.status_calibration,
+            self.status_tare,
+        ):
             self.statusBar().addWidget(widget)
         self.statusBar().addPermanentWidget(self.status_fps)
 
@@ -154,6 +176,10 @@ class MainWindow(QMainWindow):
         self.filter_panel.parameterChanged.connect(session.requestFilterParameter)
         self.filter_panel.comparisonsRequested.connect(session.requestComparisons)
         session.comparisonsChanged.connect(self._on_comparisons_changed)
+        session.calibrationChanged.connect(self._on_calibration_changed)
+        session.tareChanged.connect(self._on_tare_changed)
+        self.calibration_wizard: CalibrationWizard | None = None
+        self._show_calibration(None)
         self.simulator_panel.deviceRequested.connect(self.connect_device)
         self.simulator_panel.targetChanged.connect(session.requestSimulatorTarget)
         session.connected.connect(self._on_connected)
@@ -254,6 +280,28 @@ class MainWindow(QMainWindow):
         quit_action.setShortcut(QKeySequence.StandardKey.Quit)
         quit_action.triggered.connect(self.close)
         file_menu.addAction(quit_action)
+        calibration_menu = self.menuBar().addMenu("&Calibration")
+        self.wizard_action = QAction("Calibration &wizard…", self)
+        self.wizard_action.triggered.connect(self.open_calibration_wizard)
+        self.tare_action = QAction("&Tare: take the current attitude as level", self)
+        self.tare_action.setShortcut(QKeySequence("Ctrl+T"))
+        self.tare_action.triggered.connect(self.session.requestTare)
+        self.clear_tare_action = QAction("&Clear tare", self)
+        self.clear_tare_action.triggered.connect(self.session.requestClearTare)
+        self.no_calibration_action = QAction("Run &uncalibrated", self)
+        self.no_calibration_action.triggered.connect(self.session.requestNoCalibration)
+        self.import_action = QAction("&Import profile…", self)
+        self.import_action.triggered.connect(self.import_profile)
+        self.export_action = QAction("&Export profile…", self)
+        self.export_action.triggered.connect(self.export_profile)
+        for action in (
+            self.wizard_action, None, self.tare_action, self.clear_tare_action, None,
+            self.no_calibration_action, self.import_action, self.export_action,
+        ):
+            if action is None:
+                calibration_menu.addSeparator()
+            else:
+                calibration_menu.addAction(action)
         view_menu = self.menuBar().addMenu("&View")
         for dock in self.docks.values():
             view_menu.addAction(dock.toggleViewAction())
@@ -325,6 +373,91 @@ class MainWindow(QMainWindow):
         self.filter_panel.show_filter(name, values)
         self.status_filter.setText(f"Filter: {FILTERS[name].title}")
         self.settings.setValue("filter", name)
+
+    # -- calibration --------------------------------------------------------------------------
+    def open_calibration_wizard(self) -> CalibrationWizard | None:
+        """Open the (non-modal) wizard for the connected device."""
+        if self.session.device_info is None:
+            self.show_error("Connect a device before calibrating it.")
+            return None
+        if self.calibration_wizard is not None and self.calibration_wizard.isVisible():
+            self.calibration_wizard.raise_()
+            return self.calibration_wizard
+        wizard = CalibrationWizard(self.session, self)
+        wizard.profileAccepted.connect(self.session.requestProfile)
+        self.calibration_wizard = wizard
+        wizard.show()
+        return wizard
+
+    def import_profile(self, path: str | None = None) -> None:
+        info = self.session.device_info
+        if info is None:
+            self.show_error("Connect the device the profile belongs to first.")
+            return
+        if path is None:
+            path, _ = QFileDialog.getOpenFileName(
+                self, "Import calibration profile", "", "Calibration profiles (*.json)"
+            )
+            if not path:
+                return
+        try:
+            profile = read_profile_file(Path(path), info.unique_id)
+        except (ProfileError, OSError) as exc:
+            self.show_error(f"Profile not imported: {exc}")
+            return
+        self.session.requestProfile.emit(profile)
+        self.log(f"Imported calibration profile {path}")
+
+    def export_profile(self, path: str | None = None) -> None:
+        info = self.session.device_info
+        if info is None:
+            self.show_error("Connect a device to export its profile.")
+            return
+        if path is None:
+            path, _ = QFileDialog.getSaveFileName(
+                self, "Export calibration profile", f"{info.unique_id}.json",
+                "Calibration profiles (*.json)",
+            )
+            if not path:
+                return
+        try:
+            self.session.profile_store.export(info.unique_id, path, overwrite=True)
+        except (ProfileError, OSError) as exc:
+            self.show_error(f"Profile not exported: {exc}")
+            return
+        self.log(f"Exported the calibration profile to {path}")
+
+    def _on_calibration_changed(self, profile: CalibrationProfile | None) -> None:
+        self._show_calibration(profile)
+        if profile is not None:
+            self.log(f"Calibration applied: {profile.calibration.name} ({profile.method})")
+
+    def _show_calibration(self, profile: CalibrationProfile | None) -> None:
+        if profile is None:
+            self.status_calibration.setText("Uncalibrated")
+            self.status_calibration.setStyleSheet(f"color: {theme.WARN_AMBER};")
+            self.status_calibration.setToolTip("Run Calibration ▸ Calibration wizard")
+            return
+        self.status_calibration.setText(
+            f"Calibrated: {profile.calibration.name} ({format_age(profile.age())} old)"
+        )
+        self.status_calibration.setStyleSheet(f"color: {theme.OK_GREEN};")
+        temperature = (
+            "" if profile.temperature_degc is None else f" at {profile.temperature_degc:.1f} °C"
+        )
+        self.status_calibration.setToolTip(
+            f"{profile.method} profile made {profile.created_utc}{temperature}"
+        )
+
+    def _on_tare_changed(self, reference) -> None:
+        if reference is None:
+            self.status_tare.setText("")
+            return
+        angles = reference.reference_angles
+        self.status_tare.setText(
+            f"TARE at roll {float(angles.roll_deg):+.2f}°, pitch {float(angles.pitch_deg):+.2f}°"
+        )
+        self.status_tare.setStyleSheet(f"color: {theme.ACCENT}; font-weight: bold;")
 
     def _on_comparisons_changed(self, names: list) -> None:
         self.filter_panel.show_comparisons(names)

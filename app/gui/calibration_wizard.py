@@ -1,0 +1,532 @@
+"""The calibration wizard: gyro bias, accelerometer poses, results; non-modal.
+
+The wizard is a controller and a set of views: it pulls *uncalibrated* samples from the
+pipeline (:class:`~app.core.raw_feed.RawSampleFeed`) on a timer, feeds the procedures of
+:mod:`app.core.calibration_procedures` and shows their state. All maths lives there. The result
+reaches the pipeline only when the user presses Finish (``profileAccepted``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from PySide6.QtCore import QPointF, QRectF, Qt, QTimer, Signal
+from PySide6.QtGui import QColor, QFont, QPainter, QPainterPath, QPen, QPolygonF
+from PySide6.QtWidgets import (
+    QButtonGroup,
+    QDoubleSpinBox,
+    QFormLayout,
+    QGridLayout,
+    QHBoxLayout,
+    QHeaderView,
+    QLabel,
+    QLineEdit,
+    QListWidget,
+    QProgressBar,
+    QPushButton,
+    QRadioButton,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
+    QWizard,
+    QWizardPage,
+)
+
+from app.core.calibration_procedures import (
+    FACE_HINTS,
+    FACES,
+    FREE,
+    SIX_POSITION,
+    AccelFit,
+    CalibrationFitError,
+    CalibrationProfile,
+    GyroBiasCalibration,
+    GyroBiasState,
+    PoseCapture,
+    SensorNoise,
+    SensorSettings,
+    StillnessDetector,
+    compare_poses,
+    fit_free_poses,
+    fit_six_position,
+    make_profile,
+)
+from app.core.raw_feed import RawSampleFeed
+from app.gui import theme
+from app.worker import DeviceSession
+from drivers.base import DeviceInfo
+
+FEED_INTERVAL_MS = 100
+
+
+class StillnessGauge(QWidget):
+    """Two bars: accelerometer and gyro motion relative to the still threshold (1 = limit)."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        layout = QFormLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        self.accel_bar = QProgressBar()
+        self.gyro_bar = QProgressBar()
+        for bar in (self.accel_bar, self.gyro_bar):
+            bar.setRange(0, 200)
+            bar.setTextVisible(False)
+            bar.setMaximumHeight(10)
+        self.state_label = QLabel("—")
+        layout.addRow("Accelerometer motion", self.accel_bar)
+        layout.addRow("Gyroscope motion", self.gyro_bar)
+        layout.addRow("", self.state_label)
+
+    def show_state(self, accel_ratio: float, gyro_ratio: float, still: bool) -> None:
+        for bar, ratio in ((self.accel_bar, accel_ratio), (self.gyro_bar, gyro_ratio)):
+            value = 200 if not math.isfinite(ratio) else min(200, round(100 * ratio))
+            bar.setValue(value)
+            colour = theme.OK_GREEN if value <= 100 else theme.WARN_AMBER
+            bar.setStyleSheet(f"QProgressBar::chunk {{ background: {colour}; }}")
+        self.state_label.setText("Still" if still else "Moving — keep it still")
+        colour = theme.OK_GREEN if still else theme.WARN_AMBER
+        self.state_label.setStyleSheet(f"color: {colour};")
+
+
+class PoseHint(QWidget):
+    """A picture of the expected pose: the board seen from the side, its up axis as an arrow."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.face = "+z"
+        self.setMinimumSize(220, 170)
+
+    def set_face(self, face: str) -> None:
+        self.face = face
+        self.update()
+
+    def paintEvent(self, _event) -> None:
+        painter = QPainter(self)
+        painter.setRenderHint(QPainter.RenderHint.Antialiasing)
+        w, h = self.width(), self.height()
+        # The box the board rests on.
+        box = QRectF(w * 0.2, h * 0.62, w * 0.6, h * 0.3)
+        painter.setPen(QPen(QColor(theme.BORDER), 1.5))
+        painter.setBrush(QColor(theme.PANEL_BG))
+        painter.drawRect(box)
+        # The board: flat for z faces, standing on an edge for x / y faces.
+        axis, sign = self.face[1], self.face[0]
+        board = QPainterPath()
+        if axis == "z":
+            board.addRoundedRect(QRectF(w * 0.3, h * 0.53, w * 0.4, h * 0.09), 3, 3)
+        else:
+            board.addRoundedRect(QRectF(w * 0.46, h * 0.22, w * 0.08, h * 0.40), 3, 3)
+        painter.setBrush(QColor("#2f6f4f"))
+        painter.setPen(QPen(QColor("#4cc38a"), 1.2))
+        painter.drawPath(board)
+        # The chip marks the +z side.
+        painter.setBrush(QColor("#111"))
+        painter.setPen(Qt.PenStyle.NoPen)
+        if axis == "z":
+            chip_y = h * 0.50 if sign == "+" else h * 0.62
+            painter.drawRect(QRectF(w * 0.47, chip_y, w * 0.06, h * 0.03))
+        else:
+            painter.drawRect(QRectF(w * 0.54, h * 0.38, w * 0.02, h * 0.08))
+        # The up arrow, labelled with the axis that must point up.
+        top = h * 0.06
+        base = h * 0.2 if axis != "z" else h * 0.46
+        painter.setPen(QPen(QColor(theme.ACCENT), 3))
+        painter.drawLine(QPointF(w * 0.5, base), QPointF(w * 0.5, top + 10))
+        painter.setBrush(QColor(theme.ACCENT))
+        painter.drawPolygon(
+            QPolygonF([QPointF(w * 0.5, top), QPointF(w * 0.47, top + 12),
+                       QPointF(w * 0.53, top + 12)])
+        )
+        font = QFont(self.font())
+        font.setPointSizeF(font.pointSizeF() * 1.6)
+        font.setBold(True)
+        painter.setFont(font)
+        painter.setPen(QColor(theme.TEXT))
+        painter.drawText(QRectF(w * 0.55, top, w * 0.4, 30), f"{self.face.upper()} up")
+        painter.end()
+
+
+class _Page(QWizardPage):
+    """A page the wizard's timer feeds with uncalibrated blocks while it is current."""
+
+    def feed(self, block) -> None:  # pragma: no cover - overridden
+        pass
+
+
+class IntroPage(_Page):
+    def __init__(self, info: DeviceInfo | None) -> None:
+        super().__init__()
+        self.setTitle("Calibrate the sensor")
+        self.setSubTitle(
+            "About three minutes: hold still for the gyroscope, then place the board on the six "
+            "faces of a box (or in 12 free orientations). Nothing changes until you press Finish."
+        )
+        layout = QVBoxLayout(self)
+        device = "no device connected" if info is None else (
+            f"{info.name} — id {info.unique_id} — {info.odr_hz:.1f} Hz, "
+            f"±{info.accel_fs_g} g, ±{info.gyro_fs_dps} °/s"
+        )
+        self.device_label = QLabel(device)
+        self.device_label.setWordWrap(True)
+        layout.addWidget(self.device_label)
+        self.six_button = QRadioButton("Six faces of a box (recommended: best accuracy)")
+        self.free_button = QRadioButton("Free orientations, no box (ellipsoid fit, 12 poses)")
+        self.skip_button = QRadioButton("Gyroscope bias only")
+        self.six_button.setChecked(True)
+        group = QButtonGroup(self)
+        for button in (self.six_button, self.free_button, self.skip_button):
+            group.addButton(button)
+            layout.addWidget(button)
+        form = QFormLayout()
+        self.gyro_seconds = QDoubleSpinBox()
+        self.gyro_seconds.setRange(2.0, 120.0)
+        self.gyro_seconds.setValue(10.0)
+        self.gyro_seconds.setSuffix(" s")
+        form.addRow("Hold still for the gyroscope", self.gyro_seconds)
+        layout.addLayout(form)
+        note = QLabel(
+            "Accuracy follows how square the box is: a face tilted by 1° shifts the result by "
+            "about 0.5° of misalignment. Any box with flat, square faces does; a machinist's "
+            "block is best."
+        )
+        note.setObjectName("dimLabel")
+        note.setWordWrap(True)
+        layout.addWidget(note)
+        layout.addStretch(1)
+
+    @property
+    def method(self) -> str:
+        if self.free_button.isChecked():
+            return FREE
+        if self.skip_button.isChecked():
+            return ""
+        return SIX_POSITION
+
+
+class GyroPage(_Page):
+    def __init__(self, wizard: CalibrationWizard) -> None:
+        super().__init__()
+        self._wizard = wizard
+        self.setTitle("Gyroscope bias")
+        self.setSubTitle("Put the board down on a firm surface and do not touch it.")
+        layout = QVBoxLayout(self)
+        self.gauge = StillnessGauge()
+        layout.addWidget(self.gauge)
+        self.progress = QProgressBar()
+        self.progress.setRange(0, 1000)
+        layout.addWidget(self.progress)
+        self.message = QLabel()
+        self.message.setWordWrap(True)
+        layout.addWidget(self.message)
+        self.result_label = QLabel()
+        self.result_label.setWordWrap(True)
+        layout.addWidget(self.result_label)
+        restart = QPushButton("Start again")
+        restart.clicked.connect(self.initializePage)
+        layout.addWidget(restart, 0, Qt.AlignmentFlag.AlignLeft)
+        layout.addStretch(1)
+        self.procedure: GyroBiasCalibration | None = None
+
+    def initializePage(self) -> None:
+        intro = self._wizard.intro
+        self.procedure = GyroBiasCalibration(
+            self._wizard.new_detector(), duration_s=intro.gyro_seconds.value()
+        )
+        self.result_label.setText("")
+        self.progress.setValue(0)
+        self.message.setText(self.procedure.message)
+        self.completeChanged.emit()
+
+    def feed(self, block) -> None:
+        procedure = self.procedure
+        if procedure is None:
+            return
+        state = procedure.update(block)
+        detector = procedure.detector
+        self.gauge.show_state(detector.accel_ratio, detector.gyro_ratio, detector.is_still)
+        self.progress.setValue(round(1000 * procedure.progress))
+        text = procedure.message
+        if procedure.restarts:
+            text += f"  (restarted {procedure.restarts}× because the board moved)"
+        self.message.setText(text)
+        if state is GyroBiasState.DONE and procedure.result is not None:
+            self.message.setText("Done. The bias is applied when you press Finish.")
+            result = procedure.result
+            bias = ", ".join(f"{v:+.4f}" for v in result.bias_dps)
+            sigma = max(result.std_error_dps)
+            self.result_label.setText(
+                f"Gyro bias ({bias}) °/s  ±{sigma:.4f} °/s, at {result.temperature_degc:.1f} °C"
+            )
+            self.completeChanged.emit()
+
+    def isComplete(self) -> bool:
+        return self.procedure is not None and self.procedure.state is GyroBiasState.DONE
+
+
+class PosesPage(_Page):
+    def __init__(self, wizard: CalibrationWizard) -> None:
+        super().__init__()
+        self._wizard = wizard
+        self.setTitle("Accelerometer poses")
+        layout = QGridLayout(self)
+        self.hint = PoseHint()
+        layout.addWidget(self.hint, 0, 0)
+        side = QVBoxLayout()
+        self.instruction = QLabel()
+        self.instruction.setWordWrap(True)
+        side.addWidget(self.instruction)
+        self.faces = QListWidget()
+        self.faces.setMaximumHeight(140)
+        side.addWidget(self.faces)
+        layout.addLayout(side, 0, 1)
+        self.gauge = StillnessGauge()
+        layout.addWidget(self.gauge, 1, 0, 1, 2)
+        self.progress = QProgressBar()
+        self.progress.setRange(0, 1000)
+        layout.addWidget(self.progress, 2, 0, 1, 2)
+        buttons = QHBoxLayout()
+        self.capture_button = QPushButton("Capture now")
+        self.capture_button.setToolTip("Capture as soon as the board is still")
+        self.capture_button.clicked.connect(lambda: self.capture and self.capture.request_capture())
+        self.undo_button = QPushButton("Remove last pose")
+        self.undo_button.clicked.connect(self._remove_last)
+        buttons.addWidget(self.capture_button)
+        buttons.addWidget(self.undo_button)
+        buttons.addStretch(1)
+        layout.addLayout(buttons, 3, 0, 1, 2)
+        self.events = QListWidget()
+        layout.addWidget(self.events, 4, 0, 1, 2)
+        self.capture: PoseCapture | None = None
+
+    def initializePage(self) -> None:
+        mode = self._wizard.intro.method
+        self.capture = PoseCapture(self._wizard.new_detector(), mode=mode)
+        self.events.clear()
+        self.setSubTitle(
+            "Place the board as shown and let go: each pose is captured automatically after "
+            "about 3 s of stillness." if mode == SIX_POSITION else
+            "Hold the board still in at least 12 clearly different orientations, "
+            "about 3 s each (rest it against something)."
+        )
+        self._refresh()
+
+    def _remove_last(self) -> None:
+        if self.capture and self.capture.poses:
+            pose = self.capture.remove_pose(len(self.capture.poses) - 1)
+            self.events.insertItem(0, f"Removed the {pose.face} pose")
+            self._refresh()
+
+    def feed(self, block) -> None:
+        capture = self.capture
+        if capture is None:
+            return
+        for event in capture.update(block):
+            if event.accepted and event.pose is not None:
+                text = f"✓ Captured {event.pose.face} up"
+            else:
+                text = f"✗ {event.reason}"
+            self.events.insertItem(0, text)
+            self.completeChanged.emit()
+        detector = capture.detector
+        self.gauge.show_state(detector.accel_ratio, detector.gyro_ratio, detector.is_still)
+        self.progress.setValue(round(1000 * capture.progress))
+        self._refresh()
+
+    def _refresh(self) -> None:
+        capture = self.capture
+        if capture is None:
+            return
+        self.faces.clear()
+        if capture.mode == SIX_POSITION:
+            done = set(capture.captured_faces)
+            for face in FACES:
+                mark = "✓" if face in done else "·"
+                self.faces.addItem(f"{mark}  {face} up — {FACE_HINTS[face]}")
+            missing = capture.missing_faces
+            if missing:
+                self.hint.set_face(missing[0])
+                self.instruction.setText(
+                    f"Next: <b>{missing[0]} up</b> — {FACE_HINTS[missing[0]]}. "
+                    f"State: {capture.state.value}."
+                )
+            else:
+                self.instruction.setText("All six faces captured. Press Next for the results.")
+        else:
+            for pose in capture.poses:
+                self.faces.addItem(f"✓  pose {len(self.faces) + 1}: nearest face {pose.face}")
+            self.instruction.setText(
+                f"{len(capture.poses)} of {capture.min_poses} poses. State: {capture.state.value}."
+            )
+
+    def isComplete(self) -> bool:
+        return self.capture is not None and self.capture.enough
+
+
+class ResultsPage(_Page):
+    def __init__(self, wizard: CalibrationWizard) -> None:
+        super().__init__()
+        self._wizard = wizard
+        self.setTitle("Results")
+        layout = QVBoxLayout(self)
+        self.summary = QLabel()
+        self.summary.setWordWrap(True)
+        layout.addWidget(self.summary)
+        self.parameters = QTableWidget(0, 4)
+        self.parameters.setHorizontalHeaderLabels(["Parameter", "x", "y", "z"])
+        self.comparison = QTableWidget(0, 3)
+        self.comparison.setHorizontalHeaderLabels(["Pose", "Tilt error before", "after"])
+        for table in (self.parameters, self.comparison):
+            table.verticalHeader().setVisible(False)
+            table.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
+            table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
+            layout.addWidget(table)
+        form = QFormLayout()
+        self.name_edit = QLineEdit()
+        form.addRow("Profile name", self.name_edit)
+        layout.addLayout(form)
+        self.fit: AccelFit | None = None
+        self.error: str = ""
+
+    def initializePage(self) -> None:
+        wizard = self._wizard
+        self.fit, self.error = None, ""
+        gyro = wizard.gyro_page.procedure.result if wizard.gyro_page.procedure else None
+        rows: list[tuple[str, list[str]]] = []
+        if gyro is not None:
+            rows.append(("Gyro bias (°/s)", [f"{v:+.4f}" for v in gyro.bias_dps]))
+            rows.append(("  ± (°/s)", [f"{v:.4f}" for v in gyro.std_error_dps]))
+        comparison_rows: list[tuple[str, str, str]] = []
+        capture = wizard.poses_page.capture
+        if wizard.intro.method and capture is not None:
+            try:
+                fit = (fit_six_position(capture.poses) if capture.mode == SIX_POSITION
+                       else fit_free_poses(capture.poses))
+            except CalibrationFitError as exc:
+                self.error = str(exc)
+            else:
+                self.fit = fit
+                rows.append(("Accel bias (mg)", [f"{v:+.2f}" for v in fit.bias_mg]))
+                rows.append(("  ± (mg)", [f"{v:.2f}" for v in fit.bias_std_mg]))
+                rows.append(("Scale error (%)", [f"{100 * v:+.3f}" for v in fit.scale_error]))
+                rows.append(("  ± (%)", [f"{100 * v:.3f}" for v in fit.scale_error_std]))
+                calibration = fit.to_calibration(gyro)
+                comparison = compare_poses(capture.poses, calibration)
+                for row in comparison.rows():
+                    comparison_rows.append(
+                        (str(row["pose"]), f"{float(row['error_before_deg']):.3f}°",
+                         f"{float(row['error_after_deg']):.3f}°")
+                    )
+        self.parameters.setRowCount(len(rows))
+        for r, (title, values) in enumerate(rows):
+            for c, text in enumerate([title, *values]):
+                self.parameters.setItem(r, c, QTableWidgetItem(text))
+        self.comparison.setRowCount(len(comparison_rows))
+        for r, cells in enumerate(comparison_rows):
+            for c, text in enumerate(cells):
+                self.comparison.setItem(r, c, QTableWidgetItem(text))
+        if self.error:
+            self.summary.setText(f"<b>The fit failed:</b> {self.error} Go back and redo poses.")
+        elif self.fit is not None:
+            fit = self.fit
+            self.summary.setText(
+                f"Accelerometer fit ({fit.method}, {fit.n_poses} poses): residual "
+                f"{fit.residual_norm_rms_mg:.3f} mg RMS of |a| − 1 g. "
+                "Press Finish to save this profile for the device and apply it."
+            )
+        else:
+            self.summary.setText("Gyroscope bias measured. Press Finish to save and apply it.")
+        info = wizard.info
+        self.name_edit.setText(f"{info.name if info else 'sensor'} calibration")
+        self.completeChanged.emit()
+
+    def isComplete(self) -> bool:
+        return not self.error
+
+    def profile(self) -> CalibrationProfile | None:
+        wizard = self._wizard
+        info = wizard.info
+        if info is None:
+            return None
+        gyro = wizard.gyro_page.procedure.result if wizard.gyro_page.procedure else None
+        name = self.name_edit.text().strip() or "calibration"
+        if self.fit is not None:
+            calibration = self.fit.to_calibration(gyro, name=name)
+            residuals = dict(self.fit.summary())
+            method = self.fit.method
+            temperature = self.fit.temperature_degc
+        else:
+            from app.core.calibration import SensorCalibration
+
+            bias = np.zeros(3) if gyro is None else gyro.bias_rad_s
+            calibration = SensorCalibration(gyro_bias_rad_s=bias, name=name)
+            residuals, method = {}, "gyro-bias"
+            temperature = math.nan if gyro is None else gyro.temperature_degc
+        if gyro is not None:
+            residuals["gyro_bias_std_dps"] = [float(v) for v in gyro.std_error_dps]
+        return make_profile(
+            info.unique_id, calibration,
+            SensorSettings(info.odr_hz, info.accel_fs_g, info.gyro_fs_dps, info.sensor),
+            method=method, temperature_degc=temperature, residuals=residuals,
+        )
+
+
+class CalibrationWizard(QWizard):
+    """Non-modal: the live views stay usable while it runs."""
+
+    profileAccepted = Signal(object)  # CalibrationProfile
+
+    def __init__(self, session: DeviceSession, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setWindowTitle("Calibration wizard")
+        self.setWizardStyle(QWizard.WizardStyle.ModernStyle)
+        self.setModal(False)
+        self.session = session
+        self.info = session.device_info
+        self.feed_source = RawSampleFeed(session.pipeline)
+        self.intro = IntroPage(self.info)
+        self.gyro_page = GyroPage(self)
+        self.poses_page = PosesPage(self)
+        self.results_page = ResultsPage(self)
+        for page in (self.intro, self.gyro_page, self.poses_page, self.results_page):
+            self.addPage(page)
+        self.resize(720, 640)
+        self.timer = QTimer(self)
+        self.timer.timeout.connect(self._feed)
+        self.timer.start(FEED_INTERVAL_MS)
+        self.finished.connect(self.timer.stop)
+        session.disconnected.connect(self._on_disconnected)
+
+    def nextId(self) -> int:
+        current = self.currentId()
+        if current == self.pageIds()[1] and not self.intro.method:
+            return self.pageIds()[3]  # gyro only: skip the poses
+        return super().nextId()
+
+    def new_detector(self) -> StillnessDetector:
+        info = self.info
+        noise = SensorNoise.lsm6dsox(
+            info.odr_hz if info else 104.0, info.accel_fs_g if info else 4,
+            info.gyro_fs_dps if info else 250,
+        )
+        return StillnessDetector(noise)
+
+    def _feed(self) -> None:
+        block = self.feed_source.next_block()
+        page = self.currentPage()
+        if block is not None and isinstance(page, _Page):
+            page.feed(block)
+
+    def _on_disconnected(self, reason: str) -> None:
+        if self.isVisible():
+            self.intro.device_label.setText(
+                "The device disconnected" + (f": {reason}" if reason else "")
+                + ". Reconnect it to go on; the steps restart when data flows again."
+            )
+
+    def accept(self) -> None:
+        profile = self.results_page.profile()
+        if profile is not None:
+            self.profileAccepted.emit(profile)
+        super().accept()
