@@ -175,6 +175,12 @@ class DeviceWorker(QObject):
         self.pipeline.set_level_reference(reference)
         self.tareChanged.emit(reference)
 
+    @Slot(object)
+    def set_tare(self, reference: TareReference | None) -> None:
+        """Use a given level reference (e.g. from the reversal procedure)."""
+        self.pipeline.set_level_reference(reference)
+        self.tareChanged.emit(self.pipeline.level_reference)
+
     @Slot()
     def clear_tare(self) -> None:
         self.pipeline.set_level_reference(None)
@@ -301,6 +307,7 @@ class DeviceSession(QObject):
     requestNoCalibration = Signal()
     requestTare = Signal()
     requestClearTare = Signal()
+    requestTareReference = Signal(object)  # TareReference
 
     def __init__(
         self,
@@ -326,6 +333,7 @@ class DeviceSession(QObject):
         self.requestNoCalibration.connect(self.worker.use_no_calibration)
         self.requestTare.connect(self.worker.tare)
         self.requestClearTare.connect(self.worker.clear_tare)
+        self.requestTareReference.connect(self.worker.set_tare)
         self.device_info: DeviceInfo | None = None
         # Queued into the GUI thread (this object lives there).
         self.worker.connected.connect(self.connected)

@@ -124,3 +124,32 @@ def test_tare_makes_the_current_attitude_level(qtbot, window):
     with qtbot.waitSignal(session.tareChanged, timeout=TIMEOUT_MS):
         window.clear_tare_action.trigger()
     assert window.status_tare.text() == ""
+
+
+def test_static_statistics_and_reversal_from_the_measure_panel(qtbot, window):
+    session = window.session
+    panel = window.measure_panel
+    with qtbot.waitSignal(session.connected, timeout=TIMEOUT_MS):
+        window.connect_device("sim://interactive?roll=1.0&pitch=0.5&odr=104&speed=10&errors=0")
+    qtbot.waitUntil(lambda: session.pipeline.counters.samples > 2000, timeout=TIMEOUT_MS)
+
+    panel.duration.setValue(5.0)
+    panel.start_statistics()
+    qtbot.waitUntil(lambda: panel.stats_progress.value() == 1000, timeout=TIMEOUT_MS)
+    roll_mean = float(panel.stats_table.item(0, 1).text())
+    assert roll_mean == pytest.approx(1.0, abs=0.05)
+    assert float(panel.stats_table.item(0, 2).text()) < 0.05  # std at rest
+
+    # Position 1 reads surface slope + offset; turned by 180 degrees, slope changes sign.
+    # The virtual "surface" here is the simulator's attitude, so turn it by hand.
+    panel.first_button.click()
+    qtbot.waitUntil(panel.second_button.isEnabled, timeout=TIMEOUT_MS)
+    session.requestSimulatorTarget.emit(-1.0, -0.5)
+    total = session.pipeline.counters.samples
+    qtbot.waitUntil(lambda: session.pipeline.counters.samples > total + 3000, timeout=TIMEOUT_MS)
+    panel.second_button.click()
+    qtbot.waitUntil(panel.tare_button.isEnabled, timeout=TIMEOUT_MS)
+    result = panel.reversal
+    assert result.slope_roll_deg == pytest.approx(1.0, abs=0.05)
+    assert result.slope_pitch_deg == pytest.approx(0.5, abs=0.05)
+    assert abs(result.offset_roll_deg) < 0.05 and abs(result.offset_pitch_deg) < 0.05

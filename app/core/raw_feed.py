@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from app.core.pipeline import Pipeline
+from app.core.ring_follower import RingFollower
 from app.core.samples import SampleBlock
 
 _COLUMNS = ["t", "raw_accel", "raw_gyro", "temp", "gap", "ref_quat"]
@@ -20,29 +21,17 @@ class RawSampleFeed:
 
     def __init__(self, pipeline: Pipeline) -> None:
         self.pipeline = pipeline
-        self._ring = pipeline.samples
-        self._next = pipeline.samples.total_written  # start with what arrives from now on
-
-    @property
-    def restarted(self) -> bool:
-        """True once when the buffers were replaced since the previous call."""
-        return self._ring is not self.pipeline.samples
+        self._follower = RingFollower(lambda: pipeline.samples, _COLUMNS)
 
     def next_block(self) -> SampleBlock | None:
         """The new rows, or None when nothing new arrived."""
-        ring = self.pipeline.samples
-        if ring is not self._ring:
-            self._ring, self._next = ring, 0
-        asked = self._next
-        first, rows = ring.since(asked, _COLUMNS)
-        count = len(rows["t"])
-        if count == 0:
+        rows = self._follower.next_rows()
+        if rows is None:
             return None
-        self._next = first + count
         ref = rows["ref_quat"]
         known = np.all(np.isfinite(ref), axis=1)
         gap = rows["gap"] > 0.5
-        if first > asked:  # rows were overwritten before we read them
+        if self._follower.skipped:  # rows were lost before we read them
             gap[0] = True
         return SampleBlock(
             t_s=rows["t"],

@@ -37,6 +37,7 @@ from app.gui.calibration_wizard import CalibrationWizard
 from app.gui.device_bar import DeviceBar
 from app.gui.device_panel import DevicePanel
 from app.gui.filter_panel import FilterPanel
+from app.gui.measure_panel import MeasurePanel
 from app.gui.plots import LivePlots
 from app.gui.presenter import UNIT_LABELS, LivePresenter
 from app.gui.readouts import TiltReadouts
@@ -135,10 +136,15 @@ class MainWindow(QMainWindow):
             "simulator", "Simulator", self.simulator_panel, Qt.DockWidgetArea.RightDockWidgetArea
         )
         self._add_dock("device", "Device", self.device_panel, Qt.DockWidgetArea.RightDockWidgetArea)
+        self.measure_panel = MeasurePanel(session)
+        self.measure_panel.tareRequested.connect(session.requestTareReference)
+        right = Qt.DockWidgetArea.RightDockWidgetArea
+        self._add_dock("measure", "Measure", self.measure_panel, right)
         self._add_dock("messages", "Messages", self.messages, Qt.DockWidgetArea.RightDockWidgetArea)
         self.tabifyDockWidget(self.docks["filter"], self.docks["simulator"])
         self.tabifyDockWidget(self.docks["simulator"], self.docks["device"])
-        self.tabifyDockWidget(self.docks["device"], self.docks["messages"])
+        self.tabifyDockWidget(self.docks["device"], self.docks["measure"])
+        self.tabifyDockWidget(self.docks["measure"], self.docks["messages"])
         self.docks["filter"].raise_()
         self._default_layout_pending = True
 
@@ -518,6 +524,7 @@ class MainWindow(QMainWindow):
 
     def closeEvent(self, event: QCloseEvent) -> None:
         self.presenter.stop()
+        self.measure_panel.stop()
         self.settings.setValue("geometry", self.saveGeometry())
         self.settings.setValue("window_state", self.saveState())
         self.session.shutdown()
