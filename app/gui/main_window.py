@@ -140,11 +140,13 @@ class MainWindow(QMainWindow):
         self.measure_panel.tareRequested.connect(session.requestTareReference)
         right = Qt.DockWidgetArea.RightDockWidgetArea
         self._add_dock("measure", "Measure", self.measure_panel, right)
-        self._add_dock("messages", "Messages", self.messages, Qt.DockWidgetArea.RightDockWidgetArea)
+        bottom = Qt.DockWidgetArea.BottomDockWidgetArea
+        self._add_dock("messages", "Messages", self.messages, bottom)
         self.tabifyDockWidget(self.docks["filter"], self.docks["simulator"])
         self.tabifyDockWidget(self.docks["simulator"], self.docks["device"])
         self.tabifyDockWidget(self.docks["device"], self.docks["measure"])
-        self.tabifyDockWidget(self.docks["measure"], self.docks["messages"])
+        self.tabifyDockWidget(self.docks["plots"], self.docks["messages"])
+        self.docks["plots"].raise_()
         self.docks["filter"].raise_()
         self._default_layout_pending = True
 
@@ -519,7 +521,7 @@ class MainWindow(QMainWindow):
 
     def _apply_default_layout(self) -> None:
         height = max(300, int(self.height() * 0.45))
-        self.resizeDocks([self.docks["filter"]], [360], Qt.Orientation.Horizontal)
+        self.resizeDocks([self.docks["filter"]], [400], Qt.Orientation.Horizontal)
         self.resizeDocks([self.docks["plots"]], [height], Qt.Orientation.Vertical)
 
     def closeEvent(self, event: QCloseEvent) -> None:
