@@ -105,19 +105,11 @@ from numba import njit
 
 from app.core.filters.base import OrientationFilter, ParameterSpec
 from app.core.filters.complementary import gyro_step
+from app.core.filters.gyro_integration import unit_positive
 from app.core.samples import STANDARD_GRAVITY_M_S2, SampleBlock
 
 N_STATES = 5
 """Error state: horizontal earth-frame tilt error (2), gyro-bias error (3)."""
-
-
-@njit(cache=True)
-def _unit_positive(qw, qx, qy, qz):  # pragma: no cover - compiled
-    """Unit norm with ``w >= 0``, as :func:`app.core.quaternion.normalize`."""
-    norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-    if qw < 0.0:
-        norm = -norm
-    return qw / norm, qx / norm, qy / norm, qz / norm
 
 
 @njit(cache=True)
@@ -319,7 +311,7 @@ def _ekf_kernel(
                 # The filtered vectors were rotated with the old estimate: rotate them too.
                 y1x, y1y, y1z = _rotate_horizontal(ew, ex, ey, y1x, y1y, y1z)
                 y2x, y2y, y2z = _rotate_horizontal(ew, ex, ey, y2x, y2y, y2z)
-        qw, qx, qy, qz = _unit_positive(qw, qx, qy, qz)
+        qw, qx, qy, qz = unit_positive(qw, qx, qy, qz)
         out[i, 0] = qw
         out[i, 1] = qx
         out[i, 2] = qy
