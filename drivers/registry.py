@@ -7,6 +7,7 @@ Built-in schemes are listed in ``_BUILTIN``; other packages add drivers through 
 from __future__ import annotations
 
 import importlib
+import re
 from importlib.metadata import entry_points
 from urllib.parse import urlsplit
 
@@ -17,7 +18,14 @@ DEFAULT_DEVICE_URL = "sim://interactive"
 
 _BUILTIN: dict[str, tuple[str, str]] = {
     "sim": ("drivers.sim.device", "SimulatedDevice"),
+    "text": ("drivers.text_lines", "TextLineDevice"),
+    "lsm6dsox": ("drivers.lsm6dsox_direct.device", "Lsm6dsoxDirectDevice"),  # host names the bus
+    "serial": ("drivers.serial_link", "SerialLinkDevice"),
+    "port": ("drivers.serial_link", "PortDevice"),  # a bare port name: v1 or text, detected
+    "replay": ("drivers.replay", "ReplayDevice"),  # also a bare path ending in .csv
 }
+_BARE_PORT = re.compile(r"(/|\\\\\.\\|\./)\S+|(?i:com)\d+")
+"""A serial port given without a scheme: ``/dev/ttyACM0``, ``COM3``, ``\\\\.\\COM12``."""
 
 
 def _schemes() -> dict[str, tuple[str, str]]:
@@ -30,10 +38,15 @@ def _schemes() -> dict[str, tuple[str, str]]:
 
 def scheme_of(url: str) -> str:
     """The scheme of a device URL (``sim`` for ``sim://static``)."""
+    if "://" not in url and url.strip().lower().endswith(".csv"):
+        return "replay"  # a recording file
+    if "://" not in url and _BARE_PORT.fullmatch(url.partition("?")[0]):
+        return "port"
     parts = urlsplit(url)
     if not parts.scheme or "://" not in url:
         raise DeviceUrlError(
-            f"{url!r} is not a device URL; expected something like {DEFAULT_DEVICE_URL!r}"
+            f"{url!r} is not a device URL; expected something like {DEFAULT_DEVICE_URL!r} "
+            "or a serial port such as /dev/ttyACM0 or COM3"
         )
     return parts.scheme.lower()
 

@@ -1,0 +1,87 @@
+"""``inclinometer simulate --pty``: an emulated NUCLEO board on a pseudo-terminal.
+
+The first line printed is the port name alone (scripts read it); the app, or any serial tool,
+then connects to that port as to a real board. Serves until Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+from typing import TextIO
+
+
+def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
+    simulate = commands.add_parser(
+        "simulate",
+        help="serve an emulated NUCLEO board (link protocol v1) on a pseudo-terminal",
+        description=(
+            "Serve the simulator as a NUCLEO board running the Inclinometer firmware would: "
+            "protocol v1 (docs/protocol.md) on a new pseudo-terminal, whose name is printed "
+            "first. Connect with 'inclinometer --device PORT'. Linux and macOS. Ctrl-C stops."
+        ),
+    )
+    simulate.add_argument("--pty", action="store_true",
+                          help="serve on a new pseudo-terminal and print its name")
+    simulate.add_argument("--scenario", default="wobble",
+                          help="simulator scenario (default %(default)s; see 'devices')")
+    simulate.add_argument("--odr", type=float, default=104.0, metavar="HZ",
+                          help="output data rate at power-on (default %(default)g)")
+    simulate.add_argument("--accel-fs", type=int, default=4, metavar="G",
+                          help="accelerometer full scale at power-on (default %(default)s)")
+    simulate.add_argument("--gyro-fs", type=int, default=250, metavar="DPS",
+                          help="gyroscope full scale at power-on (default %(default)s)")
+    simulate.add_argument("--seed", type=int, default=1,
+                          help="picks the simulated unit, its unique id and USB serial "
+                               "(default %(default)s)")
+    simulate.add_argument("--baud", type=int, default=921600,
+                          help="the board's UART rate: faster ODRs than it carries are "
+                               "refused; 0 for native USB, no limit (default %(default)s)")
+
+
+def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
+                     stop: threading.Event | None = None) -> int:
+    """Run the ``simulate`` sub-command; returns when ``stop`` is set or on Ctrl-C."""
+    out = sys.stdout if out is None else out
+    if not args.pty:
+        print("inclinometer: simulate needs --pty (the only transport so far)", file=sys.stderr)
+        return 2
+    try:
+        from drivers.emulated_nucleo import EmulatedNucleo
+        from drivers.errors import DeviceError
+
+        board = EmulatedNucleo(
+            args.scenario, odr_hz=args.odr, accel_fs_g=args.accel_fs, gyro_fs_dps=args.gyro_fs,
+            seed=args.seed, baud=args.baud or None, share_port=True,
+        )
+    except ImportError as exc:
+        print(f"inclinometer: pseudo-terminals need Linux or macOS ({exc})", file=sys.stderr)
+        return 2
+    except (ValueError, DeviceError) as exc:
+        print(f"inclinometer: {exc}", file=sys.stderr)
+        return 2
+    config = board.config
+    print(board.port, file=out)
+    print(f"Emulated NUCLEO-F746ZG, protocol v1, scenario {args.scenario}, seed {args.seed}: "
+          f"unique id {board.unique_id.hex().upper()}, USB serial {board.usb_serial}, "
+          f"{config.odr_hz:g} Hz, +-{config.accel_fs_g} g, +-{config.gyro_fs_dps} dps.",
+          file=out)
+    print(f"Connect with: inclinometer --device {board.port}    (Ctrl-C stops)", file=out)
+    out.flush()
+    stop = stop or threading.Event()
+    if threading.current_thread() is threading.main_thread():
+        # `kill` and `timeout` send SIGTERM: stop as cleanly as on Ctrl-C.
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        while not stop.wait(0.5):
+            pass
+    except KeyboardInterrupt:
+        pass
+    finally:
+        board.close()
+    stats = board.stats
+    print(f"Stopped: {stats.packets_sent} SAMPLES packets, {stats.samples_sent} samples sent, "
+          f"{stats.packets_dropped} packets dropped, {stats.commands} commands.", file=out)
+    return 0

@@ -1,0 +1,524 @@
+"""An emulated NUCLEO board: the simulator served over a pseudo-terminal in protocol v1.
+
+The far end of a pseudo-terminal pair behaves as the firmware would (``docs/protocol.md``):
+it answers HELLO, CONFIGURE, START, STOP, SELF_TEST and PING, streams SAMPLES of up to 32
+samples with ``seq`` and ``t0`` in ticks of the simulated chip's trimmed 25 us clock, refuses
+output data rates the serial link could not carry at its baud rate, and sends LOG messages.
+Its port is an ordinary device path (``/dev/pts/N``), so the real serial driver opens it.
+
+    board = EmulatedNucleo("wobble", odr_hz=208, seed=3)
+    device = create_device(board.port)          # protocol v1 detected
+    ...
+    board.close()                               # the cable is pulled
+    new_port = board.replug()                   # back on another port, same ids
+
+The board registers its port with the USB identity of an ST-LINK/V2-1 (0483:374B) and a serial
+number derived from the seed, so discovery and reconnect-by-USB-serial treat it as a real one.
+Pseudo-terminals need Linux or macOS.
+
+Timing model: the board's clock runs with the wall clock from power-on (``initial_ticks`` at
+power-on; it keeps running across an unplug unless :meth:`replug` is told ``power_cycle``).
+Samples are produced at the simulated chip's true rate and sent every ``packet_interval_s``
+(or as soon as 32 are waiting). Output the host does not read piles up to
+:data:`TX_BUFFER_BYTES`; beyond that SAMPLES packets are dropped, as a firmware's full transmit
+ring would (the host sees sequence gaps).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import logging
+import math
+import os
+import select
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from cobs import cobs
+
+from drivers import lsm6dsox
+from drivers.link import protocol as p
+from drivers.link.framing import FrameError, FrameSplitter, crc16, encode_packet, unframe
+from drivers.link.ports import (
+    SerialPortInfo,
+    register_virtual_port,
+    unregister_virtual_port,
+)
+from drivers.sim.device import SimulatedDevice
+from drivers.sim.error_model import unique_id_for_seed
+
+log = logging.getLogger(__name__)
+
+FIRMWARE_VERSION = (1, 0, 0)
+USB_VID = 0x0483
+USB_PID = 0x374B
+TX_BUFFER_BYTES = 16 * 1024
+"""The emulated firmware's transmit ring: SAMPLES are dropped when this much is unsent."""
+SIM_BLOCK = 256
+PACKET_INTERVAL_S = 0.005
+SELF_TEST_ACCEL_WINDOW_MG = (50, 1700)
+SELF_TEST_GYRO_WINDOW_DPS = (20, 80)
+"""Self-test output change windows at +-250 dps (LSM6DSO datasheet, same family)."""
+
+
+def link_bytes_per_sample(samples_per_packet: int = p.MAX_SAMPLES_PER_PACKET) -> float:
+    """Bytes on the wire per sample when packets carry ``samples_per_packet`` samples.
+
+    Type byte, SAMPLES header, 12 bytes per sample and the CRC, plus the COBS overhead
+    (one byte, and one more per 254) and the 0x00 delimiter.
+    """
+    packet = 1 + p.SAMPLES_HEADER_BYTES + p.SAMPLE_BYTES * samples_per_packet + 2
+    encoded = cobs.max_encoded_length(packet) + 1
+    return encoded / samples_per_packet
+
+
+def link_capacity_bytes_s(baud: int) -> float:
+    """Bytes per second an 8N1 UART carries: 10 bits per byte."""
+    return baud / 10.0
+
+
+def odr_fits_link(odr_hz: float, baud: int | None) -> bool:
+    """True when full SAMPLES packets at ``odr_hz`` fit the link (always on native USB)."""
+    return baud is None or odr_hz * link_bytes_per_sample() <= link_capacity_bytes_s(baud)
+
+
+def usb_serial_for_seed(seed: int) -> str:
+    """A 24-digit hex USB serial number, stable per seed (like an ST-LINK's)."""
+    digest = hashlib.blake2b(f"emulated-stlink:{seed}".encode(), digest_size=9).hexdigest()
+    return "0670FF" + digest.upper()
+
+
+@dataclass(frozen=True, slots=True)
+class NucleoFaults:
+    """Faults to inject (tests). Sequence numbers count every SAMPLES packet, sent or not."""
+
+    drop_seqs: frozenset[int] = frozenset()
+    """SAMPLES packets with these sequence numbers are not sent."""
+    corrupt_seqs: frozenset[int] = frozenset()
+    """SAMPLES packets with these sequence numbers get one sample byte flipped (bad CRC)."""
+    drop_probability: float = 0.0
+    corrupt_probability: float = 0.0
+    self_test_fails: bool = False
+    seed: int = 0
+
+
+@dataclass(slots=True)
+class NucleoStats:
+    """What the emulated board did (read after :meth:`EmulatedNucleo.close`, or loosely live)."""
+
+    commands: int = 0
+    bad_frames: int = 0
+    packets_sent: int = 0
+    samples_sent: int = 0
+    packets_dropped: int = 0
+    samples_dropped: int = 0
+    packets_corrupted: int = 0
+
+
+class EmulatedNucleo:
+    """The simulated LSM6DSOX behind a NUCLEO firmware, on a pseudo-terminal.
+
+    Parameters
+    ----------
+    scenario : simulator scenario (see :data:`drivers.sim.SCENARIOS`).
+    odr_hz, accel_fs_g, gyro_fs_dps : settings at power-on (CONFIGURE changes them).
+    seed : picks the simulated unit: its errors, unique id and USB serial number.
+    baud : the UART's baud rate, used to refuse rates the link cannot carry; None for native
+        USB (no limit). A pseudo-terminal itself has no speed.
+    errors, noise : as the simulator's options.
+    who_am_i : what INFO reports (another value tests the host's check).
+    faults : fault injection.
+    packet_interval_s : longest wait before waiting samples are sent.
+    initial_ticks : the board clock at power-on (near 2**32 to test the wrap).
+    on_packet_sent : called in the board's thread as ``f(seq, first_sample, count, t_write)``
+        right after a SAMPLES packet was written (``time.perf_counter()``).
+    scenario_params : the scenario's own options.
+    share_port : announce the port to other processes of this user too (for
+        ``inclinometer simulate``), not only to this one.
+    """
+
+    def __init__(
+        self,
+        scenario: str = "wobble",
+        *,
+        odr_hz: float = 104.0,
+        accel_fs_g: int = 4,
+        gyro_fs_dps: int = 250,
+        seed: int = 1,
+        baud: int | None = p.DEFAULT_BAUD,
+        errors: bool = True,
+        noise: bool = True,
+        who_am_i: int = lsm6dsox.WHO_AM_I_VALUE,
+        faults: NucleoFaults | None = None,
+        packet_interval_s: float = PACKET_INTERVAL_S,
+        initial_ticks: int = 0,
+        on_packet_sent: Callable[[int, int, int, float], None] | None = None,
+        scenario_params: dict[str, object] | None = None,
+        share_port: bool = False,
+    ) -> None:
+        odr_code = lsm6dsox.odr_code_for(odr_hz)
+        if not odr_fits_link(lsm6dsox.ODR_CODES_HZ[odr_code], baud):
+            raise ValueError(f"{odr_hz:g} Hz does not fit a {baud} baud link")
+        self.scenario = scenario
+        self.seed = seed
+        self.baud = baud
+        self.errors = errors
+        self.noise = noise
+        self.who_am_i = who_am_i
+        self.faults = faults or NucleoFaults()
+        self.packet_interval_s = packet_interval_s
+        self.initial_ticks = initial_ticks
+        self.on_packet_sent = on_packet_sent
+        self.scenario_params = dict(scenario_params or {})
+        self.share_port = share_port
+        self.unique_id = bytes.fromhex(unique_id_for_seed(seed).removeprefix("SIM-"))
+        self.usb_serial = usb_serial_for_seed(seed)
+        self.stats = NucleoStats()
+        self._fault_rng = np.random.default_rng(self.faults.seed)
+        self._settings = (odr_code, accel_fs_g, gyro_fs_dps)
+        self._lock = threading.Lock()
+        self._outgoing: list[bytes] = []  # raw bytes other threads ask to send
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._master = self._slave = -1
+        self._wake_r = self._wake_w = -1
+        self.port = ""
+        self._power_on()
+        self.replug()
+
+    # -- the cable ------------------------------------------------------------------------------
+    @property
+    def is_plugged(self) -> bool:
+        return self._thread is not None
+
+    def close(self) -> None:
+        """Pull the cable: the pseudo-terminal disappears (the host's reads fail)."""
+        thread, self._thread = self._thread, None
+        if thread is None:
+            return
+        self._stop.set()
+        os.write(self._wake_w, b"x")
+        thread.join()
+        unregister_virtual_port(self.port)
+        for fd in (self._master, self._slave, self._wake_r, self._wake_w):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        self._master = self._slave = self._wake_r = self._wake_w = -1
+        self._streaming = False
+
+    def replug(self, *, power_cycle: bool = False) -> str:
+        """Plug the cable in (again): a new pseudo-terminal, same unique id and USB serial.
+
+        With ``power_cycle`` the board also restarts (clock, sequence numbers, motion).
+        Returns the new port name.
+        """
+        import pty
+        import tty
+
+        self.close()
+        if power_cycle:
+            self._power_on()
+        self._master, self._slave = pty.openpty()
+        tty.setraw(self._slave)  # no echo, no line editing before the host opens the port
+        os.set_blocking(self._master, False)
+        self._wake_r, self._wake_w = os.pipe()
+        self.port = os.ttyname(self._slave)
+        self._splitter = FrameSplitter()
+        self._tx = bytearray()
+        self._streaming = False
+        register_virtual_port(
+            SerialPortInfo(
+                device=self.port, description="STM32 STLink (emulated NUCLEO)", vid=USB_VID,
+                pid=USB_PID, serial_number=self.usb_serial, manufacturer="STMicroelectronics",
+                product="STM32 STLink", emulated=True,
+            ),
+            shared=self.share_port,
+        )
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._serve, name=f"nucleo {self.port}",
+                                        daemon=True)
+        self._thread.start()
+        return self.port
+
+    def __enter__(self) -> EmulatedNucleo:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- thread-safe controls -------------------------------------------------------------------
+    def log(self, level: int, text: str) -> None:
+        """Send a LOG message to the host."""
+        self.inject(encode_packet(p.Log(level, text)))
+
+    def inject(self, data: bytes) -> None:
+        """Send raw bytes to the host (garbage, hand-made frames)."""
+        with self._lock:
+            self._outgoing.append(bytes(data))
+        if self._thread is not None:
+            os.write(self._wake_w, b"x")
+
+    @property
+    def streaming(self) -> bool:
+        return self._streaming
+
+    @property
+    def config(self) -> p.Config:
+        """The CONFIG the board would report now."""
+        sim = self._sim
+        tick_ns = round(p.DEFAULT_TICK_NS / sim.unit_errors.clock_trim_factor)
+        return p.Config(round(sim.odr_hz * 1000), sim.options.accel_fs_g,
+                        sim.options.gyro_fs_dps, tick_ns)
+
+    @property
+    def info(self) -> p.Info:
+        name = f"NUCLEO-F746ZG emulated ({self.scenario}, seed {self.seed})"
+        return p.Info(p.PROTOCOL_VERSION, FIRMWARE_VERSION, self.who_am_i, self.unique_id, name)
+
+    def self_test_result(self) -> p.SelfTestResult:
+        """What SELF_TEST reports: output changes drawn per unit, inside the datasheet windows."""
+        rng = np.random.default_rng([self.seed, 0x5E1F])
+        accel = tuple(int(v) for v in rng.uniform(250, 700, 3).round())
+        gyro = tuple(int(v) for v in rng.uniform(35, 65, 3).round())
+        if self.faults.self_test_fails:
+            gyro = (2, 1, 3)
+        accel_ok = all(SELF_TEST_ACCEL_WINDOW_MG[0] <= a <= SELF_TEST_ACCEL_WINDOW_MG[1]
+                       for a in accel)
+        gyro_ok = all(SELF_TEST_GYRO_WINDOW_DPS[0] <= g <= SELF_TEST_GYRO_WINDOW_DPS[1]
+                      for g in gyro)
+        return p.SelfTestResult(accel_ok, gyro_ok, accel, gyro)  # type: ignore[arg-type]
+
+    # -- board state ----------------------------------------------------------------------------
+    def _power_on(self) -> None:
+        self._power_on_wall = time.monotonic()
+        self._seq = 0
+        self._last_end_ticks = self.initial_ticks
+        self._sim = self._new_sim(*self._settings)
+        self._pending: list[np.ndarray] = []  # generated, not yet sent: (n, 7) gx..az, temp
+        self._run_sent = 0
+
+    def _new_sim(self, odr_code: int, accel_fs_g: int, gyro_fs_dps: int) -> SimulatedDevice:
+        url = (f"sim://{self.scenario}?odr={lsm6dsox.ODR_CODES_HZ[odr_code]:g}"
+               f"&accel_fs={accel_fs_g}&gyro_fs={gyro_fs_dps}&seed={self.seed}&realtime=0"
+               f"&block={SIM_BLOCK}&errors={int(self.errors)}&noise={int(self.noise)}")
+        sim = SimulatedDevice(url, **self.scenario_params)
+        sim.open()
+        return sim
+
+    def _board_ticks(self, now: float) -> int:
+        tick_s = self.config.tick_s
+        return self.initial_ticks + round((now - self._power_on_wall) / tick_s)
+
+    # -- the serving thread ---------------------------------------------------------------------
+    def _serve(self) -> None:
+        try:
+            self._serve_until_stopped()
+        except Exception:  # a bug here must show, not leave the host waiting in silence
+            log.exception("emulated NUCLEO on %s stopped", self.port)
+
+    def _serve_until_stopped(self) -> None:
+        next_send = math.inf
+        while not self._stop.is_set():
+            now = time.monotonic()
+            if self._streaming:
+                next_send = self._next_send_time(now)
+            timeout = None if not self._streaming else max(0.0, next_send - now)
+            if timeout is not None:
+                timeout = min(timeout, 0.5)
+            writers = [self._master] if self._tx else []
+            try:
+                readable, writable, _ = select.select(
+                    [self._master, self._wake_r], writers, [], timeout
+                )
+            except (OSError, ValueError):
+                return
+            if self._wake_r in readable:
+                with contextlib.suppress(OSError):
+                    os.read(self._wake_r, 4096)
+                if self._stop.is_set():
+                    return
+            with self._lock:
+                outgoing, self._outgoing = self._outgoing, []
+            for data in outgoing:
+                self._tx += data
+            if self._master in readable:
+                try:
+                    data = os.read(self._master, 4096)
+                except BlockingIOError:
+                    data = b""
+                except OSError:
+                    return
+                for frame in self._splitter.feed(data):
+                    self._on_frame(frame)
+            if self._streaming and time.monotonic() >= next_send:
+                self._send_samples(time.monotonic())
+            if self._tx or writable:
+                self._flush_tx()
+
+    def _flush_tx(self) -> None:
+        if not self._tx:
+            return
+        try:
+            written = os.write(self._master, self._tx)
+        except BlockingIOError:
+            return
+        except OSError:
+            self._tx.clear()
+            return
+        del self._tx[:written]
+
+    def _queue(self, packet: p.Packet) -> None:
+        self._tx += encode_packet(packet)
+
+    def _next_send_time(self, now: float) -> float:
+        odr = self._sim.true_odr_hz
+        first_due = self._run_start + self._run_sent / odr
+        full_due = self._run_start + (self._run_sent + p.MAX_SAMPLES_PER_PACKET - 1) / odr
+        return max(first_due, min(full_due, self._last_send + self.packet_interval_s))
+
+    # -- commands -------------------------------------------------------------------------------
+    def _on_frame(self, frame: bytes) -> None:
+        try:
+            body = unframe(frame)
+        except FrameError:
+            self.stats.bad_frames += 1  # the firmware ignores it; the host times out, retries
+            return
+        command = body[0]
+        self.stats.commands += 1
+        if command not in p.HOST_PACKET_TYPES:
+            self._queue(p.Ack(command, p.ACK_UNSUPPORTED, f"unknown command 0x{command:02X}"))
+            return
+        try:
+            packet = p.parse_packet(command, body[1:])
+        except p.PacketError as exc:
+            self._queue(p.Ack(command, p.ACK_BAD_ARGUMENT, str(exc)))
+            return
+        if isinstance(packet, p.Hello):
+            self._queue(self.info)
+            self._queue(self.config)
+        elif isinstance(packet, p.Configure):
+            self._configure(packet)
+        elif isinstance(packet, p.Start):
+            if not self._streaming:
+                self._start()
+            self._queue(p.Ack(p.START, p.ACK_OK))
+            config = self.config
+            self._queue(p.Log(1, f"streaming at {config.odr_hz:g} Hz, +-{config.accel_fs_g} g, "
+                                 f"+-{config.gyro_fs_dps} dps"))
+        elif isinstance(packet, p.Stop):
+            self._streaming = False
+            self._queue(p.Ack(p.STOP, p.ACK_OK))
+        elif isinstance(packet, p.SelfTest):
+            if self._streaming:
+                self._queue(p.Ack(p.SELF_TEST, p.ACK_BUSY, "streaming; send STOP first"))
+            else:
+                self._queue(p.Ack(p.SELF_TEST, p.ACK_OK))
+                self._queue(self.self_test_result())
+        elif isinstance(packet, p.Ping):
+            self._queue(p.Pong(packet.token))
+
+    def _configure(self, command: p.Configure) -> None:
+        problem = ""
+        if command.odr_code not in lsm6dsox.ODR_CODES_HZ:
+            problem = f"odr_code {command.odr_code} is not 1..10"
+        elif command.accel_fs_g not in lsm6dsox.ACCEL_MG_PER_LSB:
+            problem = f"accel_fs_g {command.accel_fs_g} is not 2, 4, 8 or 16"
+        elif command.gyro_fs_dps not in lsm6dsox.GYRO_MDPS_PER_LSB:
+            problem = f"gyro_fs_dps {command.gyro_fs_dps} is not 125, 250, 500, 1000 or 2000"
+        elif not odr_fits_link(lsm6dsox.ODR_CODES_HZ[command.odr_code], self.baud):
+            odr = lsm6dsox.ODR_CODES_HZ[command.odr_code]
+            needed = odr * link_bytes_per_sample()
+            problem = (f"{odr:g} Hz needs {needed:,.0f} bytes/s; {self.baud} baud carries "
+                       f"{link_capacity_bytes_s(self.baud or 0):,.0f}")
+        if problem:
+            self._queue(p.Ack(p.CONFIGURE, p.ACK_BAD_ARGUMENT, problem))
+        elif self._streaming:
+            self._queue(p.Ack(p.CONFIGURE, p.ACK_BUSY, "streaming; send STOP first"))
+        else:
+            self._settings = (command.odr_code, command.accel_fs_g, command.gyro_fs_dps)
+            self._sim.close()
+            self._sim = self._new_sim(*self._settings)
+            self._pending = []
+            self._queue(p.Ack(p.CONFIGURE, p.ACK_OK))
+        self._queue(self.config)
+
+    def _start(self) -> None:
+        now = time.monotonic()
+        self._streaming = True
+        self._run_start = now
+        self._run_sent = 0
+        self._last_send = now
+        self._run_origin_ticks = max(self._board_ticks(now), math.ceil(self._last_end_ticks))
+
+    # -- samples --------------------------------------------------------------------------------
+    def _take_samples(self, count: int) -> np.ndarray:
+        rows: list[np.ndarray] = []
+        have = 0
+        while have < count:
+            if not self._pending:
+                raw = self._sim.read(1.0)
+                assert raw is not None
+                block = np.empty((len(raw), 7), dtype=np.int16)
+                block[:, 0:3] = raw.gyro_raw
+                block[:, 3:6] = raw.accel_raw
+                block[:, 6] = raw.temp_raw
+                self._pending = [block]
+            head = self._pending[0]
+            take = min(count - have, len(head))
+            rows.append(head[:take])
+            have += take
+            if take == len(head):
+                self._pending.pop(0)
+            else:
+                self._pending[0] = head[take:]
+        return np.concatenate(rows)
+
+    def _send_samples(self, now: float) -> None:
+        due = math.floor((now - self._run_start) * self._sim.true_odr_hz) + 1 - self._run_sent
+        if due <= 0:
+            return
+        config = self.config
+        ticks_per_sample = 1e12 / (config.odr_mhz * config.tick_ns)
+        rows = self._take_samples(due)
+        for first in range(0, due, p.MAX_SAMPLES_PER_PACKET):
+            chunk = rows[first:first + p.MAX_SAMPLES_PER_PACKET]
+            index = self._run_sent + first
+            t0 = self._run_origin_ticks + round(index * ticks_per_sample)
+            self._send_packet(p.Samples(self._seq & 0xFFFF, t0 & 0xFFFFFFFF, int(chunk[0, 6]),
+                                        chunk[:, 0:6]), index)
+            self._last_end_ticks = t0 + len(chunk) * ticks_per_sample
+            self._seq += 1
+        self._run_sent += due
+        self._last_send = now
+
+    def _send_packet(self, packet: p.Samples, first_sample: int) -> None:
+        stats, faults = self.stats, self.faults
+        count = packet.count
+        dropped = packet.seq in faults.drop_seqs or (
+            faults.drop_probability > 0 and self._fault_rng.random() < faults.drop_probability
+        )
+        if dropped or len(self._tx) > TX_BUFFER_BYTES:
+            stats.packets_dropped += 1
+            stats.samples_dropped += count
+            return
+        corrupt = packet.seq in faults.corrupt_seqs or (
+            faults.corrupt_probability > 0
+            and self._fault_rng.random() < faults.corrupt_probability
+        )
+        if corrupt:
+            body = bytearray((p.SAMPLES,)) + packet.payload()
+            body += crc16(bytes(body)).to_bytes(2, "little")
+            body[1 + p.SAMPLES_HEADER_BYTES] ^= 0x55  # a sample byte: the CRC catches it
+            self._tx += cobs.encode(bytes(body)) + b"\x00"
+            stats.packets_corrupted += 1
+        else:
+            self._tx += encode_packet(packet)
+        self._flush_tx()
+        stats.packets_sent += 1
+        stats.samples_sent += count
+        if self.on_packet_sent is not None:
+            self.on_packet_sent(packet.seq, first_sample, count, time.perf_counter())

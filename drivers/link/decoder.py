@@ -1,0 +1,357 @@
+"""The streaming decoder of protocol v1: bytes in, packets and :class:`RawBlock` s out.
+
+Feed it whatever the port delivered, in chunks of any size; it cuts frames at 0x00, checks them,
+parses them and never raises on garbage (a bad frame is counted and the decoder resynchronises
+at the next 0x00). SAMPLES packets are collected and turned into :class:`RawBlock` s with a few
+numpy operations per batch (``np.frombuffer`` over the joined sample bytes, never value by
+value); every other packet is handed back to the caller.
+
+Time and sequence rules (also in ``docs/protocol.md``)
+-------------------------------------------------------
+- ``t0`` (u32 ticks) is unwrapped: the forward difference to the previous packet's ``t0``
+  modulo 2**32 is added to a running count, so the 29.8 h wrap at 25 us ticks is invisible.
+- Sample ``i`` of a packet is at ``t0 + i / ODR``. ``t_s`` is seconds since the first sample
+  the decoder saw (``(t0 - t0_first) * tick_ns * 1e-9 + i / ODR``): device time, not host time.
+- ``seq`` (u16) must advance by one per SAMPLES packet. A jump of ``d > 1`` is a gap of
+  ``k = d - 1`` packets. How many samples they held is not on the wire (count is per packet);
+  it is estimated from the timestamps: ``round((t0 - t_end) * tick_s * ODR)`` where ``t_end``
+  is where the previous packet's last sample + 1 would be, and never less than ``k`` (every
+  packet holds at least one sample). The first sample after the gap gets ``gap=True`` and the
+  estimate is added to ``lost_samples``.
+- A packet with the same ``seq`` as the previous one is a duplicate: dropped.
+- A ``t0`` earlier than the previous one (a forward difference >= 2**31 ticks) means the
+  device restarted its clock; a ``t0`` more than half a sample period before the end of the
+  previous packet overlaps it. Either way time goes on from the end of the previous packet
+  (``t_s`` stays strictly increasing), the sample is marked as a gap (lost samples unknown,
+  counted as 0) and one sequence gap is counted.
+- A CONFIG with another ``tick_ns`` (never sent by a real device) starts a new time base the
+  same way: time goes on from the end of the last packet, with a gap.
+- After :meth:`LinkDecoder.arm_start`, SAMPLES are dropped until the ACK of START.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+from app.core.samples import RawBlock, ScaleFactors
+from drivers import lsm6dsox
+from drivers.link import protocol as p
+from drivers.link.framing import FrameError, FrameSplitter, unframe
+
+_SAMPLES_HEADER = struct.Struct("<HIBh")
+_SAMPLE_DATA_OFFSET = 1 + p.SAMPLES_HEADER_BYTES  # in a packet without its CRC
+_WRAP32 = 1 << 32
+_MASK32 = _WRAP32 - 1
+_HALF32 = 1 << 31
+
+
+@dataclass(frozen=True, slots=True)
+class LinkCounters:
+    """Totals since the decoder was created (a snapshot; see :meth:`LinkDecoder.counters`).
+
+    Attributes
+    ----------
+    bytes_received : every byte fed in.
+    packets : frames that passed COBS, length and CRC checks and parsed.
+    samples : samples delivered in :class:`RawBlock` s.
+    crc_errors : frames whose CRC did not match.
+    undecodable : frames with bad COBS, a length outside 3..512 bytes, a payload that does not
+        fit its type, or runs of more than 515 bytes without a 0x00.
+    unknown_packets : valid frames of a packet type this host does not know (ignored).
+    seq_gaps : sequence gaps (and device clock restarts).
+    lost_samples : samples the gaps held (estimated from the timestamps).
+    dropped_samples : samples in valid packets that were not delivered: duplicate packets,
+        SAMPLES before any CONFIG, or still in flight from a stream before the last START.
+    """
+
+    bytes_received: int = 0
+    packets: int = 0
+    samples: int = 0
+    crc_errors: int = 0
+    undecodable: int = 0
+    unknown_packets: int = 0
+    seq_gaps: int = 0
+    lost_samples: int = 0
+    dropped_samples: int = 0
+
+
+def scale_factors(config: p.Config) -> ScaleFactors:
+    """How the raw numbers of a device with this CONFIG become SI units."""
+    return ScaleFactors(
+        accel_m_s2_per_lsb=lsm6dsox.accel_m_s2_per_lsb(config.accel_fs_g),
+        gyro_rad_s_per_lsb=lsm6dsox.gyro_rad_s_per_lsb(config.gyro_fs_dps),
+        temp_degc_per_lsb=1.0 / lsm6dsox.TEMP_LSB_PER_DEGC,
+        temp_offset_degc=lsm6dsox.TEMP_OFFSET_DEGC,
+    )
+
+
+class LinkDecoder:
+    """Bytes from a protocol v1 device -> packets and :class:`RawBlock` s.
+
+    Parameters
+    ----------
+    config : the device's CONFIG if already known (SAMPLES cannot be converted without one;
+        a CONFIG packet in the stream sets or replaces it).
+
+    Not thread-safe: one thread feeds; the owner locks if others read :meth:`counters`.
+    """
+
+    def __init__(self, config: p.Config | None = None) -> None:
+        self._splitter = FrameSplitter()
+        self._config: p.Config | None = None
+        self._scale: ScaleFactors | None = None
+        self._ticks_per_sample = 1.0
+        self._tick_s = 0.0
+        self._blocks: list[RawBlock] = []
+        # Counters (plain ints: the hot path must not build objects).
+        self._bytes = 0
+        self._packets = 0
+        self._samples = 0
+        self._crc_errors = 0
+        self._undecodable = 0
+        self._unknown = 0
+        self._seq_gaps = 0
+        self._lost = 0
+        self._dropped = 0
+        self.last_error = ""
+        """What was wrong with the most recent rejected frame (for error messages)."""
+        # Stream state.
+        self._origin_ticks: int | None = None
+        """Unwrapped device tick where ``t_s`` equals ``_offset_s`` (None: the next packet)."""
+        self._offset_s = 0.0
+        self._last_seq: int | None = None
+        self._last_t0 = 0
+        self._t_ticks = 0
+        self._end_ticks = 0.0
+        self._last_period_ticks = 0.0
+        self._pending_gap = False
+        self._armed: tuple[bool, bool] | None = None
+        self._clear_batch()
+        if config is not None:
+            self._apply_config(config)
+
+    # -- public API --------------------------------------------------------------------------
+    @property
+    def config(self) -> p.Config | None:
+        return self._config
+
+    @property
+    def scale(self) -> ScaleFactors | None:
+        return self._scale
+
+    @property
+    def clock_origin_s(self) -> float | None:
+        """Device clock time (s, unwrapped from the first packet's ``t0``) where ``t_s`` is 0.
+
+        None before the first sample.
+        """
+        if self._origin_ticks is None or self._config is None:
+            return None
+        return self._origin_ticks * self._tick_s - self._offset_s
+
+    def counters(self) -> LinkCounters:
+        """A snapshot of the counters."""
+        return LinkCounters(
+            bytes_received=self._bytes, packets=self._packets, samples=self._samples,
+            crc_errors=self._crc_errors,
+            undecodable=self._undecodable + self._splitter.oversized,
+            unknown_packets=self._unknown, seq_gaps=self._seq_gaps, lost_samples=self._lost,
+            dropped_samples=self._dropped,
+        )
+
+    def feed(self, data: bytes) -> list[p.Packet]:
+        """Decode ``data``; returns the packets other than SAMPLES, in arrival order.
+
+        SAMPLES become blocks: collect them with :meth:`take_blocks`. A CONFIG packet is
+        applied (and also returned). Never raises on bad input.
+        """
+        self._bytes += len(data)
+        packets: list[p.Packet] = []
+        for frame in self._splitter.feed(data):
+            try:
+                body = unframe(frame)
+            except FrameError as exc:
+                if exc.kind == "crc":
+                    self._crc_errors += 1
+                else:
+                    self._undecodable += 1
+                self.last_error = str(exc)
+                continue
+            packet_type = body[0]
+            if packet_type == p.SAMPLES:
+                try:
+                    count = p.samples_count(body, 1)
+                except p.PacketError as exc:
+                    self._reject(exc)
+                    continue
+                self._packets += 1
+                self._on_samples(body, count)
+                continue
+            try:
+                packet = p.parse_packet(packet_type, body[1:])
+            except p.UnknownPacketType as exc:
+                self._unknown += 1
+                self.last_error = str(exc)
+                continue
+            except p.PacketError as exc:
+                self._reject(exc)
+                continue
+            self._packets += 1
+            if isinstance(packet, p.Config):
+                self._apply_config(packet)
+            elif isinstance(packet, p.Ack):
+                self._on_start_ack(packet)
+            packets.append(packet)
+        self._flush()
+        return packets
+
+    def take_blocks(self) -> list[RawBlock]:
+        """The blocks decoded since the last call (usually one per :meth:`feed`)."""
+        blocks, self._blocks = self._blocks, []
+        return blocks
+
+    def arm_start(self, *, new_origin: bool, mark_gap: bool = False) -> None:
+        """Drop SAMPLES until the device acknowledges START; then the stream starts afresh.
+
+        Call it before sending START: samples still in flight from an earlier stream are
+        not mixed into the new one. When the ACK (status ok) arrives, the sequence number is
+        forgotten; with ``new_origin`` ``t_s`` restarts at 0 with the next sample, otherwise
+        time goes on from the device's timestamps. With ``mark_gap`` the next sample is
+        flagged as the first after a gap (the stream was paused, e.g. for a self-test).
+        """
+        self._flush()
+        self._armed = (new_origin, mark_gap)
+
+    def _on_start_ack(self, ack: p.Ack) -> None:
+        if self._armed is None or ack.command != p.START:
+            return
+        new_origin, mark_gap = self._armed
+        self._armed = None
+        if ack.ok:
+            self._last_seq = None
+            if new_origin:
+                self._origin_ticks = None
+                self._offset_s = 0.0
+            self._pending_gap = self._pending_gap or mark_gap
+
+    def reset_framing(self) -> None:
+        """Drop a partial frame (the port was flushed or reopened)."""
+        self._splitter.reset()
+
+    # -- internals ---------------------------------------------------------------------------
+    def _reject(self, exc: Exception) -> None:
+        self._undecodable += 1
+        self.last_error = str(exc)
+
+    def _apply_config(self, config: p.Config) -> None:
+        if config == self._config:
+            return
+        self._flush()  # pending samples keep the scale they were measured with
+        if (self._origin_ticks is not None and self._config is not None
+                and config.tick_ns != self._config.tick_ns):
+            # Another tick length is another time base (a real device never changes it):
+            # time goes on from the end of the last packet, and a gap is marked.
+            self._offset_s += (self._end_ticks - self._origin_ticks) * self._tick_s
+            self._origin_ticks = None
+            self._last_seq = None
+            self._pending_gap = True
+        self._config = config
+        self._scale = scale_factors(config)
+        self._ticks_per_sample = 1e12 / (config.odr_mhz * config.tick_ns)
+        self._tick_s = config.tick_s
+
+    def _clear_batch(self) -> None:
+        self._starts: list[float] = []
+        self._counts: list[int] = []
+        self._temps: list[int] = []
+        self._gap_packets: list[int] = []
+        self._chunks: list[bytes] = []
+        self._batch_lost = 0
+
+    def _on_samples(self, body: bytes, count: int) -> None:
+        if self._config is None or self._armed is not None:
+            self._dropped += count
+            if self._config is None:
+                self.last_error = "SAMPLES before any CONFIG"
+            return
+        seq, t0, _, temperature = _SAMPLES_HEADER.unpack_from(body, 1)
+        gap = self._pending_gap
+        lost = 0
+        if self._origin_ticks is None:  # the first packet (of this time base)
+            t_ticks = t0
+            self._origin_ticks = t0
+        else:
+            forward = (t0 - self._last_t0) & _MASK32
+            if self._last_seq is not None and seq == self._last_seq:
+                self._dropped += count  # a duplicate packet
+                return
+            t_ticks = self._t_ticks + forward
+            if forward >= _HALF32 or t_ticks < self._end_ticks - 0.5 * self._last_period_ticks:
+                # The device clock went back (it restarted) or the packet overlaps the previous
+                # one: keep time monotonic, going on from the end of the previous packet.
+                t_ticks = math.ceil(self._end_ticks)
+                gap = True
+                self._seq_gaps += 1
+            else:
+                if self._last_seq is not None:
+                    missing_packets = ((seq - self._last_seq) & 0xFFFF) - 1
+                    if missing_packets:
+                        estimate = round((t_ticks - self._end_ticks) / self._ticks_per_sample)
+                        lost = max(missing_packets, estimate)
+                        gap = True
+                        self._seq_gaps += 1
+                        self._lost += lost
+        self._last_seq = seq
+        self._last_t0 = t0
+        self._t_ticks = t_ticks
+        self._end_ticks = t_ticks + count * self._ticks_per_sample
+        self._last_period_ticks = self._ticks_per_sample
+        self._pending_gap = False
+        if gap:
+            self._gap_packets.append(len(self._counts))
+        self._starts.append(self._offset_s + (t_ticks - self._origin_ticks) * self._tick_s)
+        self._counts.append(count)
+        self._temps.append(temperature)
+        self._chunks.append(body[_SAMPLE_DATA_OFFSET:])
+        self._batch_lost += lost
+
+    def _flush(self) -> None:
+        """Turn the collected SAMPLES packets into one block."""
+        if not self._counts:
+            return
+        config, scale = self._config, self._scale
+        assert config is not None and scale is not None
+        period_s = 1000.0 / config.odr_mhz
+        data = np.frombuffer(b"".join(self._chunks), dtype="<i2").astype(np.int16)
+        data = data.reshape(-1, 6)
+        n = data.shape[0]
+        gap = np.zeros(n, dtype=bool)
+        if len(self._counts) == 1:  # common at low rates: skip the bookkeeping
+            t_s = self._starts[0] + np.arange(n) * period_s
+            temp_raw = np.full(n, self._temps[0], dtype=np.int16)
+            gap[0] = bool(self._gap_packets)
+        else:
+            counts = np.array(self._counts, dtype=np.int64)
+            packet_first = np.cumsum(counts) - counts
+            within = np.arange(n) - np.repeat(packet_first, counts)
+            t_s = np.repeat(np.array(self._starts), counts) + within * period_s
+            temp_raw = np.repeat(np.array(self._temps, dtype=np.int16), counts)
+            if self._gap_packets:
+                gap[packet_first[self._gap_packets]] = True
+        self._blocks.append(
+            RawBlock(
+                t_s=t_s,
+                accel_raw=data[:, 3:6],
+                gyro_raw=data[:, 0:3],
+                temp_raw=temp_raw,
+                scale=scale,
+                gap=gap,
+                lost_samples=self._batch_lost,
+            )
+        )
+        self._samples += n
+        self._clear_batch()

@@ -1,0 +1,456 @@
+"""NUCLEO link protocol v1: packet types, their payloads, and builders/parsers for each.
+
+The protocol is specified in ``docs/protocol.md`` (binding: firmware and other tools implement it
+independently). This module knows payloads only; framing (CRC, COBS, the 0x00 delimiter) lives
+in :mod:`drivers.link.framing` and the streaming decoder in :mod:`drivers.link.decoder`.
+
+Every packet is a small frozen dataclass with a class attribute ``TYPE`` (the type byte), a
+:meth:`payload` method (the bytes after the type byte) and a ``from_payload`` class method
+that validates and raises :class:`PacketError`. :func:`parse_packet` dispatches on the type.
+All integers are little-endian.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from typing import ClassVar, Protocol
+
+import numpy as np
+
+from drivers import lsm6dsox
+
+PROTOCOL_VERSION = 1
+MAX_PACKET_BYTES = 512
+"""Longest decoded packet: type byte + payload + 2 CRC bytes."""
+MAX_SAMPLES_PER_PACKET = 32
+SAMPLE_BYTES = 12
+"""One sample on the wire: gx, gy, gz, ax, ay, az as i16."""
+SAMPLES_HEADER_BYTES = 9
+"""seq u16, t0 u32, count u8, temperature i16."""
+DEFAULT_TICK_NS = 25_000
+DEFAULT_BAUD = 921_600
+
+# Device -> host.
+INFO = 0x01
+CONFIG = 0x02
+SAMPLES = 0x03
+ACK = 0x04
+SELFTEST = 0x05
+LOG = 0x06
+PONG = 0x07
+# Host -> device.
+HELLO = 0x81
+CONFIGURE = 0x82
+START = 0x83
+STOP = 0x84
+SELF_TEST = 0x85
+PING = 0x86
+
+COMMAND_NAMES: dict[int, str] = {
+    HELLO: "HELLO", CONFIGURE: "CONFIGURE", START: "START", STOP: "STOP",
+    SELF_TEST: "SELF_TEST", PING: "PING",
+}
+PACKET_NAMES: dict[int, str] = {
+    INFO: "INFO", CONFIG: "CONFIG", SAMPLES: "SAMPLES", ACK: "ACK", SELFTEST: "SELFTEST",
+    LOG: "LOG", PONG: "PONG", **COMMAND_NAMES,
+}
+
+# ACK status codes.
+ACK_OK = 0
+ACK_BAD_ARGUMENT = 1
+ACK_UNSUPPORTED = 2
+ACK_SENSOR_ERROR = 3
+ACK_BUSY = 4
+ACK_STATUS_TEXT: dict[int, str] = {
+    ACK_OK: "ok",
+    ACK_BAD_ARGUMENT: "bad argument",
+    ACK_UNSUPPORTED: "unsupported command",
+    ACK_SENSOR_ERROR: "sensor error",
+    ACK_BUSY: "busy",
+}
+
+LOG_LEVELS: dict[int, str] = {0: "debug", 1: "info", 2: "warning", 3: "error"}
+
+_SAMPLES_HEADER = struct.Struct("<HIBh")
+_CONFIG = struct.Struct("<IBHI")
+_INFO_HEAD = struct.Struct("<BBBBB12s")
+_SELFTEST = struct.Struct("<BB3h3h")
+_CONFIGURE = struct.Struct("<BBH")
+_U32 = struct.Struct("<I")
+
+
+class PacketError(ValueError):
+    """A packet's payload does not match its type (wrong length or an impossible value)."""
+
+
+class Packet(Protocol):
+    """What every packet class provides."""
+
+    TYPE: ClassVar[int]
+
+    def payload(self) -> bytes: ...
+
+
+def _exact_length(name: str, payload: bytes, expected: int) -> None:
+    if len(payload) != expected:
+        raise PacketError(f"{name} payload is {len(payload)} bytes, expected {expected}")
+
+
+def _text(data: bytes) -> str:
+    # The CRC passed, so these are the firmware's bytes: show them even if not valid UTF-8.
+    return data.decode("utf-8", errors="replace")
+
+
+# -- device to host -------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class Info:
+    """0x01 INFO: who the device is."""
+
+    TYPE: ClassVar[int] = INFO
+    protocol_version: int
+    firmware: tuple[int, int, int]
+    who_am_i: int
+    unique_id: bytes
+    """12 bytes (the STM32's 96-bit unique device id)."""
+    name: str
+
+    def payload(self) -> bytes:
+        if len(self.unique_id) != 12:
+            raise PacketError(f"INFO unique_id must be 12 bytes, not {len(self.unique_id)}")
+        major, minor, patch = self.firmware
+        head = _INFO_HEAD.pack(
+            self.protocol_version, major, minor, patch, self.who_am_i, self.unique_id
+        )
+        return head + self.name.encode("utf-8")
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> Info:
+        if len(payload) < _INFO_HEAD.size:
+            raise PacketError(f"INFO payload is {len(payload)} bytes, at least 17 expected")
+        version, major, minor, patch, who_am_i, unique_id = _INFO_HEAD.unpack_from(payload)
+        return cls(version, (major, minor, patch), who_am_i, unique_id,
+                   _text(payload[_INFO_HEAD.size:]))
+
+    @property
+    def firmware_text(self) -> str:
+        return ".".join(str(part) for part in self.firmware)
+
+    @property
+    def unique_id_hex(self) -> str:
+        return self.unique_id.hex().upper()
+
+
+@dataclass(frozen=True, slots=True)
+class Config:
+    """0x02 CONFIG: the settings in effect."""
+
+    TYPE: ClassVar[int] = CONFIG
+    odr_mhz: int
+    """Output data rate actually used (trimmed), in millihertz."""
+    accel_fs_g: int
+    gyro_fs_dps: int
+    tick_ns: int
+    """Length of one timestamp tick in nanoseconds (trimmed like the ODR)."""
+
+    def payload(self) -> bytes:
+        return _CONFIG.pack(self.odr_mhz, self.accel_fs_g, self.gyro_fs_dps, self.tick_ns)
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> Config:
+        _exact_length("CONFIG", payload, _CONFIG.size)
+        config = cls(*_CONFIG.unpack(payload))
+        if config.odr_mhz == 0 or config.tick_ns == 0:
+            raise PacketError(f"CONFIG with odr_mhz={config.odr_mhz}, tick_ns={config.tick_ns}")
+        if config.accel_fs_g not in lsm6dsox.ACCEL_MG_PER_LSB:
+            raise PacketError(f"CONFIG accel_fs_g={config.accel_fs_g} is not 2, 4, 8 or 16")
+        if config.gyro_fs_dps not in lsm6dsox.GYRO_MDPS_PER_LSB:
+            raise PacketError(
+                f"CONFIG gyro_fs_dps={config.gyro_fs_dps} is not 125, 250, 500, 1000 or 2000"
+            )
+        return config
+
+    @property
+    def odr_hz(self) -> float:
+        return self.odr_mhz / 1000.0
+
+    @property
+    def tick_s(self) -> float:
+        return self.tick_ns * 1e-9
+
+    @property
+    def odr_code(self) -> int:
+        """The LSM6DSOX ODR code nearest to the rate in use."""
+        return lsm6dsox.odr_code_for(self.odr_hz)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Samples:
+    """0x03 SAMPLES: up to 32 samples.
+
+    ``data`` is an (count, 6) int16 array of gx, gy, gz, ax, ay, az in LSB. The streaming
+    decoder does not build these objects (it decodes many packets at once); they serve
+    the emulator, the tests and anyone handling one packet.
+    """
+
+    TYPE: ClassVar[int] = SAMPLES
+    seq: int
+    t0: int
+    """Device timestamp of the first sample, in ticks (wraps at 2**32)."""
+    temperature_raw: int
+    data: np.ndarray
+
+    def payload(self) -> bytes:
+        rows = np.asarray(self.data).reshape(-1, 6)
+        count = rows.shape[0]
+        if not 1 <= count <= MAX_SAMPLES_PER_PACKET:
+            raise PacketError(f"SAMPLES count must be 1..32, not {count}")
+        head = _SAMPLES_HEADER.pack(
+            self.seq & 0xFFFF, self.t0 & 0xFFFFFFFF, count, self.temperature_raw
+        )
+        return head + rows.astype("<i2").tobytes()
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> Samples:
+        count = samples_count(payload, 0)
+        seq, t0, _, temperature = _SAMPLES_HEADER.unpack_from(payload)
+        data = np.frombuffer(payload, "<i2", offset=SAMPLES_HEADER_BYTES).reshape(count, 6)
+        return cls(seq, t0, temperature, data.astype(np.int16))
+
+    @property
+    def count(self) -> int:
+        return int(np.asarray(self.data).reshape(-1, 6).shape[0])
+
+    @property
+    def gyro_raw(self) -> np.ndarray:
+        return np.asarray(self.data).reshape(-1, 6)[:, 0:3]
+
+    @property
+    def accel_raw(self) -> np.ndarray:
+        return np.asarray(self.data).reshape(-1, 6)[:, 3:6]
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Samples):
+            return NotImplemented
+        return (self.seq, self.t0, self.temperature_raw) == (
+            other.seq, other.t0, other.temperature_raw
+        ) and np.array_equal(np.asarray(self.data), np.asarray(other.data))
+
+
+def samples_count(buffer: bytes | memoryview, offset: int, length: int | None = None) -> int:
+    """Validate a SAMPLES payload at ``offset`` and return its sample count.
+
+    ``length`` is the payload's length (default: the rest of ``buffer``).
+    """
+    length = len(buffer) - offset if length is None else length
+    if length < SAMPLES_HEADER_BYTES:
+        raise PacketError(f"SAMPLES payload is {length} bytes, at least 9 expected")
+    count = buffer[offset + 6]
+    if not 1 <= count <= MAX_SAMPLES_PER_PACKET:
+        raise PacketError(f"SAMPLES count is {count}, expected 1..32")
+    expected = SAMPLES_HEADER_BYTES + SAMPLE_BYTES * count
+    if length != expected:
+        raise PacketError(f"SAMPLES with count {count} is {length} bytes, expected {expected}")
+    return count
+
+
+@dataclass(frozen=True, slots=True)
+class Ack:
+    """0x04 ACK: the outcome of a command."""
+
+    TYPE: ClassVar[int] = ACK
+    command: int
+    status: int
+    message: str = ""
+
+    def payload(self) -> bytes:
+        return bytes((self.command, self.status)) + self.message.encode("utf-8")
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> Ack:
+        if len(payload) < 2:
+            raise PacketError(f"ACK payload is {len(payload)} bytes, at least 2 expected")
+        return cls(payload[0], payload[1], _text(payload[2:]))
+
+    @property
+    def ok(self) -> bool:
+        return self.status == ACK_OK
+
+    @property
+    def status_text(self) -> str:
+        return ACK_STATUS_TEXT.get(self.status, f"unknown status {self.status}")
+
+
+@dataclass(frozen=True, slots=True)
+class SelfTestResult:
+    """0x05 SELFTEST: the sensor's self-test outcome (output change with the test force on)."""
+
+    TYPE: ClassVar[int] = SELFTEST
+    accel_pass: bool
+    gyro_pass: bool
+    accel_delta_mg: tuple[int, int, int]
+    gyro_delta_dps: tuple[int, int, int]
+
+    def payload(self) -> bytes:
+        return _SELFTEST.pack(
+            int(self.accel_pass), int(self.gyro_pass), *self.accel_delta_mg, *self.gyro_delta_dps
+        )
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> SelfTestResult:
+        _exact_length("SELFTEST", payload, _SELFTEST.size)
+        values = _SELFTEST.unpack(payload)
+        return cls(bool(values[0]), bool(values[1]), tuple(values[2:5]), tuple(values[5:8]))
+
+    @property
+    def passed(self) -> bool:
+        return self.accel_pass and self.gyro_pass
+
+
+@dataclass(frozen=True, slots=True)
+class Log:
+    """0x06 LOG: a message from the firmware (level 0 debug .. 3 error)."""
+
+    TYPE: ClassVar[int] = LOG
+    level: int
+    text: str
+
+    def payload(self) -> bytes:
+        return bytes((self.level,)) + self.text.encode("utf-8")
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> Log:
+        if len(payload) < 1:
+            raise PacketError("LOG payload is empty, at least the level byte expected")
+        return cls(payload[0], _text(payload[1:]))
+
+    @property
+    def level_name(self) -> str:
+        return LOG_LEVELS.get(self.level, f"level {self.level}")
+
+
+@dataclass(frozen=True, slots=True)
+class Pong:
+    """0x07 PONG: the answer to PING, echoing its token."""
+
+    TYPE: ClassVar[int] = PONG
+    token: int
+
+    def payload(self) -> bytes:
+        return _U32.pack(self.token)
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> Pong:
+        _exact_length("PONG", payload, 4)
+        return cls(_U32.unpack(payload)[0])
+
+
+# -- host to device -------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class _NoPayload:
+    TYPE: ClassVar[int] = 0
+
+    def payload(self) -> bytes:
+        return b""
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> _NoPayload:
+        _exact_length(PACKET_NAMES[cls.TYPE], payload, 0)
+        return cls()
+
+
+@dataclass(frozen=True, slots=True)
+class Hello(_NoPayload):
+    """0x81 HELLO: the device answers INFO, then CONFIG."""
+
+    TYPE: ClassVar[int] = HELLO
+
+
+@dataclass(frozen=True, slots=True)
+class Configure:
+    """0x82 CONFIGURE: the device answers ACK, then CONFIG (the settings now in effect)."""
+
+    TYPE: ClassVar[int] = CONFIGURE
+    odr_code: int
+    """LSM6DSOX ODR code 1..10 (12.5 ... 6667 Hz)."""
+    accel_fs_g: int
+    gyro_fs_dps: int
+
+    def payload(self) -> bytes:
+        return _CONFIGURE.pack(self.odr_code, self.accel_fs_g, self.gyro_fs_dps)
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> Configure:
+        _exact_length("CONFIGURE", payload, _CONFIGURE.size)
+        return cls(*_CONFIGURE.unpack(payload))
+
+
+@dataclass(frozen=True, slots=True)
+class Start(_NoPayload):
+    """0x83 START: the device answers ACK, then streams SAMPLES."""
+
+    TYPE: ClassVar[int] = START
+
+
+@dataclass(frozen=True, slots=True)
+class Stop(_NoPayload):
+    """0x84 STOP: the device stops streaming and answers ACK."""
+
+    TYPE: ClassVar[int] = STOP
+
+
+@dataclass(frozen=True, slots=True)
+class SelfTest(_NoPayload):
+    """0x85 SELF_TEST: the device answers ACK, then SELFTEST."""
+
+    TYPE: ClassVar[int] = SELF_TEST
+
+
+@dataclass(frozen=True, slots=True)
+class Ping:
+    """0x86 PING: the device answers PONG with the same token."""
+
+    TYPE: ClassVar[int] = PING
+    token: int
+
+    def payload(self) -> bytes:
+        return _U32.pack(self.token)
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> Ping:
+        _exact_length("PING", payload, 4)
+        return cls(_U32.unpack(payload)[0])
+
+
+PACKET_CLASSES: dict[int, type] = {
+    cls.TYPE: cls
+    for cls in (Info, Config, Samples, Ack, SelfTestResult, Log, Pong,
+                Hello, Configure, Start, Stop, SelfTest, Ping)
+}
+DEVICE_PACKET_TYPES = frozenset({INFO, CONFIG, SAMPLES, ACK, SELFTEST, LOG, PONG})
+HOST_PACKET_TYPES = frozenset(COMMAND_NAMES)
+
+
+class UnknownPacketType(PacketError):
+    """A packet type this host does not know (the protocol allows new types: ignore it)."""
+
+
+def parse_packet(packet_type: int, payload: bytes) -> Packet:
+    """The packet object for a type byte and its payload.
+
+    Raises
+    ------
+    UnknownPacketType
+        For a type not in this module.
+    PacketError
+        When the payload does not fit its type.
+    """
+    cls = PACKET_CLASSES.get(packet_type)
+    if cls is None:
+        raise UnknownPacketType(f"unknown packet type 0x{packet_type:02X}")
+    return cls.from_payload(bytes(payload))
+
+
+def describe_packet(packet: Packet) -> str:
+    """A short text for logs and error messages."""
+    return f"{PACKET_NAMES.get(packet.TYPE, hex(packet.TYPE))} {packet!r}"

@@ -1,0 +1,404 @@
+"""``lsm6dsox://`` devices: the register-level driver on a named I2C bus.
+
+URLs
+----
+- ``lsm6dsox://emulated?odr=104`` - the emulated chip of
+  :mod:`~drivers.lsm6dsox_direct.emulated_chip` on a virtual bus, paced by the wall clock: the
+  whole register path (configuration, FIFO bursts, tag decoding, timestamps) with the
+  simulator's physics, no hardware needed.
+- ``lsm6dsox://mcp2221?address=0x6a&odr=104`` - a real chip on an MCP2221A USB-I2C bridge
+  (:mod:`~drivers.lsm6dsox_direct.mcp2221`; needs the optional EasyMCP2221 package).
+
+Options for every bus: ``odr`` Hz (snapped to the nearest LSM6DSOX rate, default 104),
+``accel_fs`` 2/4/8/16 g (default 4), ``gyro_fs`` 125/250/500/1000/2000 dps (default 250),
+``address`` 0x6a (SA0 low, default) or 0x6b.
+
+``mcp2221`` options: ``serial`` (the adapter's USB serial number) or ``index`` (enumeration
+order, default 0), ``speed`` I2C clock in Hz (default 400000), ``force=1`` to allow an ODR above
+:data:`~drivers.lsm6dsox_direct.mcp2221.MAX_ODR_HZ`.
+
+``emulated`` options: ``scenario`` (a simulator scenario, default slow-tilt) and its options,
+``seed``, ``errors``, ``noise`` as for ``sim://``; fault injection: ``who_am_i=0x6b`` (another
+part answers), ``selftest_fault=1`` (the self-test changes nothing), ``fail_after`` seconds
+(the adapter is pulled).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from dataclasses import dataclass, field
+from typing import ClassVar
+from urllib.parse import parse_qsl, urlsplit
+
+import numpy as np
+
+from app.core.samples import RawBlock, ScaleFactors
+from drivers import lsm6dsox
+from drivers.base import Device, DeviceDescriptor, DeviceInfo
+from drivers.errors import (
+    DeviceClosedError,
+    DeviceError,
+    DeviceIOError,
+    DeviceOpenError,
+    DeviceUrlError,
+)
+from drivers.lsm6dsox_direct import mcp2221
+from drivers.lsm6dsox_direct.bus import I2CBus
+from drivers.lsm6dsox_direct.driver import Lsm6dsoxDriver, SelfTestResult, StreamSettings
+from drivers.lsm6dsox_direct.fifo import DecodedSamples
+from drivers.sim.error_model import unique_id_for_seed
+from drivers.sim.options import SimOptions, parse_sim_url
+
+BUSES = ("emulated", "mcp2221")
+DEFAULT_ODR_HZ = 104.0
+DEFAULT_ACCEL_FS_G = 4
+DEFAULT_GYRO_FS_DPS = 250
+DEFAULT_ADDRESS = 0x6A
+DEFAULT_EMULATED_SCENARIO = "slow-tilt"
+COMMON_OPTIONS = ("odr", "accel_fs", "gyro_fs", "address")
+MCP2221_OPTIONS = ("serial", "index", "speed", "force")
+EMULATED_OWN_OPTIONS = ("scenario", "who_am_i", "selftest_fault", "fail_after")
+_SIM_ONLY = ("realtime", "block")
+_TRUE = {"1", "true", "yes", "on"}
+_FALSE = {"0", "false", "no", "off"}
+
+
+@dataclass(frozen=True, slots=True)
+class DirectOptions:
+    """A validated ``lsm6dsox://`` URL."""
+
+    bus: str
+    odr_nominal_hz: float = DEFAULT_ODR_HZ
+    accel_fs_g: int = DEFAULT_ACCEL_FS_G
+    gyro_fs_dps: int = DEFAULT_GYRO_FS_DPS
+    address: int = DEFAULT_ADDRESS
+    serial: str | None = None
+    index: int = 0
+    speed_hz: int = mcp2221.DEFAULT_SPEED_HZ
+    force: bool = False
+    sim: SimOptions = field(default_factory=lambda: SimOptions(DEFAULT_EMULATED_SCENARIO))
+    who_am_i: int = lsm6dsox.WHO_AM_I_VALUE
+    selftest_fault: bool = False
+    fail_after_s: float | None = None
+
+
+def _fail(url: str, message: str) -> DeviceUrlError:
+    return DeviceUrlError(f"{url}: {message}")
+
+
+def _int(url: str, key: str, text: str, low: int, high: int) -> int:
+    try:
+        value = int(text, 0)
+    except ValueError:
+        raise _fail(url, f"{key}={text!r} is not a whole number (decimal or 0x..)") from None
+    if not low <= value <= high:
+        raise _fail(url, f"{key}={text!r} is out of range {low}..{high}")
+    return value
+
+
+def _flag(url: str, key: str, text: str) -> bool:
+    if text.lower() in _TRUE:
+        return True
+    if text.lower() in _FALSE:
+        return False
+    raise _fail(url, f"{key}={text!r}: use 1 or 0")
+
+
+def _positive(url: str, key: str, text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise _fail(url, f"{key}={text!r} is not a number") from None
+    if not math.isfinite(value) or value <= 0.0:
+        raise _fail(url, f"{key}={text!r} must be a positive number")
+    return value
+
+
+def parse_lsm6dsox_url(url: str, overrides: dict[str, object] | None = None) -> DirectOptions:
+    """Validate an ``lsm6dsox://BUS?options`` URL (``overrides`` win over the query)."""
+    parts = urlsplit(url)
+    if parts.scheme.lower() != "lsm6dsox" or "://" not in url:
+        raise _fail(url, "not an lsm6dsox:// URL")
+    bus = (parts.netloc + parts.path).strip("/").lower()
+    if bus not in BUSES:
+        raise _fail(url, f"unknown bus {bus!r}; use lsm6dsox://emulated or lsm6dsox://mcp2221")
+    raw: dict[str, str] = {}
+    for key, value in parse_qsl(parts.query, keep_blank_values=True):
+        key = key.strip().lower()
+        if key in raw:
+            raise _fail(url, f"option {key!r} is given twice")
+        raw[key] = value.strip()
+    for key, value in (overrides or {}).items():
+        raw[key] = str(int(value)) if isinstance(value, bool) else str(value)
+    for key, value in raw.items():
+        if value == "":
+            raise _fail(url, f"option {key!r} needs a value ({key}=...)")
+
+    options: dict[str, object] = {"bus": bus}
+    if "odr" in raw:
+        odr = _positive(url, "odr", raw["odr"])
+        options["odr_nominal_hz"] = lsm6dsox.ODR_CODES_HZ[lsm6dsox.odr_code_for(odr)]
+    if "accel_fs" in raw:
+        value = _int(url, "accel_fs", raw["accel_fs"], 0, 10**6)
+        if value not in lsm6dsox.FS_XL_CODES:
+            raise _fail(url, f"accel_fs={raw['accel_fs']!r}: use 2, 4, 8 or 16 (g)")
+        options["accel_fs_g"] = value
+    if "gyro_fs" in raw:
+        value = _int(url, "gyro_fs", raw["gyro_fs"], 0, 10**6)
+        if value not in lsm6dsox.FS_G_CODES:
+            raise _fail(url, f"gyro_fs={raw['gyro_fs']!r}: use 125, 250, 500, 1000 or 2000 (dps)")
+        options["gyro_fs_dps"] = value
+    if "address" in raw:
+        address = _int(url, "address", raw["address"], 0, 0x7F)
+        if address not in (0x6A, 0x6B):
+            raise _fail(url, f"address={raw['address']!r}: an LSM6DSOX is at 0x6a or 0x6b")
+        options["address"] = address
+
+    if bus == "mcp2221":
+        allowed = (*COMMON_OPTIONS, *MCP2221_OPTIONS)
+        unknown = sorted(set(raw) - set(allowed))
+        if unknown:
+            raise _fail(url, f"unknown option {unknown[0]!r}; allowed: {', '.join(allowed)}")
+        if "serial" in raw:
+            options["serial"] = raw["serial"]
+        if "index" in raw:
+            options["index"] = _int(url, "index", raw["index"], 0, 255)
+        if "speed" in raw:
+            options["speed_hz"] = _int(url, "speed", raw["speed"], 47_000, 400_000)
+        if "force" in raw:
+            options["force"] = _flag(url, "force", raw["force"])
+        odr = float(options.get("odr_nominal_hz", DEFAULT_ODR_HZ))  # type: ignore[arg-type]
+        if odr > mcp2221.MAX_ODR_HZ and not options.get("force"):
+            raise _fail(
+                url,
+                f"odr={odr:g} Hz is more than an MCP2221A can read (about 400 samples/s; "
+                f"use {mcp2221.MAX_ODR_HZ:g} Hz or less, or force=1 to try and see gaps)",
+            )
+        return DirectOptions(**options)  # type: ignore[arg-type]
+
+    for key in _SIM_ONLY:
+        if key in raw:
+            raise _fail(url, f"option {key!r} is for sim:// only; the emulated chip is paced "
+                             "by the clock")
+    if "who_am_i" in raw:
+        options["who_am_i"] = _int(url, "who_am_i", raw.pop("who_am_i"), 0, 0xFF)
+    if "selftest_fault" in raw:
+        options["selftest_fault"] = _flag(url, "selftest_fault", raw.pop("selftest_fault"))
+    if "fail_after" in raw:
+        options["fail_after_s"] = _positive(url, "fail_after", raw.pop("fail_after"))
+    scenario = raw.pop("scenario", DEFAULT_EMULATED_SCENARIO)
+    for key in COMMON_OPTIONS:
+        raw.pop(key, None)
+    try:
+        options["sim"] = parse_sim_url(f"sim://{scenario}", raw)
+    except DeviceUrlError as exc:
+        raise _fail(url, f"{exc} (lsm6dsox://emulated also accepts "
+                         f"{', '.join((*COMMON_OPTIONS, *EMULATED_OWN_OPTIONS))})") from None
+    return DirectOptions(**options)  # type: ignore[arg-type]
+
+
+class Lsm6dsoxDirectDevice(Device):
+    """An LSM6DSOX driven register by register (see the module docstring for the URLs).
+
+    Parameters
+    ----------
+    url : ``lsm6dsox://BUS?options``.
+    bus : an already made bus to use instead of the one the URL names (tests pass an
+        :class:`~drivers.lsm6dsox_direct.emulated_chip.EmulatedLsm6dsox` on virtual time); the
+        device never closes a bus it was given.
+    **overrides : URL options as Python values; they win over the query.
+    """
+
+    scheme: ClassVar[str] = "lsm6dsox"
+
+    def __init__(self, url: str, *, bus: I2CBus | None = None, **overrides: object) -> None:
+        super().__init__(url)
+        self.options = parse_lsm6dsox_url(url, overrides)
+        self._given_bus = bus
+        self._bus: I2CBus | None = None
+        self._driver: Lsm6dsoxDriver | None = None
+        self._scale = ScaleFactors(
+            accel_m_s2_per_lsb=lsm6dsox.accel_m_s2_per_lsb(self.options.accel_fs_g),
+            gyro_rad_s_per_lsb=lsm6dsox.gyro_rad_s_per_lsb(self.options.gyro_fs_dps),
+            temp_degc_per_lsb=1.0 / lsm6dsox.TEMP_LSB_PER_DEGC,
+            temp_offset_degc=lsm6dsox.TEMP_OFFSET_DEGC,
+        )
+        self._reset_timeline()
+
+    # -- public ---------------------------------------------------------------------------------
+    @property
+    def driver(self) -> Lsm6dsoxDriver | None:
+        """The register-level driver while open."""
+        return self._driver
+
+    @property
+    def bus(self) -> I2CBus | None:
+        """The I2C bus while open."""
+        return self._bus
+
+    @property
+    def settings(self) -> StreamSettings | None:
+        """What the chip was configured with, and its clock trim."""
+        return None if self._driver is None else self._driver.settings
+
+    def self_test(self) -> SelfTestResult:
+        """Run the chip's self-test (about 0.5 s), then stream again; the pause is a gap."""
+        driver, bus = self._driver, self._bus
+        if driver is None or bus is None or self.info is None:
+            raise DeviceClosedError(f"{self.url} is not open")
+        try:
+            try:
+                result = driver.self_test()
+            finally:
+                self._restart_stream(driver, bus)
+        except DeviceIOError as exc:
+            raise DeviceIOError(f"{self.url}: {exc}") from exc
+        return result
+
+    @classmethod
+    def discover(cls) -> list[DeviceDescriptor]:
+        """The emulated chip, and every MCP2221A adapter when EasyMCP2221 is installed."""
+        found = [
+            DeviceDescriptor(
+                "lsm6dsox://emulated?odr=104",
+                "Emulated LSM6DSOX on a virtual I2C bus (register-level driver)",
+                "emulated",
+            )
+        ]
+        for adapter in mcp2221.list_adapters():
+            serial = adapter["serial"]
+            which = f"serial={serial}" if serial else f"index={adapter['index']}"
+            found.append(
+                DeviceDescriptor(
+                    f"lsm6dsox://mcp2221?{which}&odr=104",
+                    f"LSM6DSOX on an MCP2221A USB-I2C bridge ({which}, USB 04D8:00DD)",
+                    "i2c-bridge",
+                )
+            )
+        return found
+
+    # -- Device template --------------------------------------------------------------------------
+    def _open(self) -> DeviceInfo:
+        opts = self.options
+        bus = self._given_bus if self._given_bus is not None else self._make_bus()
+        driver = Lsm6dsoxDriver(bus, opts.address, label=self.url)
+        try:
+            driver.check_who_am_i()
+            settings = driver.configure(opts.odr_nominal_hz, opts.accel_fs_g, opts.gyro_fs_dps)
+        except DeviceError as exc:
+            if bus is not self._given_bus:
+                bus.close()
+            if isinstance(exc, DeviceOpenError):
+                raise
+            raise DeviceOpenError(f"{self.url}: {exc}") from exc
+        self._bus, self._driver = bus, driver
+        self._reset_timeline()
+        self._poll_interval_s = max(bus.min_poll_interval_s, min(0.05, 32.0 / settings.odr_hz))
+        return DeviceInfo(
+            url=self.url,
+            name=self._name(bus),
+            unique_id=self._unique_id(bus),
+            sensor="LSM6DSOX",
+            odr_hz=settings.odr_hz,
+            odr_nominal_hz=settings.odr_nominal_hz,
+            accel_fs_g=settings.accel_fs_g,
+            gyro_fs_dps=settings.gyro_fs_dps,
+            firmware="",
+            extra={
+                "bus": bus.description,
+                "address": opts.address,
+                "freq_fine": settings.freq_fine,
+                "tick_s": settings.tick_s,
+                "configuration": [[r, v] for r, v in settings.sequence],
+            },
+        )
+
+    def _read(self, timeout_s: float) -> RawBlock | None:
+        driver, bus = self._driver, self._bus
+        assert driver is not None and bus is not None
+        try:
+            deadline = bus.monotonic() + max(0.0, timeout_s)
+            while True:
+                decoded = driver.poll()
+                if decoded is not None:
+                    return self._block(decoded, driver, bus)
+                now = bus.monotonic()
+                if now >= deadline:
+                    return None
+                bus.delay(min(self._poll_interval_s, deadline - now))
+        except DeviceIOError as exc:
+            raise DeviceIOError(f"{self.url}: {exc}") from exc
+
+    def _close(self) -> None:
+        driver, bus = self._driver, self._bus
+        self._driver = self._bus = None
+        if driver is None or bus is None:
+            return
+        with contextlib.suppress(DeviceError):  # unplugged: nothing left to switch off
+            driver.stop()
+        if bus is not self._given_bus:
+            bus.close()
+
+    # -- internals --------------------------------------------------------------------------------
+    def _make_bus(self) -> I2CBus:
+        opts = self.options
+        if opts.bus == "mcp2221":
+            return mcp2221.Mcp2221Bus(serial=opts.serial, index=opts.index, speed_hz=opts.speed_hz)
+        from drivers.lsm6dsox_direct.emulated_chip import EmulatedLsm6dsox
+
+        return EmulatedLsm6dsox(
+            opts.sim, address=opts.address, who_am_i=opts.who_am_i,
+            self_test_working=not opts.selftest_fault, fail_after_s=opts.fail_after_s,
+        )
+
+    def _name(self, bus: I2CBus) -> str:
+        if self.options.bus == "emulated":
+            sim = getattr(bus, "sim", self.options.sim)
+            return f"Emulated LSM6DSOX, register level ({sim.scenario})"
+        return f"LSM6DSOX at 0x{self.options.address:02X} on {bus.description}"
+
+    def _unique_id(self, bus: I2CBus) -> str:
+        if self.options.bus == "emulated":
+            sim = getattr(bus, "sim", self.options.sim)
+            return "EMU-" + unique_id_for_seed(sim.seed)[4:]
+        serial = getattr(bus, "serial", "") or f"index{self.options.index}"
+        return f"MCP2221A-{serial}-0x{self.options.address:02X}"
+
+    def _reset_timeline(self) -> None:
+        self._origin_ticks: float | None = None
+        self._time_offset_s = 0.0
+        self._last_t_s: float | None = None
+        self._last_block_clock_s = 0.0
+        self._pending_lost = 0
+
+    def _restart_stream(self, driver: Lsm6dsoxDriver, bus: I2CBus) -> None:
+        """Configure again after a pause; the time axis keeps real time across it."""
+        opts = self.options
+        settings = driver.configure(opts.odr_nominal_hz, opts.accel_fs_g, opts.gyro_fs_dps)
+        if self._last_t_s is not None:
+            paused_s = max(0.0, bus.monotonic() - self._last_block_clock_s)
+            self._time_offset_s = self._last_t_s + paused_s
+            self._pending_lost = max(0, round(paused_s * settings.odr_hz) - 1)
+            self._origin_ticks = None
+
+    def _block(self, decoded: DecodedSamples, driver: Lsm6dsoxDriver, bus: I2CBus) -> RawBlock:
+        settings = driver.settings
+        assert settings is not None
+        if self._origin_ticks is None:
+            self._origin_ticks = float(decoded.ticks[0])
+        t_s = self._time_offset_s + (decoded.ticks - self._origin_ticks) * settings.tick_s
+        lost = decoded.lost_before.copy()
+        lost[0] += self._pending_lost
+        self._pending_lost = 0
+        self._last_t_s = float(t_s[-1])
+        self._last_block_clock_s = bus.monotonic()
+        return RawBlock(
+            t_s=t_s,
+            accel_raw=decoded.accel_raw,
+            gyro_raw=decoded.gyro_raw,
+            temp_raw=decoded.temp_raw,
+            scale=self._scale,
+            gap=lost > 0,
+            lost_samples=int(np.sum(lost)),
+        )

@@ -1,0 +1,746 @@
+"""The serial driver for NUCLEO link protocol v1 (``docs/protocol.md``), over pyserial.
+
+URLs
+----
+- ``serial:///dev/ttyACM0?baud=921600&odr=104&accel_fs=4&gyro_fs=250``, ``serial://COM3``:
+  protocol v1 on that port. Any pyserial URL works as the port: ``serial://loop://``,
+  ``serial://spy:///dev/ttyACM0?file=trace.txt`` (options this driver does not know stay
+  with the pyserial URL).
+- A bare port name or path, ``/dev/ttyACM0``, ``COM3``, ``/dev/pts/4`` (options allowed:
+  ``/dev/ttyACM0?odr=208``): :class:`PortDevice` detects whether protocol v1 packets or text
+  lines arrive, and hands text over to the ``text://`` driver (at the same baud rate, with the
+  options this driver does not know, such as ``columns=``).
+
+Options: ``baud`` (default 921600; ignored by native USB), ``odr`` (Hz, snapped to the nearest
+LSM6DSOX rate), ``accel_fs`` (2/4/8/16 g), ``gyro_fs`` (125..2000 dps), ``timeout`` (seconds
+to wait for an answer to HELLO, default 2). Without ``odr``/``accel_fs``/``gyro_fs`` the board
+keeps its settings; with any of them it is sent CONFIGURE.
+
+Opening: STOP, HELLO -> INFO + CONFIG (HELLO is repeated every 0.5 s until the timeout), the
+WHO_AM_I and protocol version are checked, CONFIGURE when asked, then START -> ACK.
+
+Threads: one thread opens, reads and closes. :attr:`SerialLinkDevice.counters`,
+:meth:`~SerialLinkDevice.self_test`, :meth:`~SerialLinkDevice.ping` and
+:meth:`~SerialLinkDevice.recent_logs` are thread-safe: whichever thread holds the port reads
+it and hands the other thread its answer.
+
+Unplugged cable: reads raise :class:`DeviceIOError` ("... was disconnected ..."). To reconnect,
+``DeviceInfo.extra["usb_serial"]`` names the board and :func:`reconnect_url` gives the URL to
+open once a port with that USB serial number is back (the port name may differ). The new
+connection's ``t_s`` starts at 0 again; ``device_clock_origin_s`` tells where on the board's
+own clock (it runs on unless the board was reset) to put it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import logging
+import secrets
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+from urllib.parse import parse_qsl, urlencode
+
+import serial
+
+from app.core.samples import RawBlock
+from drivers import lsm6dsox
+from drivers.base import Device, DeviceDescriptor, DeviceInfo
+from drivers.errors import DeviceError, DeviceIOError, DeviceOpenError, DeviceUrlError
+from drivers.link import protocol as p
+from drivers.link.decoder import LinkCounters, LinkDecoder
+from drivers.link.framing import DELIMITER, encode_packet
+from drivers.link.ports import (
+    find_port_by_serial,
+    list_serial_ports,
+    open_error,
+    port_info,
+)
+
+if TYPE_CHECKING:
+    from drivers.text_lines import TextLineCounters
+
+log = logging.getLogger(__name__)
+
+DEFAULT_HELLO_TIMEOUT_S = 2.0
+"""How long the board has to answer HELLO before the port is declared the wrong protocol."""
+HELLO_RESEND_S = 0.5
+COMMAND_TIMEOUT_S = 1.0
+SELF_TEST_TIMEOUT_S = 3.0
+POLL_S = 0.02
+"""Longest a single port read blocks (bounds how late a read returns after its timeout)."""
+WRITE_TIMEOUT_S = 1.0
+PROBE_BYTES = 4096
+"""Bytes kept from the start of the connection to say what was seen."""
+TEXT_LINES_TO_DECIDE = 3
+
+OPTIONS: dict[str, str] = {
+    "baud": "baud rate (default 921600; native USB ignores it)",
+    "odr": "output data rate in Hz, snapped to the nearest LSM6DSOX rate (12.5 ... 6667)",
+    "accel_fs": "accelerometer full scale: 2, 4, 8 or 16 g",
+    "gyro_fs": "gyroscope full scale: 125, 250, 500, 1000 or 2000 dps",
+    "timeout": "seconds to wait for the board's answer to HELLO (default 2)",
+}
+
+ACK_MESSAGES: dict[int, str] = {
+    p.ACK_BAD_ARGUMENT: "the board refused the arguments",
+    p.ACK_UNSUPPORTED: "the firmware does not support this command",
+    p.ACK_SENSOR_ERROR: "the sensor did not respond as expected (check the sensor board "
+                        "and its connection)",
+    p.ACK_BUSY: "the board is busy",
+}
+
+WHO_AM_I_OTHERS: dict[int, str] = {
+    0x69: "an LSM6DS3", 0x6A: "an LSM6DSL or LSM6DS3TR-C", 0x6B: "an LSM6DSR or ISM330DHCX",
+    0x70: "an LSM6DSV",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class LinkOptions:
+    """A validated serial-link URL."""
+
+    port: str
+    baud: int = p.DEFAULT_BAUD
+    odr_hz: float | None = None
+    accel_fs_g: int | None = None
+    gyro_fs_dps: int | None = None
+    hello_timeout_s: float = DEFAULT_HELLO_TIMEOUT_S
+    other_options: tuple[tuple[str, str], ...] = ()
+    """Options of a bare port this driver does not know: for the text driver if text arrives."""
+
+    @property
+    def wants_configure(self) -> bool:
+        return (self.odr_hz, self.accel_fs_g, self.gyro_fs_dps) != (None, None, None)
+
+
+def _split_url(url: str) -> tuple[str, str]:
+    """(port, query) of a ``serial://`` URL or a bare port."""
+    rest = url[len("serial://"):] if url.lower().startswith("serial://") else url
+    port, _, query = rest.partition("?")
+    return port, query
+
+
+def parse_link_url(url: str, *, allow_other: bool = False) -> LinkOptions:
+    """Validate a ``serial://PORT?options`` URL or a bare ``PORT?options``.
+
+    With ``allow_other`` (bare ports), options this driver does not know are kept in
+    ``other_options`` (the text driver's, such as ``columns``) instead of refused.
+
+    Raises
+    ------
+    DeviceUrlError
+        For a missing port, an unknown option or a bad value; the message names the allowed.
+    """
+    port, query = _split_url(url)
+    if not port:
+        raise DeviceUrlError(f"{url}: no port; expected e.g. serial:///dev/ttyACM0 or COM3")
+
+    def fail(message: str) -> DeviceUrlError:
+        return DeviceUrlError(f"{url}: {message}")
+
+    def number(key: str, text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise fail(f"{key}={text!r} is not a number") from None
+        if not value > 0 or value == float("inf"):
+            raise fail(f"{key}={text!r} must be a positive number")
+        return value
+
+    def choice(key: str, text: str, allowed: list[int], unit: str) -> int:
+        value = number(key, text)
+        if value not in allowed:
+            raise fail(f"{key}={text!r} is not supported; use one of "
+                       f"{', '.join(map(str, allowed))} ({unit})")
+        return int(value)
+
+    values: dict[str, object] = {}
+    passed_on: list[tuple[str, str]] = []
+    other: list[tuple[str, str]] = []
+    for key, text in parse_qsl(query, keep_blank_values=True):
+        key = key.strip().lower()
+        if key not in OPTIONS:
+            if "://" in port:  # an option of the pyserial URL (spy://...?file=...)
+                passed_on.append((key, text))
+                continue
+            if allow_other:
+                other.append((key, text))
+                continue
+            raise fail(f"unknown option {key!r}; allowed: {', '.join(OPTIONS)}")
+        if key == "baud":
+            baud = number(key, text)
+            if baud != int(baud):
+                raise fail(f"baud={text!r} must be a whole number")
+            values["baud"] = int(baud)
+        elif key == "odr":
+            values["odr_hz"] = lsm6dsox.ODR_CODES_HZ[lsm6dsox.odr_code_for(number(key, text))]
+        elif key == "accel_fs":
+            values["accel_fs_g"] = choice(key, text, sorted(lsm6dsox.ACCEL_MG_PER_LSB), "g")
+        elif key == "gyro_fs":
+            values["gyro_fs_dps"] = choice(key, text, sorted(lsm6dsox.GYRO_MDPS_PER_LSB), "dps")
+        elif key == "timeout":
+            values["hello_timeout_s"] = number(key, text)
+    if passed_on:
+        port = f"{port}?{urlencode(passed_on)}"
+    return LinkOptions(port=port, other_options=tuple(other), **values)  # type: ignore[arg-type]
+
+
+def url_with_port(url: str, port: str) -> str:
+    """``url`` with its port replaced (same form: ``serial://`` or bare; options kept)."""
+    _, query = _split_url(url)
+    prefix = "serial://" if url.lower().startswith("serial://") else ""
+    return f"{prefix}{port}" + (f"?{query}" if query else "")
+
+
+def reconnect_url(url: str, usb_serial: str) -> str | None:
+    """The URL to reopen a board by its USB serial number, wherever it is now.
+
+    ``url`` is the URL the board was opened with, ``usb_serial`` is
+    ``DeviceInfo.extra["usb_serial"]``. Returns None while no port has that serial number
+    (the board is still unplugged or still enumerating).
+    """
+    port = find_port_by_serial(usb_serial)
+    return None if port is None else url_with_port(url, port)
+
+
+class _TextLinesSeen(DeviceOpenError):
+    """Text lines arrived instead of protocol v1 (a :class:`PortDevice` hands over)."""
+
+    def __init__(self, message: str, sample_line: str) -> None:
+        super().__init__(message)
+        self.sample_line = sample_line
+
+
+def _text_lines(data: bytes) -> list[str] | None:
+    """The complete lines in ``data`` if it looks like text, else None."""
+    if b"\n" not in data:
+        return None
+    printable = sum(1 for byte in data if 32 <= byte < 127 or byte in (9, 10, 13))
+    if printable < 0.95 * len(data):
+        return None
+    complete = data[: data.rfind(b"\n")].decode("ascii", errors="replace").split("\n")
+    return [line.strip() for line in complete if line.strip()]
+
+
+class SerialLinkDevice(Device):
+    """A board speaking protocol v1 on a serial port (see the module docstring).
+
+    Parameters
+    ----------
+    url : ``serial://PORT?options`` (or a bare port for :class:`PortDevice`).
+    hello_timeout_s : overrides the URL's ``timeout`` option.
+    """
+
+    scheme: ClassVar[str] = "serial"
+    detect_text: ClassVar[bool] = False
+
+    def __init__(self, url: str, *, hello_timeout_s: float | None = None) -> None:
+        super().__init__(url)
+        options = parse_link_url(url, allow_other=self.detect_text)
+        if hello_timeout_s is not None:
+            options = dataclasses.replace(options, hello_timeout_s=hello_timeout_s)
+        self.options = options
+        self.port = options.port
+        self.info_packet: p.Info | None = None
+        self.config_packet: p.Config | None = None
+        self._serial: serial.SerialBase | None = None
+        self._decoder = LinkDecoder()
+        self._state = threading.Condition()
+        self._read_lock = threading.Lock()
+        self._write_lock = threading.Lock()
+        self._command_lock = threading.RLock()
+        self._blocks: deque[RawBlock] = deque()
+        self._replies: deque[p.Packet] = deque(maxlen=64)
+        self._logs: deque[p.Log] = deque(maxlen=200)
+        self._probe = bytearray()
+        self._streaming = False
+        self._disconnected = False
+
+    # -- discovery -----------------------------------------------------------------------------
+    @classmethod
+    def discover(cls) -> list[DeviceDescriptor]:
+        """Serial ports present now, with USB VID:PID, serial number and a guess."""
+        try:
+            ports = list_serial_ports()
+        except Exception as exc:  # listing must never break the device menu
+            log.warning("listing serial ports failed: %s", exc)
+            return []
+        return [DeviceDescriptor(info.device, info.summary(), "serial") for info in ports]
+
+    # -- thread-safe helpers ----------------------------------------------------------------------
+    @property
+    def counters(self) -> LinkCounters:
+        """Link statistics (packets, samples, CRC errors, undecodable, gaps): a snapshot.
+
+        Thread-safe. A property, as the text driver's ``counters``.
+        """
+        with self._state:
+            return self._decoder.counters()
+
+    def recent_logs(self) -> list[p.Log]:
+        """The board's latest LOG messages, oldest first. Thread-safe."""
+        with self._state:
+            return list(self._logs)
+
+    @property
+    def usb_serial(self) -> str | None:
+        """The USB serial number of the port, when known."""
+        return None if self._info is None else self._info.extra.get("usb_serial")
+
+    @property
+    def device_clock_origin_s(self) -> float | None:
+        """Device time (s since the board's clock started, unwrapped) where ``t_s`` is 0.
+
+        None until the first sample arrived. When the same board (same unique id) comes back
+        with its clock still running, ``t_s + device_clock_origin_s`` continues across the
+        reconnect; when it is smaller than before, the board was reset.
+        """
+        with self._state:
+            return self._decoder.clock_origin_s
+
+    def ping(self, timeout_s: float = COMMAND_TIMEOUT_S) -> float:
+        """Round-trip time of PING -> PONG in seconds. Thread-safe."""
+        self._require_open()
+        token = secrets.randbits(32)
+        start = time.perf_counter()
+        self._send(p.Ping(token))
+        pong = self._wait_for(lambda pkt: isinstance(pkt, p.Pong) and pkt.token == token,
+                              timeout_s)
+        if pong is None:
+            raise DeviceIOError(f"{self.port}: no PONG within {timeout_s:g} s")
+        return time.perf_counter() - start
+
+    def self_test(self, timeout_s: float = SELF_TEST_TIMEOUT_S) -> p.SelfTestResult:
+        """Run the sensor's self-test; streaming pauses meanwhile. Thread-safe.
+
+        The first sample after the pause is marked as a gap. Raises :class:`DeviceError`
+        when the board refuses or does not answer.
+        """
+        self._require_open()
+        with self._command_lock:
+            was_streaming = self._streaming
+            if was_streaming:
+                self._command(p.Stop(), "stopping the stream for the self-test")
+                self._streaming = False
+            try:
+                self._command(p.SelfTest(), "self-test", timeout_s)
+                result = self._wait_for(lambda pkt: isinstance(pkt, p.SelfTestResult),
+                                        timeout_s)
+                if result is None:
+                    raise DeviceIOError(f"{self.port}: no SELFTEST result within {timeout_s:g} s")
+                return result
+            finally:
+                if was_streaming:
+                    self._start_streaming(new_origin=False, mark_gap=True)
+
+    def send_command(self, packet: p.Packet, timeout_s: float = COMMAND_TIMEOUT_S) -> p.Ack:
+        """Send any command and return its ACK (not checked). Thread-safe."""
+        self._require_open()
+        with self._command_lock:
+            return self._exchange(packet, timeout_s)
+
+    # -- Device template ------------------------------------------------------------------------
+    def _open(self) -> DeviceInfo:
+        self._disconnected = False
+        self._serial = self._open_port()
+        try:
+            return self._handshake()
+        except BaseException:
+            self._close_port()
+            raise
+
+    def _read(self, timeout_s: float) -> RawBlock | None:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            with self._state:
+                if self._blocks:
+                    return self._blocks.popleft()
+            if time.monotonic() >= deadline:
+                return None
+            with self._read_lock:
+                self._pump()
+
+    def _close(self) -> None:
+        if not self._disconnected and self._serial is not None:
+            with contextlib.suppress(DeviceError):
+                self._write(encode_packet(p.Stop()))
+        self._streaming = False
+        self._close_port()
+
+    # -- opening ------------------------------------------------------------------------------
+    def _open_port(self) -> serial.SerialBase:
+        try:
+            port = serial.serial_for_url(
+                self.port, baudrate=self.options.baud, timeout=POLL_S,
+                write_timeout=WRITE_TIMEOUT_S, exclusive=True,
+            )
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise open_error(self.port, exc) from exc
+        with contextlib.suppress(serial.SerialException, OSError):
+            port.reset_input_buffer()
+        return port
+
+    def _handshake(self) -> DeviceInfo:
+        with self._state:  # nothing of an earlier connection carries over
+            self._blocks.clear()
+            self._replies.clear()
+        self._decoder = LinkDecoder()
+        self._decoder.arm_start(new_origin=True)
+        self._probe.clear()
+        self._write(DELIMITER + encode_packet(p.Stop()) + encode_packet(p.Hello()))
+        info, config = self._await_hello()
+        if info.protocol_version != p.PROTOCOL_VERSION:
+            raise DeviceOpenError(
+                f"{self.port}: the board speaks protocol version {info.protocol_version}; "
+                f"this program speaks version {p.PROTOCOL_VERSION}. Update the firmware or "
+                "the program so that they match."
+            )
+        if info.who_am_i != lsm6dsox.WHO_AM_I_VALUE:
+            raise DeviceOpenError(who_am_i_message(self.port, info.who_am_i))
+        if self.options.wants_configure:
+            config = self._configure(config)
+        if self.options.other_options:
+            ignored = ", ".join(key for key, _ in self.options.other_options)
+            log.warning("%s speaks protocol v1: ignoring the text-line options %s", self.port,
+                        ignored)
+        self.info_packet, self.config_packet = info, config
+        self._start_streaming(new_origin=True, mark_gap=False)
+        return self._device_info(info, config)
+
+    def _await_hello(self) -> tuple[p.Info, p.Config]:
+        start = time.monotonic()
+        deadline = start + self.options.hello_timeout_s
+        next_hello = start + HELLO_RESEND_S
+        info: p.Info | None = None
+        config: p.Config | None = None
+        while info is None or config is None:
+            now = time.monotonic()
+            if now >= deadline:
+                raise DeviceOpenError(self._wrong_protocol_message())
+            if now >= next_hello:
+                self._write(DELIMITER + encode_packet(p.Hello()))
+                next_hello += HELLO_RESEND_S
+            if self.detect_text and now - start >= HELLO_RESEND_S:
+                self._check_for_text()
+            packet = self._wait_for(lambda pkt: isinstance(pkt, p.Info | p.Config),
+                                    min(deadline, next_hello) - time.monotonic())
+            if isinstance(packet, p.Info):
+                info = packet
+            elif isinstance(packet, p.Config):
+                config = packet
+        return info, config
+
+    def _check_for_text(self) -> None:
+        with self._state:
+            probe = bytes(self._probe)
+            packets = self._decoder.counters().packets
+        lines = _text_lines(probe)
+        if packets == 0 and lines is not None and len(lines) >= TEXT_LINES_TO_DECIDE:
+            raise _TextLinesSeen(f"{self.port}: text lines arrive, e.g. {lines[0]!r}", lines[0])
+
+    def _wrong_protocol_message(self) -> str:
+        with self._state:
+            probe = bytes(self._probe)
+            counters = self._decoder.counters()
+            last_error = self._decoder.last_error
+        waited = f"{self.options.hello_timeout_s:g} s"
+        head = f"{self.port}: no answer in NUCLEO protocol v1 within {waited} of HELLO. "
+        if not probe:
+            return head + (
+                "Nothing at all was received. Is this the right port, is the board powered "
+                "and running the Inclinometer firmware, and (on the ST-LINK port) is the baud "
+                f"rate right (the firmware uses {p.DEFAULT_BAUD}, this port is set to "
+                f"{self.options.baud})?"
+            )
+        lines = _text_lines(probe)
+        if lines is not None:
+            example = lines[0] if lines else probe[:60].decode("ascii", "replace")
+            return head + (
+                f"Received {len(probe)} bytes of text lines, e.g. {example!r}: this is a sketch "
+                f"printing text. Open it as text://{self.port}, or give just the port name "
+                f"({self.port}) to have it detected."
+            )
+        first = probe[:32].hex(" ")
+        details = []
+        if counters.packets:
+            details.append(f"{counters.packets} packets decoded but no INFO/CONFIG")
+        if counters.crc_errors:
+            details.append(f"{counters.crc_errors} frames failed the CRC")
+        if counters.undecodable:
+            details.append(f"{counters.undecodable} frames were undecodable")
+        if last_error:
+            details.append(f"last problem: {last_error}")
+        summary = f" ({'; '.join(details)})" if details else ""
+        return head + (
+            f"Received {len(probe)} bytes that are neither protocol v1 nor text{summary}; "
+            f"first bytes: {first}. A wrong baud rate looks like this: the firmware uses "
+            f"{p.DEFAULT_BAUD} baud, this port is set to {self.options.baud} (a sketch "
+            "printing text at another rate: add ?baud=115200 or its rate to the port)."
+        )
+
+    def _configure(self, current: p.Config) -> p.Config:
+        opts = self.options
+        odr_code = (current.odr_code if opts.odr_hz is None
+                    else lsm6dsox.odr_code_for(opts.odr_hz))
+        accel = current.accel_fs_g if opts.accel_fs_g is None else opts.accel_fs_g
+        gyro = current.gyro_fs_dps if opts.gyro_fs_dps is None else opts.gyro_fs_dps
+        wanted = f"{lsm6dsox.ODR_CODES_HZ[odr_code]:g} Hz, +-{accel} g, +-{gyro} dps"
+        with self._state:
+            self._replies = deque((r for r in self._replies if not isinstance(r, p.Config)),
+                                  maxlen=self._replies.maxlen)
+        ack = self._exchange(p.Configure(odr_code, accel, gyro), COMMAND_TIMEOUT_S)
+        if not ack.ok:
+            raise DeviceOpenError(ack_message(self.port, f"configuring {wanted}", ack))
+        config = self._wait_for(lambda pkt: isinstance(pkt, p.Config), COMMAND_TIMEOUT_S)
+        if config is None:
+            raise DeviceOpenError(f"{self.port}: the board acknowledged CONFIGURE but sent no "
+                                  f"CONFIG within {COMMAND_TIMEOUT_S:g} s")
+        applied = (config.odr_code, config.accel_fs_g, config.gyro_fs_dps)
+        if applied != (odr_code, accel, gyro):
+            raise DeviceOpenError(
+                f"{self.port}: asked for {wanted}, the board uses "
+                f"{config.odr_hz:g} Hz, +-{config.accel_fs_g} g, +-{config.gyro_fs_dps} dps"
+            )
+        return config
+
+    def _start_streaming(self, *, new_origin: bool, mark_gap: bool) -> None:
+        with self._state:
+            self._decoder.arm_start(new_origin=new_origin, mark_gap=mark_gap)
+        self._command(p.Start(), "starting the stream")
+        self._streaming = True
+
+    def _device_info(self, info: p.Info, config: p.Config) -> DeviceInfo:
+        usb = port_info(self.port)
+        odr_nominal = lsm6dsox.ODR_CODES_HZ[config.odr_code]
+        return DeviceInfo(
+            url=self.url,
+            name=info.name or "NUCLEO (protocol v1)",
+            unique_id=info.unique_id_hex,
+            sensor="LSM6DSOX",
+            odr_hz=config.odr_hz,
+            odr_nominal_hz=odr_nominal,
+            accel_fs_g=config.accel_fs_g,
+            gyro_fs_dps=config.gyro_fs_dps,
+            firmware=info.firmware_text,
+            extra={
+                "port": self.port,
+                "baud": self.options.baud,
+                "protocol": "NUCLEO link v1",
+                "who_am_i": info.who_am_i,
+                "tick_ns": config.tick_ns,
+                "usb_serial": None if usb is None else usb.serial_number,
+                "usb_vid_pid": None if usb is None else usb.vid_pid,
+                "usb_description": None if usb is None else usb.summary(),
+            },
+        )
+
+    # -- commands -----------------------------------------------------------------------------
+    def _require_open(self) -> None:
+        if self._serial is None:
+            raise DeviceError(f"{self.url} is not open")
+
+    def _exchange(self, packet: p.Packet, timeout_s: float) -> p.Ack:
+        """Send a command and wait for its ACK."""
+        command = packet.TYPE
+        with self._state:  # forget stale answers to the same command
+            self._replies = deque(
+                (r for r in self._replies if not (isinstance(r, p.Ack) and r.command == command)),
+                maxlen=self._replies.maxlen,
+            )
+        self._send(packet)
+        ack = self._wait_for(lambda pkt: isinstance(pkt, p.Ack) and pkt.command == command,
+                             timeout_s)
+        if ack is None:
+            name = p.COMMAND_NAMES.get(command, hex(command))
+            raise DeviceIOError(f"{self.port}: no ACK to {name} within {timeout_s:g} s")
+        return ack
+
+    def _command(self, packet: p.Packet, doing: str,
+                 timeout_s: float = COMMAND_TIMEOUT_S) -> p.Ack:
+        """Send a command; raise unless its ACK says ok."""
+        ack = self._exchange(packet, timeout_s)
+        if not ack.ok:
+            raise DeviceError(ack_message(self.port, doing, ack))
+        return ack
+
+    def _send(self, packet: p.Packet) -> None:
+        self._write(encode_packet(packet))
+
+    def _write(self, data: bytes) -> None:
+        port = self._serial
+        if port is None:
+            raise DeviceIOError(f"{self.port} is closed")
+        try:
+            with self._write_lock:
+                port.write(data)
+        except serial.SerialTimeoutException as exc:
+            raise DeviceIOError(f"{self.port}: writing timed out (the board does not read; "
+                                f"is it hung?): {exc}") from exc
+        except (serial.SerialException, OSError) as exc:
+            self._disconnected = True
+            raise DeviceIOError(disconnected_message(self.port, exc)) from exc
+
+    # -- reading ------------------------------------------------------------------------------
+    def _pump(self) -> None:
+        """Read what the port has (waiting at most :data:`POLL_S`) and decode it.
+
+        Call with ``_read_lock`` held.
+        """
+        port = self._serial
+        if port is None:
+            raise DeviceIOError(f"{self.port} is closed")
+        try:
+            waiting = port.in_waiting
+            data = port.read(waiting or 1)
+            if data and not waiting and port.in_waiting:
+                data += port.read(port.in_waiting)
+        except (serial.SerialException, OSError) as exc:
+            self._disconnected = True
+            raise DeviceIOError(disconnected_message(self.port, exc)) from exc
+        if not data:
+            return
+        with self._state:
+            if len(self._probe) < PROBE_BYTES:
+                self._probe += data[: PROBE_BYTES - len(self._probe)]
+            for packet in self._decoder.feed(data):
+                if isinstance(packet, p.Log):
+                    self._logs.append(packet)
+                    log.log(10 + 10 * min(packet.level, 3), "%s: %s", self.port, packet.text)
+                else:
+                    self._replies.append(packet)
+            self._blocks.extend(self._decoder.take_blocks())
+            self._state.notify_all()
+
+    def _wait_for(self, match: Callable[[p.Packet], bool], timeout_s: float) -> p.Packet | None:
+        """The first reply matching ``match`` (removed from the queue), or None on timeout.
+
+        Reads the port itself unless another thread is reading it (then waits for that
+        thread to hand the reply over).
+        """
+        deadline = time.monotonic() + max(0.0, timeout_s)
+        while True:
+            with self._state:
+                for index, packet in enumerate(self._replies):
+                    if match(packet):
+                        del self._replies[index]
+                        return packet
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return None
+                if self._read_lock.locked():
+                    self._state.wait(min(remaining, POLL_S))
+                    continue
+            if self._read_lock.acquire(blocking=False):
+                try:
+                    self._pump()
+                finally:
+                    self._read_lock.release()
+
+    def _close_port(self) -> None:
+        port, self._serial = self._serial, None
+        if port is not None:
+            with contextlib.suppress(serial.SerialException, OSError):
+                port.close()
+
+
+class PortDevice(SerialLinkDevice):
+    """A bare port name (``/dev/ttyACM0``, ``COM3``): protocol v1 or text lines, detected.
+
+    While waiting for the answer to HELLO, text lines (at least three, and no valid packet)
+    mean a sketch printing text: the port is closed and reopened by the ``text://`` driver.
+    """
+
+    scheme: ClassVar[str] = "port"
+    detect_text: ClassVar[bool] = True
+
+    def __init__(self, url: str, *, hello_timeout_s: float | None = None) -> None:
+        super().__init__(url, hello_timeout_s=hello_timeout_s)
+        self.text_device: Device | None = None
+
+    @classmethod
+    def discover(cls) -> list[DeviceDescriptor]:
+        return []  # the serial driver lists the ports
+
+    @property
+    def counters(self) -> LinkCounters | TextLineCounters:  # type: ignore[override]
+        """The counters of the driver in use (protocol v1 or text lines). Thread-safe."""
+        text = self.text_device
+        if text is not None and hasattr(text, "counters"):
+            return text.counters
+        return super().counters
+
+    def _require_open(self) -> None:
+        if self.text_device is not None:
+            raise DeviceError(f"{self.port}: a sketch printing text lines has no self-test "
+                              "or ping; those need the NUCLEO firmware (protocol v1)")
+        super()._require_open()
+
+    def _open(self) -> DeviceInfo:
+        try:
+            return super()._open()
+        except _TextLinesSeen as seen:
+            return self._hand_over_to_text(seen)
+
+    def _hand_over_to_text(self, seen: _TextLinesSeen) -> DeviceInfo:
+        from drivers.registry import create_device
+
+        # Text was seen at this baud rate: the text driver must use it too.
+        query = urlencode([("baud", str(self.options.baud)), *self.options.other_options])
+        text_url = f"text://{self.port}?{query}"
+        try:
+            device = create_device(text_url)
+        except DeviceUrlError as exc:
+            raise DeviceOpenError(
+                f"{self.port}: text lines were seen (e.g. {seen.sample_line!r}), not protocol "
+                f"v1, but the text-line driver is not available ({exc})."
+            ) from exc
+        info = device.open()
+        self.text_device = device
+        usb = port_info(self.port)
+        extra = {**info.extra, "detected": "text lines", "text_url": text_url,
+                 "usb_serial": None if usb is None else usb.serial_number,
+                 "usb_vid_pid": None if usb is None else usb.vid_pid}
+        return dataclasses.replace(info, url=self.url, extra=extra)
+
+    def _read(self, timeout_s: float) -> RawBlock | None:
+        if self.text_device is not None:
+            return self.text_device.read(timeout_s)
+        return super()._read(timeout_s)
+
+    def _close(self) -> None:
+        text, self.text_device = self.text_device, None
+        if text is not None:
+            text.close()
+            return
+        super()._close()
+
+
+# -- messages ---------------------------------------------------------------------------------
+def disconnected_message(port: str, exc: BaseException) -> str:
+    return f"{port} was disconnected (cable unplugged or board reset): {exc}"
+
+
+def ack_message(port: str, doing: str, ack: p.Ack) -> str:
+    """A sentence for a refused command."""
+    meaning = ACK_MESSAGES.get(ack.status, f"unknown ACK status {ack.status}")
+    said = f": {ack.message}" if ack.message else ""
+    return f"{port}: {doing} failed, {meaning} (status {ack.status}, {ack.status_text}){said}"
+
+
+def who_am_i_message(port: str, who_am_i: int) -> str:
+    expected = f"0x{lsm6dsox.WHO_AM_I_VALUE:02X}"
+    if who_am_i in (0x00, 0xFF):
+        hint = ("no sensor answers: check that the sensor board sits in its socket and the "
+                "I2C wiring")
+    elif who_am_i in WHO_AM_I_OTHERS:
+        hint = f"0x{who_am_i:02X} is what {WHO_AM_I_OTHERS[who_am_i]} reads: another sensor"
+    else:
+        hint = "another sensor, or a damaged one"
+    return (f"{port}: the board's sensor reads WHO_AM_I 0x{who_am_i:02X}, but an LSM6DSOX "
+            f"reads {expected} ({hint}).")
+
