@@ -1,9 +1,9 @@
 """Filter evaluation: run orientation filters over a stream with a known true orientation.
 
 A *stream* is any iterable of :class:`~app.core.samples.SampleBlock` s that carry
-``reference_quat``: the simulator (:func:`simulator_blocks`) today, a recording with reference
-columns later. :func:`evaluate` joins the stream, runs each filter over it in large blocks and
-scores it:
+``reference_quat``: the simulator (:func:`simulator_blocks`), or a recording with reference
+columns (:func:`recording_source`). :func:`evaluate` joins the stream, runs each filter over
+it in large blocks and scores it:
 
 - **inclination error**: the angle between estimated and true gravity directions
   (:func:`app.core.orientation.inclination_error_deg`), as RMSE and maximum in degrees. The
@@ -196,6 +196,32 @@ def simulator_source(
     return StreamSource(label or url, blocks, description)
 
 
+def recording_source(
+    path: str, *, recalibrate: bool = True, label: str | None = None
+) -> StreamSource:
+    """A :class:`StreamSource` for a recording file with reference columns.
+
+    With ``recalibrate`` (the default) the calibration recorded in the file is applied again,
+    as a replay does; otherwise the raw samples are scored. Reads the file at once: raises
+    :class:`app.core.recording.errors.RecordingError` for a bad file and ValueError when it
+    has no reference orientation.
+    """
+    from app.core.recording.reader import read_recording
+
+    recording = read_recording(path)
+    if not recording.has_reference:
+        raise ValueError(f"{path}: the recording has no reference orientation (columns qw, qx, "
+                         "qy, qz) to compare the filters with")
+    calibration = recording.calibration if recalibrate else None
+    applied = (f"recorded calibration {calibration.name!r} applied" if calibration is not None
+               else "raw samples, no calibration")
+
+    def blocks() -> Iterable[SampleBlock]:
+        return [recording.sample_block(calibration)]
+
+    return StreamSource(label or str(path), blocks, applied)
+
+
 # -- scoring ---------------------------------------------------------------------------------
 def error_statistics(
     quat: np.ndarray, reference: np.ndarray, t_s: np.ndarray, skip_s: float = DEFAULT_SKIP_S
@@ -211,7 +237,8 @@ def error_statistics(
     if len(t_s) == 0:
         return {"rmse_deg": math.nan, "max_deg": math.nan, "scored": 0, "nan": 0,
                 "diverged": False}
-    scored = (t_s >= t_s[0] + skip_s) & finite
+    # Rows whose reference is unknown (empty reference columns in a recording) are not scored.
+    scored = (t_s >= t_s[0] + skip_s) & finite & np.all(np.isfinite(reference), axis=1)
     errors = inclination_error_deg(quat[scored], reference[scored])
     if len(errors) == 0:
         return {"rmse_deg": math.nan, "max_deg": math.nan, "scored": 0, "nan": nan_count,

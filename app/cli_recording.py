@@ -1,0 +1,219 @@
+"""The ``record`` and ``replay`` sub-commands of ``inclinometer`` (docs/recording-format.md).
+
+``inclinometer record --device URL [--duration S] OUT.csv``
+    read a device headless, run the pipeline, write a recording; Ctrl-C (or SIGTERM) ends it
+    cleanly and keeps the file.
+``inclinometer replay IN.csv [--filter NAME...] --out ANGLES.csv``
+    run filters over a recording as fast as possible, exactly as live, and export their angles.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import sys
+import threading
+import warnings
+from pathlib import Path
+from typing import Any, TextIO
+
+EXIT_USAGE = 2
+EXIT_FAILED = 1
+
+
+def add_recording_parsers(commands: argparse._SubParsersAction) -> None:
+    """Add ``record`` and ``replay`` to the command's sub-parsers."""
+    record = commands.add_parser(
+        "record",
+        help="record a device to a CSV file, without the GUI",
+        description=(
+            "Open a device, run the pipeline (calibration and filter) and write every raw "
+            "sample to a recording (format: docs/recording-format.md). Ctrl-C stops it "
+            "cleanly; the file keeps every row. Progress goes to stderr."
+        ),
+    )
+    record.add_argument("out", metavar="OUT.csv", help="the recording to create")
+    record.add_argument("--device", dest="record_device", metavar="URL", required=True,
+                        help="the device, e.g. 'sim://wobble?odr=104' or "
+                             "'sim://tour?realtime=0' (as fast as possible)")
+    record.add_argument("--duration", metavar="S",
+                        help="device time to record: 30, 30s, 2m, 1h (default: until Ctrl-C)")
+    record.add_argument("--note", default="", help="free text stored in the recording")
+    record.add_argument("--filter", dest="record_filter", metavar="NAME",
+                        help="orientation filter to run (default: the app's default)")
+    record.add_argument("--compare", dest="record_comparisons", metavar="NAME[,NAME]",
+                        action="append", help="filters run side by side (noted in the file); "
+                        "repeat the option or separate names with commas")
+    record.add_argument("--calibration", metavar="PROFILE.json",
+                        help="a calibration profile file to apply (default: none)")
+    record.add_argument("--overwrite", action="store_true", help="replace OUT.csv if it exists")
+    record.add_argument("--quiet", action="store_true", help="no progress lines")
+
+    replay = commands.add_parser(
+        "replay",
+        help="run filters over a recording and export their angles to CSV",
+        description=(
+            "Run orientation filters over a recording as fast as possible, through the same "
+            "stages as live (the recorded calibration, the recorded device blocks, the "
+            "recorded filter parameters), and write t, then per filter roll, pitch, tilt, "
+            "direction (degrees) and the quaternion; with reference columns also the "
+            "reference angles and each filter's inclination error."
+        ),
+    )
+    replay.add_argument("source", metavar="IN.csv", help="a recording (or replay://PATH)")
+    replay.add_argument("--filter", dest="filters", metavar="NAME", nargs="+", action="extend",
+                        help="filter(s) to run, or 'all' (default: the recorded filter)")
+    replay.add_argument("--out", required=True, metavar="ANGLES.csv", help="the file to write")
+    replay.add_argument("--raw", action="store_true",
+                        help="do not apply the calibration recorded in the file")
+    replay.add_argument("--block", type=int, metavar="N",
+                        help="process blocks of N samples instead of the recorded device "
+                             "blocks: faster, but VQF then differs from live in the last bits")
+
+
+def _error(message: str) -> None:
+    print(f"inclinometer: {message}", file=sys.stderr)
+
+
+def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """The ``record`` sub-command."""
+    from app.core.calibration_procedures.profiles import ProfileError, read_profile_file
+    from app.core.filters import FILTERS
+    from app.core.recording.errors import RecordingWriteError
+    from app.core.recording.recorder import parse_duration, record_device
+    from drivers.errors import DeviceError
+    from drivers.registry import create_device
+
+    out = sys.stdout if out is None else out
+    names = [args.record_filter] if args.record_filter else []
+    comparisons = [n.strip() for item in args.record_comparisons or [] for n in item.split(",")
+                   if n.strip()]
+    unknown = [n for n in [*names, *comparisons] if n not in FILTERS]
+    if unknown:
+        _error(f"no filter {unknown[0]!r}; choose from {', '.join(FILTERS)}")
+        return EXIT_USAGE
+    try:
+        duration = None if args.duration is None else parse_duration(args.duration)
+    except ValueError:
+        _error(f"--duration {args.duration!r}: give seconds (30), or 30s, 2m, 1h")
+        return EXIT_USAGE
+    calibration = None
+    if args.calibration:
+        try:
+            calibration = read_profile_file(Path(args.calibration)).calibration
+        except ProfileError as exc:
+            _error(str(exc))
+            return EXIT_USAGE
+    try:
+        device = create_device(args.record_device)
+    except DeviceError as exc:
+        _error(str(exc))
+        return EXIT_USAGE
+    stop = threading.Event()
+
+    def progress(status: Any) -> None:
+        if not args.quiet:
+            print(f"recording {status.path.name}: {status.duration_s:7.1f} s, "
+                  f"{status.rows_synced} rows on disk", file=sys.stderr, flush=True)
+
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        outcome = record_device(
+            device, args.out, duration_s=duration, note=args.note,
+            filter_name=args.record_filter, comparisons=comparisons,
+            calibration=calibration, overwrite=args.overwrite, stop=stop, on_flush=progress,
+        )
+    except (DeviceError, RecordingWriteError) as exc:
+        _error(str(exc))
+        return EXIT_FAILED
+    except KeyboardInterrupt:  # before the first sample: nothing was recorded
+        _error("interrupted before recording started")
+        return 130
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+    status = outcome.status
+    endings = {
+        "duration": "duration reached", "stopped": "stopped", "interrupted": "stopped by Ctrl-C",
+        "end": "the source ended", "device": "the device failed", "write": "writing failed",
+    }
+    print(f"{status.path}: {status.rows_written} rows, {status.duration_s:.1f} s of device "
+          f"time ({endings.get(outcome.reason, outcome.reason)})", file=out)
+    if outcome.message:
+        _error(outcome.message)
+    return EXIT_FAILED if outcome.reason in ("device", "write") else 0
+
+
+def _recording_path(source: str) -> Path:
+    from drivers.replay import recording_path
+
+    return recording_path(source)
+
+
+def load_recording_for_cli(source: str) -> Any:
+    """Read a recording for a command; warnings go to stderr. Raises RecordingError."""
+    from app.core.recording.reader import read_recording
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        recording = read_recording(_recording_path(source))
+    for warning in caught:
+        _error(f"warning: {warning.message}")
+    return recording
+
+
+def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """The ``replay`` sub-command."""
+    from app.core.evaluation import DEFAULT_SKIP_S, error_statistics
+    from app.core.filters import DEFAULT_FILTER, FILTERS
+    from app.core.recording.errors import RecordingError
+    from app.core.recording.export import resolve_calibration, run_filters, write_angles_csv
+    from drivers.errors import DeviceUrlError
+
+    out = sys.stdout if out is None else out
+    if args.block is not None and args.block < 1:
+        _error("--block must be at least 1")
+        return EXIT_USAGE
+    try:
+        source_path = _recording_path(args.source)
+        recording = load_recording_for_cli(args.source)
+    except (RecordingError, DeviceUrlError) as exc:
+        _error(str(exc))
+        return EXIT_USAGE
+    names = args.filters or [recording.filter_name or DEFAULT_FILTER]
+    if "all" in names:
+        names = list(FILTERS)
+    unknown = [n for n in names if n not in FILTERS]
+    if unknown:
+        _error(f"no filter {unknown[0]!r}; choose from {', '.join(FILTERS)} (or 'all')")
+        return EXIT_USAGE
+    target = Path(args.out)
+    if target.exists() and target.resolve() == source_path.resolve():
+        _error("--out would overwrite the recording itself")
+        return EXIT_USAGE
+    calibration = None if args.raw else resolve_calibration(recording, "recorded")
+    outputs = run_filters(recording, list(dict.fromkeys(names)), calibration=calibration,
+                          block=args.block)
+    write_angles_csv(target, recording, outputs, calibration=calibration)
+    applied = "no calibration" if calibration is None else f"calibration {calibration.name!r}"
+    print(f"{target}: {len(recording)} rows, {recording.duration_s:.1f} s, {applied}",
+          file=out)
+    reference = recording.reference_quat
+    width = max(6, *(len(o.name) for o in outputs))
+    header = f"  {'filter':<{width}}  {'final roll':>10}  {'final pitch':>11}"
+    if reference is not None:
+        header += f"  {'RMSE deg':>9}  {'max deg':>9}"
+    print(header, file=out)
+    for output in outputs:
+        line = (f"  {output.name:<{width}}  {output.roll_deg[-1]:10.3f}  "
+                f"{output.pitch_deg[-1]:11.3f}")
+        if reference is not None:
+            stats = error_statistics(output.quat, reference, recording.t_s, DEFAULT_SKIP_S)
+            rmse, worst = stats["rmse_deg"], stats["max_deg"]
+            line += (f"  {rmse:9.3f}  {worst:9.3f}" if math.isfinite(rmse)
+                     else f"  {'-':>9}  {'-':>9}")
+        print(line, file=out)
+    return 0

@@ -1,0 +1,55 @@
+"""Change the metadata of a finished recording (e.g. to store bookmarks) without touching rows."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+from app.core.recording.format import KEY_BOOKMARKS, metadata_text
+from app.core.recording.reader import Bookmark, read_head
+
+
+def rewrite_metadata(
+    path: str | os.PathLike[str], changes: Mapping[str, Any], *, remove: Iterable[str] = ()
+) -> dict[str, Any]:
+    """Set (or ``remove``) metadata keys of a recording; returns the new metadata.
+
+    The file is rewritten atomically (a temporary file beside it, fsynced, then renamed); the
+    header and every row are copied byte for byte. Not for a file still being recorded.
+    """
+    path = Path(path)
+    head, chunk = read_head(path)
+    metadata = dict(head.metadata)
+    for key in remove:
+        metadata.pop(key, None)
+    metadata.update(changes)
+    header_start = chunk.rfind(b"\n", 0, head.body_start - 1) + 1
+    text = metadata_text(metadata)
+    if head.comments:
+        text += "".join(f"{comment}\n" for comment in head.comments)
+    fd, temp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as out, open(path, "rb") as source:
+            out.write(text.encode("utf-8"))
+            out.write(chunk[header_start: head.body_start])
+            source.seek(head.body_start)
+            shutil.copyfileobj(source, out, 1 << 20)
+            out.flush()
+            os.fsync(out.fileno())
+        os.replace(temp_name, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(temp_name)
+        raise
+    return metadata
+
+
+def save_bookmarks(path: str | os.PathLike[str], bookmarks: Iterable[Bookmark]) -> None:
+    """Store ``bookmarks`` as the recording's ``bookmarks`` metadata (replacing earlier ones)."""
+    entries = [{"t": b.t_s, "label": b.label} for b in sorted(bookmarks, key=lambda b: b.t_s)]
+    rewrite_metadata(path, {KEY_BOOKMARKS: entries})

@@ -1,0 +1,65 @@
+"""Typed recording errors; each message names the file and, where it helps, the line."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from app.core.recording.reader import Recording
+
+
+class RecordingError(Exception):
+    """A recording could not be read or written; ``path`` is the file concerned (if any)."""
+
+    def __init__(self, message: str, path: Path | None = None) -> None:
+        super().__init__(message)
+        self.path = path
+
+
+class NotARecordingError(RecordingError):
+    """The file does not start with ``# inclinometer-recording``."""
+
+
+class RecordingVersionError(RecordingError):
+    """The file is a recording of another format version."""
+
+    def __init__(self, message: str, path: Path | None, version: str) -> None:
+        super().__init__(message, path)
+        self.version = version
+
+
+class MissingColumnsError(RecordingError):
+    """The header lacks required columns (``missing`` lists them)."""
+
+    def __init__(self, message: str, path: Path | None, missing: list[str]) -> None:
+        super().__init__(message, path)
+        self.missing = missing
+
+
+class RecordingCorruptError(RecordingError):
+    """A line could not be read.
+
+    Attributes
+    ----------
+    line : 1-based line number in the file (None when the problem is not one line).
+    partial : the rows before the bad line, as a :class:`~app.core.recording.reader.Recording`
+        (None when the problem is before the first sample). Load it on purpose with
+        ``read_recording(path, on_corrupt="truncate")``.
+    """
+
+    def __init__(
+        self, message: str, path: Path | None, line: int | None = None,
+        partial: Recording | None = None,
+    ) -> None:
+        super().__init__(message, path)
+        self.line = line
+        self.partial = partial
+
+
+class RecordingWriteError(RecordingError):
+    """A recording could not be started (the file exists, the folder is missing, ...)."""
+
+
+class RecordingWarning(UserWarning):
+    """Something was skipped while reading (an incomplete last row, a bad metadata line)."""

@@ -1,0 +1,670 @@
+"""Read a v1 recording: metadata, columns, and clear errors for anything else.
+
+:func:`read_recording` loads a whole file (an hour at 1 kHz in a few seconds: the numbers are
+parsed by :mod:`app.core.recording.fast_csv` on every core) and returns a :class:`Recording`.
+
+What it tolerates, and says so (a :class:`~app.core.recording.errors.RecordingWarning`, and
+the message in :attr:`Recording.warnings`):
+
+- an incomplete last row (no line end: the writer was killed mid-row): dropped;
+- a metadata value that is not JSON: kept as its text;
+- blank lines, ``\\r\\n`` line ends, spaces around fields, a UTF-8 byte-order mark;
+- unknown columns: kept in :attr:`Recording.columns` (numbers, or text when not numbers),
+  ignored otherwise.
+
+What it refuses, with a typed error: a file that is not a recording
+(:class:`NotARecordingError`), another format version (:class:`RecordingVersionError`), a header
+without the required columns (:class:`MissingColumnsError`), and a row that cannot be read
+(:class:`RecordingCorruptError`, which names the line and carries the rows before it).
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import json
+import math
+import mmap
+import os
+import re
+import warnings
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from app.core.calibration import SensorCalibration
+from app.core.recording import fast_csv
+from app.core.recording.errors import (
+    MissingColumnsError,
+    NotARecordingError,
+    RecordingCorruptError,
+    RecordingError,
+    RecordingVersionError,
+    RecordingWarning,
+)
+from app.core.recording.format import (
+    ACCEL_COLUMNS,
+    FORMAT_VERSION,
+    GYRO_COLUMNS,
+    KEY_BOOKMARKS,
+    KEY_CALIBRATION,
+    KEY_DEVICE,
+    KEY_FILTER,
+    KEY_NOTE,
+    MAGIC,
+    OPTIONAL_COLUMNS,
+    REFERENCE_COLUMNS,
+    REQUIRED_COLUMNS,
+    calibration_from_json,
+)
+from app.core.samples import RawBlock, SampleBlock, ScaleFactors
+
+UNIT_SCALE = ScaleFactors(
+    accel_m_s2_per_lsb=1.0, gyro_rad_s_per_lsb=1.0, temp_degc_per_lsb=1.0, temp_offset_degc=0.0
+)
+"""Recorded values are already SI: ``x * 1.0 + 0.0`` gives each one back bit for bit."""
+PARALLEL_MIN_BYTES = 4 << 20
+"""Bodies smaller than this are parsed on one thread."""
+MMAP_MIN_BYTES = 8 << 20
+"""Files at least this large are memory-mapped instead of read into memory."""
+
+Buffer = bytes | mmap.mmap
+"""The file's bytes: ``bytes``, or a read-only memory map (no ``count``, ``startswith``)."""
+
+OnCorrupt = Literal["raise", "truncate"]
+
+
+@dataclass(frozen=True, slots=True)
+class Bookmark:
+    """A named moment of a recording; ``t_s`` is on the ``t`` column's clock."""
+
+    t_s: float
+    label: str = ""
+
+
+@dataclass
+class Recording:
+    """A loaded recording.
+
+    Attributes
+    ----------
+    metadata : every ``# key: value`` line, JSON-decoded, in file order.
+    header : the column names as in the file.
+    columns : every column by name: float64 arrays (NaN where empty), or object arrays of
+        text for unknown columns that are not numbers.
+    path : the file read (None for bytes).
+    warnings : what was skipped or tolerated, one message each.
+    dropped_partial_row : True when an incomplete last row was dropped.
+    corrupt_line : with ``on_corrupt="truncate"``, the line where reading stopped.
+    """
+
+    metadata: dict[str, Any]
+    header: tuple[str, ...]
+    columns: dict[str, np.ndarray]
+    path: Path | None = None
+    warnings: list[str] = field(default_factory=list)
+    dropped_partial_row: bool = False
+    corrupt_line: int | None = None
+    comments: list[str] = field(default_factory=list)
+
+    # -- samples ---------------------------------------------------------------------------------
+    def __len__(self) -> int:
+        return int(self.columns["t"].shape[0])
+
+    @property
+    def t_s(self) -> np.ndarray:
+        """(N,) device clock, s (a recording need not start at 0)."""
+        return self.columns["t"]
+
+    @property
+    def accel_m_s2(self) -> np.ndarray:
+        """(N, 3) raw specific force, before calibration."""
+        return np.column_stack([self.columns[c] for c in ACCEL_COLUMNS])
+
+    @property
+    def gyro_rad_s(self) -> np.ndarray:
+        """(N, 3) raw angular rate, before calibration."""
+        return np.column_stack([self.columns[c] for c in GYRO_COLUMNS])
+
+    @property
+    def temp_degc(self) -> np.ndarray:
+        """(N,) temperature; NaN when the column is absent or empty."""
+        temp = self.columns.get("temp")
+        return np.full(len(self), np.nan) if temp is None else temp
+
+    @property
+    def gap(self) -> np.ndarray:
+        """(N,) bool, True on the first sample after lost data."""
+        return self._flag("gap")
+
+    @property
+    def block_start(self) -> np.ndarray | None:
+        """(N,) bool, True where a device block began; None when not recorded."""
+        return self._flag("block_start") if "block_start" in self.columns else None
+
+    @property
+    def has_reference(self) -> bool:
+        """True when the reference columns exist and hold at least one full quaternion."""
+        if not all(c in self.columns for c in REFERENCE_COLUMNS):
+            return False
+        return bool(np.any(np.all(np.isfinite(self._reference()), axis=1)))
+
+    @property
+    def reference_quat(self) -> np.ndarray | None:
+        """(N, 4) reference orientation (NaN rows where unknown), or None without one."""
+        return self._reference() if self.has_reference else None
+
+    @property
+    def unknown_columns(self) -> dict[str, np.ndarray]:
+        """Columns this version does not know (kept, never used)."""
+        known = set(REQUIRED_COLUMNS) | set(OPTIONAL_COLUMNS)
+        return {name: values for name, values in self.columns.items() if name not in known}
+
+    def _flag(self, name: str) -> np.ndarray:
+        values = self.columns.get(name)
+        if values is None:
+            return np.zeros(len(self), dtype=bool)
+        return np.isfinite(values) & (values != 0.0)
+
+    def _reference(self) -> np.ndarray:
+        return np.column_stack([self.columns[c] for c in REFERENCE_COLUMNS])
+
+    # -- metadata ------------------------------------------------------------------------------
+    @property
+    def device(self) -> dict[str, Any]:
+        """The recorded device description (empty when the file has none)."""
+        value = self.metadata.get(KEY_DEVICE)
+        return dict(value) if isinstance(value, dict) else {}
+
+    @property
+    def calibration(self) -> SensorCalibration | None:
+        """The calibration applied while recording (None when absent or unreadable)."""
+        value = self.metadata.get(KEY_CALIBRATION)
+        if value is None:
+            return None
+        try:
+            return calibration_from_json(value)
+        except ValueError:
+            return None
+
+    @property
+    def filter_name(self) -> str | None:
+        value = self.metadata.get(KEY_FILTER)
+        return str(value["name"]) if isinstance(value, dict) and "name" in value else None
+
+    @property
+    def filter_parameters(self) -> dict[str, Any]:
+        value = self.metadata.get(KEY_FILTER)
+        params = value.get("parameters") if isinstance(value, dict) else None
+        return dict(params) if isinstance(params, dict) else {}
+
+    @property
+    def note(self) -> str:
+        value = self.metadata.get(KEY_NOTE)
+        return value if isinstance(value, str) else ""
+
+    @property
+    def bookmarks(self) -> list[Bookmark]:
+        """``bookmarks`` metadata: ``[{"t": s, "label": text}, ...]`` or plain times."""
+        found = []
+        for entry in self.metadata.get(KEY_BOOKMARKS) or []:
+            if isinstance(entry, dict) and isinstance(entry.get("t"), int | float):
+                found.append(Bookmark(float(entry["t"]), str(entry.get("label", ""))))
+            elif isinstance(entry, int | float) and not isinstance(entry, bool):
+                found.append(Bookmark(float(entry)))
+        return sorted(found, key=lambda b: b.t_s)
+
+    @property
+    def duration_s(self) -> float:
+        t = self.t_s
+        return float(t[-1] - t[0]) if len(t) > 1 else 0.0
+
+    @property
+    def rate_hz(self) -> float:
+        """Median sample rate (the recorded device's ``odr_hz`` when given)."""
+        odr = self.device.get("odr_hz")
+        if isinstance(odr, int | float) and odr > 0:
+            return float(odr)
+        steps = np.diff(self.t_s)
+        steps = steps[steps > 0]
+        return 1.0 / float(np.median(steps)) if len(steps) else math.nan
+
+    # -- blocks --------------------------------------------------------------------------------
+    def raw_block(self, start: int = 0, stop: int | None = None) -> RawBlock:
+        """Rows ``[start, stop)`` as a device block in SI units (scale factors of 1.0)."""
+        stop = len(self) if stop is None else stop
+        rows = slice(start, stop)
+        reference = self.reference_quat
+        return RawBlock(
+            t_s=self.t_s[rows],
+            accel_raw=np.column_stack([self.columns[c][rows] for c in ACCEL_COLUMNS]),
+            gyro_raw=np.column_stack([self.columns[c][rows] for c in GYRO_COLUMNS]),
+            temp_raw=self.temp_degc[rows],
+            scale=UNIT_SCALE,
+            gap=self.gap[rows],
+            reference_quat=None if reference is None else reference[rows],
+        )
+
+    def block_bounds(self, size: int | None = None) -> np.ndarray:
+        """Start indices of the blocks to replay, plus ``len(self)`` at the end.
+
+        ``size=None``: the device's blocks as recorded (``block_start``), else blocks of
+        ``size`` samples (also when the file has no ``block_start`` column: 65 536).
+        """
+        n = len(self)
+        starts = self.block_start
+        if size is None and starts is not None:
+            bounds = np.flatnonzero(starts)
+            if len(bounds) == 0 or bounds[0] != 0:
+                bounds = np.concatenate([[0], bounds])
+        else:
+            bounds = np.arange(0, n, size or 65536)
+        return np.concatenate([bounds, [n]]).astype(np.int64) if n else np.zeros(1, np.int64)
+
+    def raw_blocks(self, size: int | None = None) -> Iterator[RawBlock]:
+        """The whole recording as device blocks (see :meth:`block_bounds`)."""
+        bounds = self.block_bounds(size)
+        for start, stop in itertools.pairwise(bounds):
+            yield self.raw_block(int(start), int(stop))
+
+    def sample_block(self, calibration: SensorCalibration | None = None) -> SampleBlock:
+        """Every sample in SI units, with ``calibration`` applied (none when None)."""
+        block = SampleBlock(
+            t_s=self.t_s, accel_m_s2=self.accel_m_s2, gyro_rad_s=self.gyro_rad_s,
+            temp_degc=self.temp_degc, gap=self.gap, reference_quat=self.reference_quat,
+        )
+        return block if calibration is None else calibration.apply(block)
+
+
+# -- reading ---------------------------------------------------------------------------------------
+def read_recording(path: str | os.PathLike[str], *, on_corrupt: OnCorrupt = "raise") -> Recording:
+    """Load a recording file.
+
+    Parameters
+    ----------
+    path : the CSV file.
+    on_corrupt : ``"raise"`` (default): a row that cannot be read raises
+        :class:`RecordingCorruptError` (with the line number, and the rows before it in
+        ``partial``); ``"truncate"``: keep the rows before it, warn, and set
+        :attr:`Recording.corrupt_line`.
+
+    Raises
+    ------
+    RecordingError
+        Subclasses for a foreign file, another version, missing columns or a corrupt row;
+        a plain :class:`RecordingError` when the file cannot be read at all.
+    """
+    path = Path(path)
+    try:
+        with open(path, "rb") as handle:
+            if os.fstat(handle.fileno()).st_size < MMAP_MIN_BYTES:
+                return parse_recording(handle.read(), path, on_corrupt=on_corrupt)
+            # Large files are mapped, not copied: the parser reads the page cache directly.
+            with _map(handle.fileno()) as mapped:
+                return parse_recording(mapped, path, on_corrupt=on_corrupt)
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read the recording: {exc.strerror or exc}",
+                             path) from exc
+
+
+def read_metadata(path: str | os.PathLike[str]) -> tuple[dict[str, Any], tuple[str, ...]]:
+    """Only the metadata and the header (reads the beginning of the file; for listings)."""
+    head, _ = read_head(Path(path))
+    return head.metadata, head.header
+
+
+def read_head(path: Path) -> tuple[RecordingHead, bytes]:
+    """The parsed metadata and header, and the bytes read (at least up to the header)."""
+    chunk = b""
+    with open(path, "rb") as handle:
+        while True:
+            more = handle.read(65536)
+            chunk += more
+            if _header_end(chunk) is not None or not more:
+                break
+    return _parse_head(chunk, path), chunk
+
+
+def _header_end(chunk: bytes) -> int | None:
+    """Offset just after the header line when ``chunk`` holds it."""
+    position = 0
+    while True:
+        newline = chunk.find(b"\n", position)
+        if newline < 0:
+            return None
+        if not chunk.startswith(b"#", position) and not chunk.startswith(b"\xef\xbb\xbf#",
+                                                                          position):
+            return newline + 1
+        position = newline + 1
+
+
+@dataclass
+class RecordingHead:
+    """What precedes the rows: metadata, header, and where the body starts (a byte offset)."""
+
+    metadata: dict[str, Any]
+    header: tuple[str, ...]
+    body_start: int
+    header_line: int
+    comments: list[str]
+    warnings: list[str]
+
+
+def _describe(line: bytes) -> str:
+    text = line[:60].decode("utf-8", errors="replace").rstrip("\r")
+    return repr(text + ("..." if len(line) > 60 else ""))
+
+
+def _parse_head(data: Buffer, path: Path | None) -> RecordingHead:
+    where = f"{path}: " if path is not None else ""
+    position = 3 if data[:3] == b"\xef\xbb\xbf" else 0
+    first_end = data.find(b"\n", position)
+    first = data[position: first_end if first_end >= 0 else len(data)].rstrip(b"\r")
+    magic = f"# {MAGIC}".encode()
+    if not first.startswith(magic):
+        shown = "the file is empty" if not data else f"its first line is {_describe(first)}"
+        raise NotARecordingError(
+            f"{where}not an inclinometer recording: {shown}, expected "
+            f"'# {MAGIC} {FORMAT_VERSION}'", path)
+    version = first[len(magic):].strip().decode("utf-8", errors="replace")
+    if version != str(FORMAT_VERSION):
+        if version.isdigit() and int(version) > FORMAT_VERSION:
+            detail = "a newer version of the program wrote it"
+        else:
+            detail = "this program reads only version 1"
+        raise RecordingVersionError(
+            f"{where}recording format version {version or '(none)'} is not supported "
+            f"({detail}); this program reads format {FORMAT_VERSION}", path, version)
+    metadata: dict[str, Any] = {}
+    comments: list[str] = []
+    problems: list[str] = []
+    line_number = 1
+    position = first_end + 1 if first_end >= 0 else len(data)
+    while True:
+        end = data.find(b"\n", position)
+        if end < 0:
+            raise RecordingCorruptError(
+                f"{where}the file ends before its header row (line {line_number + 1}): "
+                "no samples were recorded", path, line_number + 1)
+        line_number += 1
+        raw = data[position:end].rstrip(b"\r")
+        position = end + 1
+        if not raw.startswith(b"#"):
+            break
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError:
+            problems.append(f"line {line_number}: metadata line is not UTF-8; skipped")
+            continue
+        key, separator, value = text[2:].partition(": ")
+        if not text.startswith("# ") or not separator or not key.strip():
+            comments.append(text)
+            continue
+        key = key.strip()
+        try:
+            decoded = json.loads(value)
+        except json.JSONDecodeError:
+            decoded = value.strip()
+            problems.append(f"line {line_number}: metadata {key!r} is not JSON; kept as text")
+        if key in metadata:
+            problems.append(f"line {line_number}: metadata {key!r} appears again; "
+                            "the last value is kept")
+        metadata[key] = decoded
+    try:
+        header_text = raw.decode("utf-8").lstrip("\ufeff")
+    except UnicodeDecodeError:
+        raise RecordingCorruptError(
+            f"{where}line {line_number}: the header row is not UTF-8 text", path,
+            line_number) from None
+    names = next(csv.reader([header_text])) if header_text.strip() else []
+    header = tuple(name.strip() for name in names)
+    duplicates = sorted({name for name in header if header.count(name) > 1})
+    if duplicates:
+        raise RecordingCorruptError(
+            f"{where}line {line_number}: the header names {', '.join(duplicates)} more than "
+            "once", path, line_number)
+    missing = [name for name in REQUIRED_COLUMNS if name not in header]
+    if missing:
+        raise MissingColumnsError(
+            f"{where}line {line_number}: the header lacks the required column(s) "
+            f"{', '.join(missing)} (it has: {', '.join(header) or 'nothing'}); required are "
+            f"{', '.join(REQUIRED_COLUMNS)}", path, missing)
+    return RecordingHead(metadata, header, position, line_number, comments, problems)
+
+
+def parse_recording(
+    data: Buffer, path: Path | None = None, *, on_corrupt: OnCorrupt = "raise"
+) -> Recording:
+    """:func:`read_recording` on bytes already in memory (or a read-only memory map)."""
+    if on_corrupt not in ("raise", "truncate"):
+        raise ValueError(f"on_corrupt must be 'raise' or 'truncate', not {on_corrupt!r}")
+    head = _parse_head(data, path)
+    where = f"{path}: " if path is not None else ""
+    problems = list(head.warnings)
+    stop = data.rfind(b"\n") + 1
+    stop = max(stop, head.body_start)
+    dropped = False
+    tail = data[stop:]
+    if tail.strip(b" \t\r\x00"):
+        line = head.header_line + _count_lines(data, head.body_start, stop) + 1
+        problems.append(
+            f"{where}line {line}: the last row is incomplete (the recording was interrupted "
+            "while writing it); it was dropped")
+        dropped = True
+    kinds = np.array([_kind(name) for name in head.header], dtype=np.int8)
+    parse = _parse_slow if data.find(b'"', head.body_start, stop) >= 0 else _parse_fast
+    parsed = parse(data, head.body_start, stop, head.header, kinds)
+    columns, rows, error = parsed
+    recording = Recording(
+        metadata=head.metadata, header=head.header, columns=columns, path=path,
+        warnings=problems, dropped_partial_row=dropped, comments=head.comments,
+    )
+    if error is not None:
+        offset, message = error
+        line = _count_lines(data, 0, offset) + 1
+        text = f"{where}line {line}: {message}; the {rows} row(s) before it are valid"
+        if on_corrupt == "raise":
+            _warn_all(problems)
+            raise RecordingCorruptError(text, path, line, recording)
+        recording.corrupt_line = line
+        problems.append(f"{text}; reading stopped there")
+    _warn_all(problems)
+    return recording
+
+
+def _warn_all(messages: list[str]) -> None:
+    for message in messages:
+        warnings.warn(message, RecordingWarning, stacklevel=4)
+
+
+def _map(fileno: int) -> mmap.mmap:
+    """A read-only map of the whole file, its pages read in at once where the OS can."""
+    populate = getattr(mmap, "MAP_POPULATE", 0)
+    if populate and hasattr(mmap, "MAP_SHARED"):
+        return mmap.mmap(fileno, 0, flags=mmap.MAP_SHARED | populate, prot=mmap.PROT_READ)
+    return mmap.mmap(fileno, 0, access=mmap.ACCESS_READ)
+
+
+def _count_lines(data: Buffer, start: int, stop: int) -> int:
+    return int(fast_csv.count_lines(np.frombuffer(data, dtype=np.uint8), start, stop))
+
+
+def _kind(name: str) -> int:
+    if name in REQUIRED_COLUMNS:
+        return fast_csv.KIND_REQUIRED
+    if name in OPTIONAL_COLUMNS:
+        return fast_csv.KIND_OPTIONAL
+    return fast_csv.KIND_LENIENT
+
+
+_ERRORS = {
+    fast_csv.ERROR_NUMBER: "column {column!r} holds {field}, which is not a number",
+    fast_csv.ERROR_EMPTY: "the required column {column!r} is empty",
+    fast_csv.ERROR_TOO_FEW: "the row has {count} field(s), the header has {expected}",
+    fast_csv.ERROR_TOO_MANY: "the row has more fields than the header's {expected}",
+}
+_NUMBER = re.compile(
+    r"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)", re.IGNORECASE
+)
+
+_Parsed = tuple[dict[str, np.ndarray], int, tuple[int, str] | None]
+"""(columns, rows kept, (byte offset of the bad line, message) or None)."""
+
+
+def _error_text(fields: list[str], code: int, column: int, header: tuple[str, ...]) -> str:
+    name = header[column] if column < len(header) else f"#{column + 1}"
+    field_text = repr(fields[column].strip()[:40]) if column < len(fields) else "''"
+    return _ERRORS[code].format(column=name, field=field_text, count=len(fields),
+                                expected=len(header))
+
+
+def _line_fields(data: Buffer, offset: int) -> list[str]:
+    end = data.find(b"\n", offset)
+    line = data[offset: end if end >= 0 else len(data)].rstrip(b"\r")
+    text = line.decode("utf-8", errors="replace")
+    return next(csv.reader([text])) if '"' in text else text.split(",")
+
+
+def _chunks(data: Buffer, start: int, stop: int) -> list[tuple[int, int]]:
+    """Split ``[start, stop)`` at line ends into about one piece per core."""
+    size = stop - start
+    count = 1 if size < PARALLEL_MIN_BYTES else max(1, min(os.cpu_count() or 1, 8))
+    bounds = [start]
+    for k in range(1, count):
+        cut = data.find(b"\n", start + size * k // count, stop)
+        if cut < 0 or cut + 1 <= bounds[-1]:
+            continue
+        bounds.append(cut + 1)
+    bounds.append(stop)
+    return [(a, b) for a, b in itertools.pairwise(bounds) if b > a]
+
+
+def _parse_fast(
+    data: Buffer, start: int, stop: int, header: tuple[str, ...], kinds: np.ndarray
+) -> _Parsed:
+    """Parse with the compiled kernel, in parallel pieces; compact around blank lines."""
+    buf = np.frombuffer(data, dtype=np.uint8)
+    pieces = _chunks(data, start, stop)
+    pool = ThreadPoolExecutor(len(pieces)) if len(pieces) > 1 else None
+    try:
+        return _parse_pieces(data, buf, pieces, pool, header, kinds)
+    finally:
+        del buf  # a memory map cannot close while an array points into it
+        if pool is not None:
+            pool.shutdown()
+
+
+def _parse_pieces(
+    data: Buffer, buf: np.ndarray, pieces: list[tuple[int, int]],
+    pool: ThreadPoolExecutor | None, header: tuple[str, ...], kinds: np.ndarray,
+) -> _Parsed:
+    ncols = len(kinds)
+
+    def lines(piece: tuple[int, int]) -> int:
+        return int(fast_csv.count_lines(buf, piece[0], piece[1]))
+
+    counts = list(pool.map(lines, pieces)) if pool is not None else [lines(p) for p in pieces]
+    first_rows = [0, *itertools.accumulate(counts)]
+    capacity = first_rows[-1]
+    values = np.empty(ncols * capacity)
+    flags = np.zeros(ncols * capacity, dtype=np.uint8)
+    offsets = np.zeros(capacity, dtype=np.int64)
+
+    def run(index: int) -> tuple[int, int, int, int]:
+        a, b = pieces[index]
+        return fast_csv.parse_body(
+            buf, a, b, kinds, first_rows[index], capacity, values, values.view(np.int64),
+            flags, offsets, fast_csv.POW5_HIGH, fast_csv.POW5_LOW, fast_csv.EXACT_POWERS_OF_TEN)
+
+    if pool is not None:
+        results = list(pool.map(run, range(len(pieces))))
+    else:
+        results = [run(0) for _ in pieces]
+    error = None
+    ranges = []
+    for index, (parsed, code, offset, column) in enumerate(results):
+        ranges.append((first_rows[index], first_rows[index] + parsed))
+        if code != fast_csv.ERROR_NONE:
+            error = (offset, _error_text(_line_fields(data, offset), code, column, header))
+            break
+    table = values.reshape(ncols, capacity)
+    cell_flags = flags.reshape(ncols, capacity)
+    contiguous = all(ranges[k][1] == ranges[k + 1][0] for k in range(len(ranges) - 1))
+    if contiguous:
+        kept = ranges[-1][1] if ranges else 0
+        table, cell_flags, offsets = table[:, :kept], cell_flags[:, :kept], offsets[:kept]
+    else:  # blank lines left holes
+        keep = np.concatenate([np.arange(a, b) for a, b in ranges])
+        table, cell_flags, offsets = table[:, keep], cell_flags[:, keep], offsets[keep]
+    # The rare cells the kernel leaves to Python (see fast_csv), then text columns.
+    for col, row in zip(*np.nonzero(cell_flags == fast_csv.FLAG_SLOW)):
+        table[col, row] = float(_line_fields(data, int(offsets[row]))[col].strip())
+    columns: dict[str, np.ndarray] = {}
+    for col, name in enumerate(header):
+        if np.any(cell_flags[col] == fast_csv.FLAG_TEXT):
+            columns[name] = np.array(
+                [_line_fields(data, int(o))[col].strip() for o in offsets.tolist()], dtype=object)
+        else:
+            columns[name] = table[col]
+    return columns, int(offsets.shape[0]), error
+
+
+def _parse_slow(
+    data: Buffer, start: int, stop: int, header: tuple[str, ...], kinds: np.ndarray
+) -> _Parsed:
+    """Line by line with the csv module: for files with quoted fields (rare, slow)."""
+    ncols = len(kinds)
+    cells: list[list[float | str]] = [[] for _ in range(ncols)]
+    text_columns: set[int] = set()
+    error = None
+    offset = start
+    rows = 0
+    while offset < stop:
+        end = data.find(b"\n", offset)
+        line_offset, offset = offset, end + 1
+        raw = data[line_offset:end].rstrip(b"\r")
+        if not raw.strip(b" \t"):
+            continue
+        try:
+            fields = next(csv.reader([raw.decode("utf-8")]))
+        except (UnicodeDecodeError, csv.Error) as exc:
+            error = (line_offset, f"the row cannot be read as CSV ({exc})")
+            break
+        code, column = fast_csv.ERROR_NONE, -1
+        if len(fields) < ncols:
+            code, column = fast_csv.ERROR_TOO_FEW, len(fields)
+        elif len(fields) > ncols:
+            code, column = fast_csv.ERROR_TOO_MANY, ncols
+        values: list[float | str] = []
+        for col in range(ncols if code == fast_csv.ERROR_NONE else 0):
+            text = fields[col].strip(" \t")
+            if not text:
+                if kinds[col] == fast_csv.KIND_REQUIRED:
+                    code, column = fast_csv.ERROR_EMPTY, col
+                    break
+                values.append(math.nan)
+            elif _NUMBER.fullmatch(text):
+                values.append(float(text))
+            elif kinds[col] == fast_csv.KIND_LENIENT:
+                values.append(text)
+                text_columns.add(col)
+            else:
+                code, column = fast_csv.ERROR_NUMBER, col
+                break
+        if code != fast_csv.ERROR_NONE:
+            error = (line_offset, _error_text(fields, code, column, header))
+            break
+        for col, value in enumerate(values):
+            cells[col].append(value)
+        rows += 1
+    columns: dict[str, np.ndarray] = {}
+    for col, name in enumerate(header):
+        if col in text_columns:
+            columns[name] = np.array([str(v) for v in cells[col]], dtype=object)
+        else:
+            columns[name] = np.array(cells[col], dtype=np.float64)
+    return columns, rows, error

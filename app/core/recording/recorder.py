@@ -1,0 +1,168 @@
+"""Headless recording: read a device, run the pipeline, write every block (``record`` command).
+
+The loop is what the GUI's worker does, without Qt: ``raw = device.read()``, hand ``raw`` to the
+:class:`~app.core.recording.writer.RecordingWriter`, ``pipeline.process(raw)``. It ends after
+``duration_s`` of device time, when ``stop`` is set, on Ctrl-C (KeyboardInterrupt), when the
+device fails or ends (a replay), or when the writer fails (a full disk); the file is closed
+cleanly in every case and keeps every row written.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from app.core.calibration import SensorCalibration
+from app.core.filters import DEFAULT_FILTER
+from app.core.pipeline import Pipeline
+from app.core.recording.format import KEY_REFERENCE, recording_metadata, simulator_metadata
+from app.core.recording.writer import RecordingWriter, WriterStatus
+from app.core.samples import RawBlock
+
+READ_TIMEOUT_S = 0.1
+SIMULATOR_REFERENCE = "the simulator's true orientation"
+
+
+@dataclass
+class RecordOutcome:
+    """How a headless recording ended.
+
+    ``reason`` is ``"duration"``, ``"stopped"`` (``stop`` was set), ``"interrupted"``
+    (Ctrl-C), ``"device"`` (the device failed: ``message`` says how), ``"end"`` (a replay
+    reached its end) or ``"write"`` (the writer failed: ``message``).
+    """
+
+    status: WriterStatus
+    reason: str
+    message: str = ""
+    pipeline: Pipeline | None = field(default=None, repr=False)
+
+
+def _cut(raw: RawBlock, count: int) -> RawBlock:
+    """The first ``count`` samples of a block."""
+    ref = raw.reference_quat
+    gap = raw.gap
+    return RawBlock(
+        t_s=raw.t_s[:count], accel_raw=raw.accel_raw[:count], gyro_raw=raw.gyro_raw[:count],
+        temp_raw=raw.temp_raw[:count], scale=raw.scale,
+        gap=None if gap is None else gap[:count], lost_samples=raw.lost_samples,
+        reference_quat=None if ref is None else ref[:count],
+    )
+
+
+def reference_source_of(device: Any) -> str | None:
+    """What a device's reference orientation is, for the metadata (None: it has none)."""
+    if getattr(device, "scheme", "") == "sim":
+        return SIMULATOR_REFERENCE
+    recording = getattr(device, "recording", None)
+    if recording is not None and recording.has_reference:
+        source = recording.metadata.get(KEY_REFERENCE)
+        return source.get("source") if isinstance(source, dict) else "recorded reference"
+    return None
+
+
+def record_device(
+    device: Any,
+    path: str | os.PathLike[str],
+    *,
+    duration_s: float | None = None,
+    note: str = "",
+    filter_name: str | None = None,
+    filter_parameters: dict[str, Any] | None = None,
+    comparisons: Sequence[str] = (),
+    calibration: SensorCalibration | None = None,
+    overwrite: bool = False,
+    stop: threading.Event | None = None,
+    on_flush: Callable[[WriterStatus], None] | None = None,
+    pipeline: Pipeline | None = None,
+    extra_metadata: dict[str, Any] | None = None,
+) -> RecordOutcome:
+    """Record ``device`` (a :class:`drivers.base.Device`) into ``path``.
+
+    The device is opened if needed and always closed at the end. ``duration_s`` counts device
+    time from the first sample (the last block is cut there); None records until ``stop`` is
+    set or Ctrl-C. Raises :class:`~app.core.recording.errors.RecordingWriteError` when the
+    file cannot be created, and the device's ``DeviceError`` when it cannot be opened.
+    """
+    from drivers.errors import DeviceError  # drivers sit above app.core: import late
+
+    info = device.open()
+    try:
+        if pipeline is None:
+            pipeline = Pipeline(info.odr_hz, filter_name or DEFAULT_FILTER)
+        else:
+            pipeline.configure(info.odr_hz)
+            if filter_name is not None and pipeline.filter.name != filter_name:
+                pipeline.set_filter(filter_name)
+        for key, value in (filter_parameters or {}).items():
+            pipeline.set_filter_parameter(key, value)
+        if comparisons:
+            pipeline.set_comparisons(list(comparisons))
+        if calibration is not None:
+            pipeline.set_calibration(calibration)
+        extra = {**simulator_metadata(device), **(extra_metadata or {})}
+        metadata = recording_metadata(
+            device=info, calibration=pipeline.calibration, orientation_filter=pipeline.filter,
+            comparison_filters=pipeline.comparisons.values(), note=note,
+            reference_source=reference_source_of(device), extra=extra,
+        )
+        writer = RecordingWriter(path, metadata, overwrite=overwrite, on_flush=on_flush)
+        writer.start()
+    except BaseException:
+        device.close()
+        raise
+    reason, message = "stopped", ""
+    first_t: float | None = None
+    try:
+        while stop is None or not stop.is_set():
+            try:
+                raw = device.read(READ_TIMEOUT_S)
+            except DeviceError as exc:
+                reason, message = "device", str(exc)
+                break
+            if raw is None or len(raw) == 0:
+                if getattr(device, "at_end", False):
+                    reason = "end"
+                    break
+                continue
+            if first_t is None:
+                first_t = float(raw.t_s[0])
+            done = False
+            if duration_s is not None:
+                inside = int((raw.t_s < first_t + duration_s).sum())
+                done = inside < len(raw)
+                raw = _cut(raw, inside) if done else raw
+            if len(raw):
+                if not writer.write(raw):
+                    reason, message = "write", writer.status.error or "the recording stopped"
+                    break
+                pipeline.process(raw)
+            if done:
+                reason = "duration"
+                break
+        if writer.status.state == "failed":
+            reason, message = "write", writer.status.error or ""
+    except KeyboardInterrupt:
+        reason = "interrupted"
+    finally:
+        status = writer.close()
+        device.close()
+    if status.state == "failed":
+        reason, message = "write", status.error or message
+    return RecordOutcome(status, reason, message, pipeline)
+
+
+def parse_duration(text: str) -> float:
+    """Seconds from ``"30"``, ``"30s"``, ``"2m"``, ``"1h"``."""
+    units = {"s": 1.0, "m": 60.0, "h": 3600.0}
+    text = text.strip().lower()
+    factor = units.get(text[-1:])
+    value = float(text[:-1] if factor is not None else text)
+    seconds = value * (factor or 1.0)
+    if not math.isfinite(seconds) or seconds <= 0:
+        raise ValueError(f"duration {text!r} must be a positive time")
+    return seconds

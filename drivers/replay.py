@@ -1,0 +1,627 @@
+"""Replay a recording as a device: ``replay://PATH`` (or just a path ending in ``.csv``).
+
+Replay is just another device (python-can's ``MessageSync``, x-IMU3's ``FileConnection``): the
+recorded raw samples go through the same pipeline (calibration, filters, views) as live ones.
+Blocks carry the recorded SI values with scale factors of 1.0, so every sample reaches the
+pipeline bit for bit as it did live; the reference orientation and gap flags come along.
+
+URL: ``replay://PATH?option=value&...``. PATH is taken literally up to the first ``?``
+(percent-encoding is undone, so write ``%3F`` for a ``?`` in a file name); relative paths are
+relative to the working directory: ``replay://data/run.csv``, ``replay:///home/me/run.csv``.
+Options:
+
+- ``speed``: 0.1 ... 100 (default 1, the recorded pace), or ``max`` (also ``0``): as fast as
+  the reader takes blocks;
+- ``loop``: 1 to start again at the end (default 0);
+- ``start``: seconds from the beginning of the recording to start at (default 0);
+- ``paused``: 1 to open paused (default 0);
+- ``exact``: 1 (default) delivers the blocks exactly as the device delivered them while
+  recording (the ``block_start`` column), so that every filter computes bit for bit what it
+  computed live; 0, or a recording without that column: blocks of whatever is due (paced) or of
+  ``block`` samples (``speed=max``);
+- ``block``: samples per block when not exact (default 1024).
+
+Pacing: the ``t`` column (device clock) against the wall clock, as the simulator paces itself;
+a hole in time longer than :data:`HOLE_LIMIT_S` (lost data, a paused logger) is waited for only
+that long.
+
+Controls (thread-safe, for the GUI thread while the worker thread reads): :meth:`play`,
+:meth:`pause`, :attr:`loop`, :meth:`step`, :meth:`seek`, :meth:`set_speed`, :meth:`next_gap`,
+:meth:`previous_gap`, :meth:`add_bookmark`, :meth:`next_bookmark`, :meth:`previous_bookmark`;
+:attr:`position_s` and :attr:`duration_s` for a slider.
+
+After a seek (or a loop back to the start)
+------------------------------------------
+The stream jumps: backwards in time, or forwards over samples the filters never see. The
+first sample of the next block is marked as a gap (every filter restarts its integration
+there) and :attr:`generation` goes up. The block's generation is in
+:attr:`last_block_generation` right after :meth:`read` returns it. A consumer whose buffers must
+hold one continuous, increasing time line (the pipeline's ring buffers) compares it with the
+previous block's and, when it changed, starts afresh before processing the block:
+``pipeline.configure(info.odr_hz)`` (which clears the buffers and resets the filters).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, ClassVar
+from urllib.parse import parse_qsl, unquote
+
+import numpy as np
+
+from app.core.calibration import SensorCalibration
+from app.core.recording.errors import RecordingError
+from app.core.recording.format import KEY_BOOKMARKS
+from app.core.recording.reader import (
+    UNIT_SCALE,
+    Bookmark,
+    Recording,
+    read_metadata,
+    read_recording,
+)
+from app.core.samples import RawBlock
+from drivers.base import Device, DeviceDescriptor, DeviceInfo
+from drivers.errors import DeviceOpenError, DeviceUrlError
+
+__all__ = [
+    "HOLE_LIMIT_S", "ReplayDevice", "is_recording_path", "parse_speed", "recording_path",
+    "replay_url",
+]
+
+SCHEME = "replay"
+MIN_SPEED = 0.1
+MAX_SPEED = 100.0
+DEFAULT_BLOCK = 1024
+MAX_BLOCK = 65536
+MIN_BLOCK_S = 0.020
+"""Paced reads without recorded blocks wait for at least this much data (as the simulator)."""
+MAX_BLOCK_S = 1.0
+"""A reader that fell behind gets at most this much recorded time per block."""
+HOLE_LIMIT_S = 1.0
+"""A hole in the recorded time is waited for at most this long (at speed 1)."""
+_OPTIONS = ("speed", "loop", "start", "paused", "exact", "block")
+_TRUE = {"1", "true", "yes", "on"}
+_FALSE = {"0", "false", "no", "off"}
+
+
+def is_recording_path(url: str) -> bool:
+    """True for a plain file path ending in ``.csv`` (no ``scheme://``)."""
+    return "://" not in url and url.strip().lower().endswith(".csv")
+
+
+def replay_url(path: str | Path, **options: Any) -> str:
+    """``replay://`` URL for a file (percent-encoding only what must be)."""
+    text = str(path).replace("%", "%25").replace("?", "%3F")
+    query = "&".join(f"{key}={value}" for key, value in options.items())
+    return f"{SCHEME}://{text}" + (f"?{query}" if query else "")
+
+
+def _split_url(url: str) -> tuple[Path, dict[str, str]]:
+    if is_recording_path(url):
+        return Path(url.strip()), {}
+    prefix = f"{SCHEME}://"
+    if not url.lower().startswith(prefix):
+        raise DeviceUrlError(f"{url}: not a replay URL; expected replay://PATH or a .csv path")
+    rest = url[len(prefix):]
+    path_text, _, query = rest.partition("?")
+    if not path_text:
+        raise DeviceUrlError(f"{url}: no file given; expected replay://PATH")
+    path = Path(unquote(path_text))
+    if not path.exists() and Path(path_text).exists():
+        path = Path(path_text)  # a literal '%' in the name
+    options: dict[str, str] = {}
+    for key, value in parse_qsl(query, keep_blank_values=True):
+        key = key.strip().lower()
+        if key not in _OPTIONS:
+            raise DeviceUrlError(
+                f"{url}: unknown option {key!r}; allowed: {', '.join(_OPTIONS)}")
+        if key in options:
+            raise DeviceUrlError(f"{url}: option {key!r} is given twice")
+        options[key] = value.strip()
+    return path, options
+
+
+def recording_path(url: str) -> Path:
+    """The file a ``replay://`` URL names; any other text is taken as a path."""
+    if url.lower().startswith(f"{SCHEME}://"):
+        return _split_url(url)[0]
+    return Path(url)
+
+
+def parse_speed(value: float | str) -> float:
+    """A speed factor from a number or ``"max"``; ``math.inf`` means as fast as possible."""
+    if isinstance(value, str):
+        text = value.strip().lower()
+        if text in ("max", "inf", "fastest"):
+            return math.inf
+        text = text.removesuffix("x")  # "2x"
+        try:
+            value = float(text)
+        except ValueError:
+            raise ValueError(f"speed {value!r}: use a factor 0.1 ... 100 or 'max'") from None
+    speed = float(value)
+    if speed == 0.0 or speed == math.inf:
+        return math.inf
+    if not MIN_SPEED <= speed <= MAX_SPEED:
+        raise ValueError(f"speed {value!r} is outside {MIN_SPEED:g} ... {MAX_SPEED:g} "
+                         "(or 'max')")
+    return speed
+
+
+def _flag(url: str, key: str, text: str) -> bool:
+    if text.lower() in _TRUE:
+        return True
+    if text.lower() in _FALSE:
+        return False
+    raise DeviceUrlError(f"{url}: {key}={text!r}: use 1 or 0")
+
+
+class ReplayDevice(Device):
+    """A recording played back as a device (see the module docstring).
+
+    Parameters
+    ----------
+    url : ``replay://PATH?options`` or a path ending in ``.csv``.
+    clock : wall clock in seconds for pacing (tests pass a fake one).
+    recording : an already loaded recording of that file (skips reading it again).
+    """
+
+    scheme: ClassVar[str] = SCHEME
+
+    def __init__(
+        self, url: str, *, clock: Callable[[], float] = time.monotonic,
+        recording: Recording | None = None,
+    ) -> None:
+        super().__init__(url)
+        self.path, options = _split_url(url)
+        try:
+            self._initial_speed = parse_speed(options.get("speed", "1"))
+        except ValueError as exc:
+            raise DeviceUrlError(f"{url}: {exc}") from None
+        self._initial_loop = _flag(url, "loop", options.get("loop", "0"))
+        self._initial_paused = _flag(url, "paused", options.get("paused", "0"))
+        self._exact = _flag(url, "exact", options.get("exact", "1"))
+        try:
+            self._start_s = float(options.get("start", "0"))
+            self._block = int(options.get("block", str(DEFAULT_BLOCK)))
+        except ValueError:
+            raise DeviceUrlError(f"{url}: start must be seconds and block a whole number of "
+                                 "samples") from None
+        if not math.isfinite(self._start_s) or self._start_s < 0:
+            raise DeviceUrlError(f"{url}: start={self._start_s!r} must be >= 0 s")
+        if not 1 <= self._block <= MAX_BLOCK:
+            raise DeviceUrlError(f"{url}: block must be 1 ... {MAX_BLOCK} samples")
+        self._clock = clock
+        self._cond = threading.Condition()
+        self._given = recording
+        self.recording: Recording | None = None
+        self._reset_state()
+
+    def _reset_state(self) -> None:
+        self._n = 0
+        self._pos = 0
+        self._playing = not self._initial_paused
+        self._speed = self._initial_speed
+        self._loop = self._initial_loop
+        self._anchor_wall = 0.0
+        self._anchor_t = 0.0
+        self._step_samples = 0  # > 0: deliver this many while paused; -1: one block
+        self._discontinuity = False
+        self._generation = 0
+        self._last_block_generation = 0
+        self._closed = False
+        self._bookmarks: list[Bookmark] = []
+        self._t = np.empty(0)
+        self._gap_rows = np.empty(0, dtype=np.int64)
+        self._bounds: np.ndarray | None = None
+
+    # -- Device template -----------------------------------------------------------------------
+    @classmethod
+    def discover(cls) -> list[DeviceDescriptor]:
+        """The sample recordings shipped with the program."""
+        from app.core.recording.samples import sample_recordings
+
+        found = []
+        for path in sample_recordings():
+            try:
+                metadata, _ = read_metadata(path)
+            except (OSError, RecordingError):
+                continue
+            note = metadata.get("note") if isinstance(metadata.get("note"), str) else ""
+            found.append(DeviceDescriptor(
+                replay_url(path), f"Sample recording: {note or path.name}", "recording"))
+        return found
+
+    def _open(self) -> DeviceInfo:
+        recording = self._given
+        if recording is None:
+            try:
+                recording = read_recording(self.path)
+            except RecordingError as exc:
+                raise DeviceOpenError(str(exc)) from exc
+        if len(recording) == 0:
+            raise DeviceOpenError(f"{self.path}: the recording holds no samples")
+        with self._cond:
+            self._reset_state()
+            self.recording = recording
+            self._load(recording)
+            self._bookmarks = list(recording.bookmarks)
+            if self._start_s > 0:
+                self._seek_index(self._index_at(self._start_s))
+                self._discontinuity = False
+            self._anchor()
+        return self._device_info(recording)
+
+    def _read(self, timeout_s: float) -> RawBlock | None:
+        with self._cond:
+            block, wait_s = self._take()
+            if block is not None or self._closed:
+                return block
+            wait_s = max(0.0, timeout_s) if wait_s is None else min(max(0.0, timeout_s), wait_s)
+            if wait_s > 0.0:
+                self._cond.wait(wait_s)
+                block, _ = self._take()
+            return block
+
+    def _close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+
+    # -- what a GUI uses (thread-safe) -------------------------------------------------------
+    @property
+    def duration_s(self) -> float:
+        """Time from the first to the last sample, s."""
+        with self._cond:
+            return float(self._t[-1] - self._t[0]) if self._n else 0.0
+
+    @property
+    def position_s(self) -> float:
+        """Time of the next sample to deliver, s from the first (``duration_s`` at the end)."""
+        with self._cond:
+            return self._position_s()
+
+    @property
+    def position_index(self) -> int:
+        """Index of the next sample to deliver (``sample_count`` at the end)."""
+        with self._cond:
+            return self._pos
+
+    @property
+    def sample_count(self) -> int:
+        with self._cond:
+            return self._n
+
+    @property
+    def start_t_s(self) -> float:
+        """Device time of the first sample (positions count from it)."""
+        with self._cond:
+            return float(self._t[0]) if self._n else 0.0
+
+    @property
+    def at_end(self) -> bool:
+        """True when every sample was delivered and the replay does not loop."""
+        with self._cond:
+            return self._n > 0 and self._pos >= self._n and not self._loop
+
+    @property
+    def playing(self) -> bool:
+        with self._cond:
+            return self._playing
+
+    @property
+    def speed(self) -> float:
+        """Speed factor; ``math.inf`` when as fast as possible."""
+        with self._cond:
+            return self._speed
+
+    @property
+    def loop(self) -> bool:
+        with self._cond:
+            return self._loop
+
+    @loop.setter
+    def loop(self, value: bool) -> None:
+        with self._cond:
+            self._loop = bool(value)
+            self._cond.notify_all()
+
+    @property
+    def exact_blocks(self) -> bool:
+        """True when blocks are cut as the device delivered them while recording."""
+        with self._cond:
+            return self._bounds is not None
+
+    @property
+    def generation(self) -> int:
+        """Goes up at every seek or loop (see the module docstring)."""
+        with self._cond:
+            return self._generation
+
+    @property
+    def last_block_generation(self) -> int:
+        """The generation of the block :meth:`read` returned last."""
+        with self._cond:
+            return self._last_block_generation
+
+    @property
+    def recorded_calibration(self) -> SensorCalibration | None:
+        """The calibration the recording was made with: apply it to reproduce the result."""
+        return None if self.recording is None else self.recording.calibration
+
+    def play(self) -> None:
+        """Play from the current position (from the start again when at the end)."""
+        with self._cond:
+            if self._n and self._pos >= self._n:
+                self._seek_index(0)
+            self._playing = True
+            self._step_samples = 0
+            self._anchor()
+            self._cond.notify_all()
+
+    def pause(self) -> None:
+        with self._cond:
+            self._playing = False
+            self._cond.notify_all()
+
+    def set_speed(self, speed: float | str) -> float:
+        """Set the speed (0.1 ... 100, or ``"max"``/0/inf); returns it. Raises ValueError."""
+        value = parse_speed(speed)
+        with self._cond:
+            self._speed = value
+            self._anchor()
+            self._cond.notify_all()
+        return value
+
+    def step(self, samples: int | None = None) -> None:
+        """Pause, then let the next :meth:`read` return one block (or ``samples`` samples)."""
+        if samples is not None and samples < 1:
+            raise ValueError("step: samples must be at least 1")
+        with self._cond:
+            self._playing = False
+            self._step_samples = -1 if samples is None else int(samples)
+            self._cond.notify_all()
+
+    def seek(self, position_s: float) -> float:
+        """Continue from the first sample at or after ``position_s`` (s from the start).
+
+        Clamped to the recording; returns the position reached. See the module docstring for
+        what happens to the stream.
+        """
+        with self._cond:
+            self._seek_index(self._index_at(position_s))
+            self._cond.notify_all()
+            return self._position_s()
+
+    def next_gap(self) -> float | None:
+        """Seek to the next sample after lost data; None (and no move) when there is none."""
+        with self._cond:
+            later = self._gap_rows[self._gap_rows > self._pos]
+            if len(later) == 0:
+                return None
+            self._seek_index(int(later[0]))
+            self._cond.notify_all()
+            return self._position_s()
+
+    def previous_gap(self) -> float | None:
+        """Seek to the last gap before the current position; None when there is none."""
+        with self._cond:
+            earlier = self._gap_rows[self._gap_rows < self._pos]
+            if len(earlier) == 0:
+                return None
+            self._seek_index(int(earlier[-1]))
+            self._cond.notify_all()
+            return self._position_s()
+
+    @property
+    def gap_positions_s(self) -> list[float]:
+        """Where gaps are, s from the start (for marks on a slider)."""
+        with self._cond:
+            return (self._t[self._gap_rows] - self._t[0]).tolist() if self._n else []
+
+    @property
+    def bookmarks(self) -> list[Bookmark]:
+        """Bookmarks (from the ``bookmarks`` metadata, plus those added), in time order."""
+        with self._cond:
+            return list(self._bookmarks)
+
+    def add_bookmark(self, position_s: float | None = None, label: str = "") -> Bookmark:
+        """Mark ``position_s`` (default: the current position); kept in memory.
+
+        Save them into the file with :func:`app.core.recording.save_bookmarks`.
+        """
+        with self._cond:
+            offset = self._position_s() if position_s is None else float(position_s)
+            mark = Bookmark(float(self._t[0]) + offset if self._n else offset, label)
+            self._bookmarks = sorted([*self._bookmarks, mark], key=lambda b: b.t_s)
+            return mark
+
+    def bookmark_position_s(self, bookmark: Bookmark) -> float:
+        """A bookmark's position in s from the start."""
+        with self._cond:
+            return bookmark.t_s - (float(self._t[0]) if self._n else 0.0)
+
+    def next_bookmark(self) -> Bookmark | None:
+        """Seek to the first bookmark after the current position."""
+        return self._jump_to_bookmark(forward=True)
+
+    def previous_bookmark(self) -> Bookmark | None:
+        """Seek to the last bookmark before the current position."""
+        return self._jump_to_bookmark(forward=False)
+
+    def _jump_to_bookmark(self, *, forward: bool) -> Bookmark | None:
+        with self._cond:
+            if not self._n:
+                return None
+            indices = [(int(np.searchsorted(self._t, b.t_s, "left")), b) for b in self._bookmarks]
+            if forward:
+                candidates = [(i, b) for i, b in indices if i > self._pos and i < self._n]
+                chosen = candidates[0] if candidates else None
+            else:
+                candidates = [(i, b) for i, b in indices if i < self._pos]
+                chosen = candidates[-1] if candidates else None
+            if chosen is None:
+                return None
+            self._seek_index(chosen[0])
+            self._cond.notify_all()
+            return chosen[1]
+
+    # -- internals (called with the condition held) ------------------------------------------
+    def _load(self, recording: Recording) -> None:
+        self._n = len(recording)
+        self._t = np.ascontiguousarray(recording.t_s)
+        self._accel = np.ascontiguousarray(recording.accel_m_s2)
+        self._gyro = np.ascontiguousarray(recording.gyro_rad_s)
+        self._temp = np.ascontiguousarray(recording.temp_degc)
+        self._gap = recording.gap
+        self._gap_rows = np.flatnonzero(self._gap)
+        reference = recording.reference_quat
+        self._reference = None if reference is None else np.ascontiguousarray(reference)
+        starts = recording.block_start
+        self._bounds = recording.block_bounds() if (self._exact and starts is not None) else None
+        rate = recording.rate_hz
+        self._rate_hz = rate if math.isfinite(rate) and rate > 0 else 100.0
+        lost = np.zeros(self._n, dtype=np.int64)
+        if len(self._gap_rows) and self._n > 1:
+            rows = self._gap_rows[self._gap_rows > 0]
+            steps = (self._t[rows] - self._t[rows - 1]) * self._rate_hz
+            lost[rows] = np.maximum(0, np.rint(steps).astype(np.int64) - 1)
+        self._lost = lost
+
+    def _device_info(self, recording: Recording) -> DeviceInfo:
+        device = recording.device
+
+        def number(key: str, default: float) -> float:
+            value = device.get(key)
+            return float(value) if isinstance(value, int | float) and value > 0 else default
+
+        odr = number("odr_hz", self._rate_hz)
+        extra = dict(device.get("extra") or {})
+        extra["replay"] = {
+            "path": str(self.path), "recorded_url": device.get("url"),
+            "start_time": recording.metadata.get("start_time"), "note": recording.note,
+            "samples": len(recording), "duration_s": recording.duration_s,
+        }
+        return DeviceInfo(
+            url=self.url,
+            name=str(device.get("name") or f"Recording {self.path.name}"),
+            unique_id=str(device.get("unique_id") or f"recording:{self.path.stem}"),
+            sensor=str(device.get("sensor") or "unknown"),
+            odr_hz=odr,
+            odr_nominal_hz=number("odr_nominal_hz", odr),
+            accel_fs_g=int(number("accel_fs_g", 0)),
+            gyro_fs_dps=int(number("gyro_fs_dps", 0)),
+            firmware=str(device.get("firmware") or ""),
+            extra=extra,
+        )
+
+    def _position_s(self) -> float:
+        if not self._n:
+            return 0.0
+        if self._pos >= self._n:
+            return float(self._t[-1] - self._t[0])
+        return float(self._t[self._pos] - self._t[0])
+
+    def _index_at(self, position_s: float) -> int:
+        if not math.isfinite(position_s):
+            raise ValueError(f"cannot seek to {position_s!r}")
+        target = float(self._t[0]) + max(0.0, position_s)
+        return min(int(np.searchsorted(self._t, target, "left")), self._n - 1)
+
+    def _seek_index(self, index: int) -> None:
+        if index != self._pos:
+            self._discontinuity = True
+            self._generation += 1
+        self._pos = index
+        self._anchor()
+
+    def _anchor(self) -> None:
+        """Pace from here: the next sample is due now."""
+        self._anchor_wall = self._clock()
+        if self._n:
+            self._anchor_t = float(self._t[min(self._pos, self._n - 1)])
+
+    def _due_wall(self, index: int) -> float:
+        return self._anchor_wall + (float(self._t[index]) - self._anchor_t) / self._speed
+
+    def _take(self) -> tuple[RawBlock | None, float | None]:
+        """The next block if one is due, else (None, seconds until one is, or None: no idea)."""
+        if self._closed or not self._n:
+            return None, None
+        if self._pos >= self._n:
+            if not self._loop:
+                return None, None
+            self._pos = 0
+            self._discontinuity = True
+            self._generation += 1
+            self._anchor()
+        if self._step_samples:
+            count = self._step_samples
+            self._step_samples = 0
+            stop = self._block_end() if count < 0 else min(self._n, self._pos + count)
+            return self._deliver(stop), None
+        if not self._playing:
+            return None, None
+        if self._bounds is not None:
+            stop = self._block_end()
+            if self._speed == math.inf:
+                return self._deliver(stop), None
+            wait = self._due_wall(stop - 1) - self._clock()
+            return (self._deliver(stop), None) if wait <= 0.0 else (None, wait)
+        if self._speed == math.inf:
+            return self._deliver(min(self._n, self._pos + self._block)), None
+        now = self._clock()
+        reached = self._anchor_t + (now - self._anchor_wall) * self._speed
+        stop = int(np.searchsorted(self._t, reached, "right"))
+        wanted = max(1, math.ceil(MIN_BLOCK_S * self._rate_hz))
+        limit = min(self._n, self._pos + max(wanted, math.ceil(MAX_BLOCK_S * self._rate_hz)))
+        stop = min(stop, limit)
+        if stop >= min(self._n, self._pos + wanted):
+            return self._deliver(stop), None
+        ready = min(self._n, self._pos + wanted) - 1
+        return None, max(0.0, self._due_wall(ready) - now)
+
+    def _block_end(self) -> int:
+        """End of the block that starts at the current position."""
+        if self._bounds is None:
+            return min(self._n, self._pos + self._block)
+        k = int(np.searchsorted(self._bounds, self._pos, "right"))
+        return int(self._bounds[min(k, len(self._bounds) - 1)])
+
+    def _deliver(self, stop: int) -> RawBlock:
+        start = self._pos
+        stop = max(stop, start + 1)
+        rows = slice(start, stop)
+        gap = self._gap[rows].copy()
+        lost = int(self._lost[rows].sum())
+        if self._discontinuity:
+            gap[0] = True
+            lost -= int(self._lost[start])
+            self._discontinuity = False
+        self._last_block_generation = self._generation
+        self._pos = stop
+        if self._speed != math.inf and 0 < stop < self._n:
+            hole = float(self._t[stop] - self._t[stop - 1])
+            if hole > HOLE_LIMIT_S:  # wait at most HOLE_LIMIT_S for the next sample
+                due = self._due_wall(stop - 1) + HOLE_LIMIT_S / self._speed
+                self._anchor_wall, self._anchor_t = due, float(self._t[stop])
+        return RawBlock(
+            t_s=self._t[rows],
+            accel_raw=self._accel[rows],
+            gyro_raw=self._gyro[rows],
+            temp_raw=self._temp[rows],
+            scale=UNIT_SCALE,
+            gap=gap,
+            lost_samples=max(0, lost),
+            reference_quat=None if self._reference is None else self._reference[rows],
+        )
+
+    # -- bookmarks for the file ---------------------------------------------------------------
+    def bookmarks_metadata(self) -> dict[str, list[dict[str, Any]]]:
+        """``{"bookmarks": [...]}``, the metadata entry that stores the current bookmarks."""
+        with self._cond:
+            return {KEY_BOOKMARKS: [{"t": b.t_s, "label": b.label} for b in self._bookmarks]}
