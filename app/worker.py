@@ -14,6 +14,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 from PySide6.QtCore import QMetaObject, QObject, Qt, QThread, QTimer, Signal, Slot
 
 from app.core.calibration import IDENTITY_CALIBRATION
@@ -25,8 +26,10 @@ from app.core.calibration_procedures import (
     TareReference,
 )
 from app.core.pipeline import Pipeline
+from app.core.recording import RecordingError, RecordingWriter, recording_metadata
+from app.core.recording.recorder import reference_source_of
 from drivers.base import Device, DeviceInfo
-from drivers.errors import DeviceError
+from drivers.errors import DeviceError, DeviceIOError
 from drivers.registry import create_device
 
 log = logging.getLogger(__name__)
@@ -34,6 +37,22 @@ log = logging.getLogger(__name__)
 READ_TIMEOUT_S = 0.05
 STATUS_INTERVAL_MS = 250
 RATE_WINDOW_S = 2.0
+RECONNECT_INTERVAL_MS = 500
+
+
+@dataclass(slots=True)
+class _Reconnect:
+    """A board that was unplugged mid-session and is awaited back (by USB serial number)."""
+
+    url: str
+    usb_serial: str
+    unique_id: str
+    last_t_s: float
+    """Pipeline time of the last sample before the cable was pulled."""
+    lost_at: float
+    """``time.monotonic()`` when it was lost."""
+    clock_origin_s: float | None
+    """The board clock at the old connection's t = 0, when the driver knows it."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,6 +66,8 @@ class StreamStatus:
     gaps: int
     pipeline_load: float
     """Fraction of one core the pipeline used over the last interval."""
+    replay: tuple[float, float, bool] | None = None
+    """For a replay: position (s), duration (s), playing."""
 
 
 class DeviceWorker(QObject):
@@ -60,6 +81,8 @@ class DeviceWorker(QObject):
     comparisonsChanged = Signal(list)  # names of the filters running side by side
     calibrationChanged = Signal(object)  # the active CalibrationProfile, or None
     tareChanged = Signal(object)  # the active TareReference, or None
+    reconnecting = Signal(str)  # the cable was pulled; the session waits for the board
+    recordingChanged = Signal(object)  # WriterStatus of the recording, or None when none
 
     def __init__(self, pipeline: Pipeline, profile_store: ProfileStore | None = None) -> None:
         super().__init__()
@@ -71,6 +94,13 @@ class DeviceWorker(QObject):
         self._status_timer: QTimer | None = None
         self._rate_history: deque[tuple[float, int]] = deque()
         self._last_cpu = (time.monotonic(), 0.0)
+        self._reconnect: _Reconnect | None = None
+        self._reconnect_timer: QTimer | None = None
+        self._time_offset_s = 0.0
+        """Added to device time so the session's time axis runs on across reconnections."""
+        self._align_time = False
+        self._gap_pending = False
+        self._writer: RecordingWriter | None = None
 
     # -- lifecycle (worker thread) ----------------------------------------------------------
     @Slot()
@@ -82,13 +112,16 @@ class DeviceWorker(QObject):
         self._status_timer = QTimer(self)
         self._status_timer.setInterval(STATUS_INTERVAL_MS)
         self._status_timer.timeout.connect(self._emit_status)
+        self._reconnect_timer = QTimer(self)
+        self._reconnect_timer.setInterval(RECONNECT_INTERVAL_MS)
+        self._reconnect_timer.timeout.connect(self._try_reconnect)
         self.pipeline.filter.warm_up()
 
     @Slot()
     def shutdown(self) -> None:
         """Close the device and stop the timers (before the thread quits)."""
         self._close_device("")
-        for timer in (self._poll_timer, self._status_timer):
+        for timer in (self._poll_timer, self._status_timer, self._reconnect_timer):
             if timer is not None:
                 timer.stop()
 
@@ -111,6 +144,8 @@ class DeviceWorker(QObject):
             return
         self._device = device
         self.pipeline.configure(info.odr_hz)
+        self._time_offset_s = 0.0
+        self._align_time = self._gap_pending = False
         self._load_profile(info)
         self._rate_history.clear()
         self._last_cpu = (time.monotonic(), self.pipeline.counters.filter_cpu_s)
@@ -234,7 +269,14 @@ class DeviceWorker(QObject):
         try:
             raw = device.read(READ_TIMEOUT_S)
             if raw is not None and len(raw):
+                self._continue_time_axis(device, raw)
                 self.pipeline.process(raw)
+                if self._writer is not None:
+                    self._writer.write(raw)
+        except DeviceIOError as exc:
+            if not self._await_board(device, str(exc)):
+                self.error.emit(str(exc))
+                self._close_device(str(exc))
         except DeviceError as exc:
             self.error.emit(str(exc))
             self._close_device(str(exc))
@@ -263,15 +305,177 @@ class DeviceWorker(QObject):
             StreamStatus(
                 url=device.url, measured_rate_hz=rate, samples=counters.samples,
                 lost_samples=counters.lost_samples, gaps=counters.gaps, pipeline_load=load,
+                replay=self._replay_position(device),
             )
         )
 
-    def _close_device(self, reason: str) -> None:
-        device, self._device = self._device, None
+    # -- replay -----------------------------------------------------------------------------
+    @staticmethod
+    def _replay_position(device: Device) -> tuple[float, float, bool] | None:
+        if getattr(device, "scheme", "") != "replay":
+            return None
+        return (float(device.position_s), float(device.duration_s), bool(device.playing))
+
+    @Slot(str, object)
+    def replay_control(self, name: str, value: object) -> None:
+        """play, pause, step, speed (0 = as fast as possible), loop, seek (s), next_gap."""
+        device = self._device
+        if getattr(device, "scheme", "") != "replay":
+            return
+        try:
+            if name == "play":
+                device.play()
+            elif name == "pause":
+                device.pause()
+            elif name == "step":
+                device.step()
+            elif name == "speed":
+                device.set_speed(value if value else "max")
+            elif name == "loop":
+                device.loop = bool(value)
+            elif name in ("seek", "next_gap"):
+                target = float(value) if name == "seek" else device.next_gap()
+                if target is None:
+                    self.error.emit("No further gap in this recording.")
+                    return
+                # Time would run backwards: start the views afresh at the new position.
+                self.pipeline.configure(device.info.odr_hz)
+                device.seek(target)
+        except (DeviceError, ValueError) as exc:
+            self.error.emit(str(exc))
+
+    # -- recording --------------------------------------------------------------------------
+    @Slot(str, str)
+    def start_recording(self, path: str, note: str) -> None:
+        """Record the raw stream (before calibration) to ``path`` in format v1."""
+        device = self._device
+        if device is None or device.info is None:
+            self.error.emit("Connect a device before recording.")
+            return
+        self.stop_recording()
+        metadata = recording_metadata(
+            device=device.info, calibration=self.pipeline.calibration,
+            orientation_filter=self.pipeline.filter,
+            comparison_filters=list(self.pipeline.comparisons.values()), note=note,
+            reference_source=reference_source_of(device),
+        )
+        writer = RecordingWriter(
+            path, metadata, on_error=self.error.emit,
+            on_flush=self.recordingChanged.emit,
+        )
+        try:
+            writer.start()
+        except RecordingError as exc:
+            self.error.emit(str(exc))
+            return
+        self._writer = writer
+        self.recordingChanged.emit(writer.status)
+
+    @Slot()
+    def stop_recording(self) -> None:
+        """Finish the recording (everything queued is written and synced)."""
+        writer, self._writer = self._writer, None
+        if writer is not None:
+            status = writer.close()
+            self.recordingChanged.emit(None)
+            if status.error:
+                self.error.emit(status.error)
+
+    # -- hot-plug ---------------------------------------------------------------------------
+    def _await_board(self, device: Device, reason: str) -> bool:
+        """After an unplug, keep the session and wait for the board (True) if it can return."""
+        info = device.info
+        usb_serial = None if info is None else info.extra.get("usb_serial")
+        if info is None or not usb_serial or self.pipeline.counters.samples == 0:
+            return False
+        last_t = self.pipeline.samples.latest(1)["t"]
+        self._reconnect = _Reconnect(
+            url=info.url, usb_serial=str(usb_serial), unique_id=info.unique_id,
+            last_t_s=float(last_t[0]) if len(last_t) else 0.0, lost_at=time.monotonic(),
+            clock_origin_s=self._clock_origin(device),
+        )
         for timer in (self._poll_timer, self._status_timer):
             if timer is not None:
                 timer.stop()
+        self._device = None
+        try:
+            device.close()
+        except DeviceError as exc:
+            log.warning("closing %s: %s", info.url, exc)
+        self.reconnecting.emit(
+            f"{reason}. The session is kept: waiting for the board (USB serial {usb_serial}) "
+            "to come back on any port."
+        )
+        assert self._reconnect_timer is not None
+        self._reconnect_timer.start()
+        return True
+
+    def _clock_origin(self, device: Device) -> float | None:
+        origin = getattr(device, "device_clock_origin_s", None)
+        return None if origin is None else float(origin) - self._time_offset_s
+
+    def _try_reconnect(self) -> None:
+        plan = self._reconnect
+        if plan is None:
+            return
+        from drivers.serial_link import reconnect_url  # only serial boards come back
+
+        url = reconnect_url(plan.url, plan.usb_serial)
+        if url is None:
+            return
+        try:
+            device = create_device(url)
+            info = device.open()
+        except DeviceError as exc:  # still enumerating, or busy for a moment: try again
+            log.info("reconnect to %s not yet possible: %s", url, exc)
+            return
+        if info.unique_id != plan.unique_id:
+            device.close()
+            return
+        assert self._reconnect_timer is not None and self._poll_timer is not None
+        self._reconnect_timer.stop()
+        self._device = device
+        self._align_time = True  # the new connection's time starts at 0 again
+        self._gap_pending = True
+        self._poll_timer.start()
+        assert self._status_timer is not None
+        self._status_timer.start()
+        self.connected.emit(info)
+
+    def _continue_time_axis(self, device: Device, raw) -> None:
+        """Shift a reconnected board's time so the session's time axis keeps real time."""
+        plan = self._reconnect
+        if self._align_time and plan is not None:
+            origin = getattr(device, "device_clock_origin_s", None)
+            if origin is not None and plan.clock_origin_s is not None and (
+                origin >= plan.clock_origin_s
+            ):
+                # Same board, clock still running: its own clock spans the outage exactly.
+                self._time_offset_s = float(origin) - plan.clock_origin_s
+            else:  # the board was reset: measure the outage on the host's clock
+                outage = time.monotonic() - plan.lost_at
+                self._time_offset_s = plan.last_t_s + outage - float(raw.t_s[0])
+            self._align_time = False
+            self._reconnect = None
+        if self._time_offset_s:
+            raw.t_s = raw.t_s + self._time_offset_s
+        if self._gap_pending:
+            gap = np.zeros(len(raw), dtype=bool) if raw.gap is None else raw.gap.copy()
+            gap[0] = True
+            raw.gap = gap
+            self._gap_pending = False
+
+    def _close_device(self, reason: str) -> None:
+        self.stop_recording()
+        device, self._device = self._device, None
+        waiting = self._reconnect is not None
+        self._reconnect = None
+        for timer in (self._poll_timer, self._status_timer, self._reconnect_timer):
+            if timer is not None:
+                timer.stop()
         if device is None:
+            if waiting:
+                self.disconnected.emit(reason)
             return
         try:
             device.close()
@@ -296,6 +500,8 @@ class DeviceSession(QObject):
     comparisonsChanged = Signal(list)
     calibrationChanged = Signal(object)
     tareChanged = Signal(object)
+    reconnecting = Signal(str)
+    recordingChanged = Signal(object)
 
     requestConnect = Signal(str)
     requestDisconnect = Signal()
@@ -308,6 +514,9 @@ class DeviceSession(QObject):
     requestTare = Signal()
     requestClearTare = Signal()
     requestTareReference = Signal(object)  # TareReference
+    requestStartRecording = Signal(str, str)  # path, note
+    requestStopRecording = Signal()
+    requestReplayControl = Signal(str, object)
 
     def __init__(
         self,
@@ -334,6 +543,9 @@ class DeviceSession(QObject):
         self.requestTare.connect(self.worker.tare)
         self.requestClearTare.connect(self.worker.clear_tare)
         self.requestTareReference.connect(self.worker.set_tare)
+        self.requestStartRecording.connect(self.worker.start_recording)
+        self.requestStopRecording.connect(self.worker.stop_recording)
+        self.requestReplayControl.connect(self.worker.replay_control)
         self.device_info: DeviceInfo | None = None
         # Queued into the GUI thread (this object lives there).
         self.worker.connected.connect(self.connected)
@@ -344,6 +556,8 @@ class DeviceSession(QObject):
         self.worker.comparisonsChanged.connect(self.comparisonsChanged)
         self.worker.calibrationChanged.connect(self.calibrationChanged)
         self.worker.tareChanged.connect(self.tareChanged)
+        self.worker.reconnecting.connect(self.reconnecting)
+        self.worker.recordingChanged.connect(self.recordingChanged)
         self.connected.connect(self._on_connected)
         self.disconnected.connect(self._on_disconnected)
         self.thread.start()

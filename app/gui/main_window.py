@@ -31,6 +31,7 @@ from app import __version__
 from app.core.calibration_procedures import CalibrationProfile, ProfileError
 from app.core.calibration_procedures.profiles import read_profile_file
 from app.core.filters import DEFAULT_FILTER, FILTERS
+from app.core.recording import sample_recordings
 from app.gui import theme
 from app.gui.bubble_level import BubbleLevel
 from app.gui.calibration_wizard import CalibrationWizard
@@ -41,14 +42,23 @@ from app.gui.measure_panel import MeasurePanel
 from app.gui.plots import LivePlots
 from app.gui.presenter import UNIT_LABELS, LivePresenter
 from app.gui.readouts import TiltReadouts
+from app.gui.replay_bar import ReplayBar
 from app.gui.simulator_panel import SimulatorPanel
 from app.worker import DeviceSession, StreamStatus
 from drivers.base import DeviceInfo
-from drivers.registry import DEFAULT_DEVICE_URL, available_devices
+from drivers.registry import DEFAULT_DEVICE_URL, available_devices, scheme_of
+from drivers.replay import replay_url
 
 PLOT_WINDOWS_S = (2, 5, 10, 20, 30, 60)
 AVERAGING_S = (0.05, 0.2, 0.5, 1.0, 2.0, 5.0)
 LEVEL_RANGES_DEG = (0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 90.0)
+
+
+def recordings_dir() -> Path:
+    """Where recordings go by default: the user's documents folder."""
+    from platformdirs import user_documents_dir
+
+    return Path(user_documents_dir()) / "Inclinometer recordings"
 
 
 def format_age(age: timedelta) -> str:
@@ -110,6 +120,10 @@ class MainWindow(QMainWindow):
         # Device bar.
         self.device_bar = DeviceBar(self)
         self.addToolBar(Qt.ToolBarArea.TopToolBarArea, self.device_bar)
+        self.addToolBarBreak()
+        self.replay_bar = ReplayBar(self)
+        self.addToolBar(Qt.ToolBarArea.TopToolBarArea, self.replay_bar)
+        self.replay_bar.hide()
 
         # Central level view.
         self.banner = ErrorBanner()
@@ -158,9 +172,10 @@ class MainWindow(QMainWindow):
         self.status_calibration = QLabel()
         self.status_calibration.setObjectName("calibrationStatus")
         self.status_tare = QLabel()
+        self.status_recording = QLabel()
         for widget in (
             self.status_device, self.status_rate, self.status_filter, self.status_calibration,
-            self.status_tare,
+            self.status_tare, self.status_recording,
         ):
             self.statusBar().addWidget(widget)
         self.statusBar().addPermanentWidget(self.status_fps)
@@ -186,6 +201,10 @@ class MainWindow(QMainWindow):
         session.comparisonsChanged.connect(self._on_comparisons_changed)
         session.calibrationChanged.connect(self._on_calibration_changed)
         session.tareChanged.connect(self._on_tare_changed)
+        session.reconnecting.connect(self._on_reconnecting)
+        session.recordingChanged.connect(self._on_recording_changed)
+        self.replay_bar.control.connect(session.requestReplayControl)
+        self._awaiting_board = False
         self.calibration_wizard: CalibrationWizard | None = None
         self._show_calibration(None)
         self.simulator_panel.deviceRequested.connect(self.connect_device)
@@ -284,6 +303,21 @@ class MainWindow(QMainWindow):
 
     def _build_menus(self) -> None:
         file_menu = self.menuBar().addMenu("&File")
+        open_action = QAction("&Open recording…", self)
+        open_action.setShortcut(QKeySequence.StandardKey.Open)
+        open_action.triggered.connect(lambda: self.open_recording())
+        file_menu.addAction(open_action)
+        samples_menu = file_menu.addMenu("Sample &recordings")
+        for path in sample_recordings():
+            action = QAction(path.stem, self)
+            action.triggered.connect(lambda _=False, p=path: self.open_recording(str(p)))
+            samples_menu.addAction(action)
+        self.record_action = QAction("&Record…", self)
+        self.record_action.setCheckable(True)
+        self.record_action.setShortcut(QKeySequence("Ctrl+R"))
+        self.record_action.triggered.connect(self._on_record_triggered)
+        file_menu.addAction(self.record_action)
+        file_menu.addSeparator()
         quit_action = QAction("&Quit", self)
         quit_action.setShortcut(QKeySequence.StandardKey.Quit)
         quit_action.triggered.connect(self.close)
@@ -340,11 +374,64 @@ class MainWindow(QMainWindow):
         self.messages.appendPlainText(f"{stamp}  {'ERROR  ' if error else ''}{message}")
 
     # -- worker events ----------------------------------------------------------------------
+    # -- recording and replay ------------------------------------------------------------------
+    def open_recording(self, path: str | None = None) -> None:
+        """Replay a recording through the whole pipeline (it becomes the device)."""
+        if path is None:
+            path, _ = QFileDialog.getOpenFileName(
+                self, "Open recording", str(recordings_dir()), "Recordings (*.csv)"
+            )
+            if not path:
+                return
+        self.connect_device(replay_url(path))
+
+    def start_recording(self, path: str, note: str = "") -> None:
+        self.session.requestStartRecording.emit(path, note)
+
+    def _on_record_triggered(self, checked: bool) -> None:
+        if not checked:
+            self.session.requestStopRecording.emit()
+            return
+        self.record_action.setChecked(False)  # until the worker says it records
+        if self.session.device_info is None:
+            self.show_error("Connect a device before recording.")
+            return
+        folder = recordings_dir()
+        folder.mkdir(parents=True, exist_ok=True)
+        name = time.strftime("inclinometer-%Y%m%d-%H%M%S.csv")
+        path, _ = QFileDialog.getSaveFileName(
+            self, "Record to", str(folder / name), "Recordings (*.csv)"
+        )
+        if path:
+            self.start_recording(path)
+
+    def _on_recording_changed(self, status) -> None:
+        recording = status is not None and status.state == "recording"
+        self.record_action.setChecked(recording)
+        if status is None:
+            self.status_recording.setText("")
+            return
+        self.status_recording.setText(
+            f"● REC {status.path.name}  {status.duration_s:.0f} s, {status.rows_written:,} rows"
+            if recording else f"Recording {status.state}"
+        )
+        self.status_recording.setStyleSheet(f"color: {theme.ALARM_RED}; font-weight: bold;")
+
+    def _on_reconnecting(self, message: str) -> None:
+        self._awaiting_board = True
+        self.device_bar.set_state("stalled", "Unplugged — waiting for the board…")
+        self.banner.show_message(message)
+        self.log(message, error=True)
+
     def _on_connected(self, info: DeviceInfo) -> None:
+        if self._awaiting_board:  # the board is back: the unplug warning is over
+            self._awaiting_board = False
+            self.banner.hide()
         self.device_bar.select_url(info.url)
         self.device_bar.set_state("streaming", "Streaming")
         self.device_panel.show_info(info)
         self.status_device.setText(f"{info.name}  ·  {info.odr_hz:.1f} Hz")
+        self.replay_bar.setVisible(scheme_of(info.url) == "replay")
         is_sim = urlsplit(info.url).scheme == "sim"
         if is_sim:
             self.simulator_panel.show_url(info.url)
@@ -367,6 +454,8 @@ class MainWindow(QMainWindow):
         self.log("Disconnected" + (f": {reason}" if reason else ""))
 
     def _on_status(self, status: StreamStatus) -> None:
+        if status.replay is not None:
+            self.replay_bar.show_position(*status.replay)
         stalled = status.measured_rate_hz <= 0.0 and status.samples > 0
         lost = f"  ·  lost {status.lost_samples:,}" if status.lost_samples else ""
         text = f"{status.measured_rate_hz:.1f} Hz{lost}"
