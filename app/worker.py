@@ -24,6 +24,7 @@ from app.core.calibration_procedures import (
     ProfileStore,
     SensorSettings,
     TareReference,
+    make_profile,
 )
 from app.core.pipeline import Pipeline
 from app.core.recording import RecordingError, RecordingWriter, recording_metadata
@@ -161,6 +162,18 @@ class DeviceWorker(QObject):
     # -- calibration ------------------------------------------------------------------------
     def _load_profile(self, info: DeviceInfo) -> None:
         """Apply the device's stored profile, if any; a bad file is reported, never fatal."""
+        recorded = getattr(self._device, "recorded_calibration", None)
+        if recorded is not None:
+            # A replay reproduces its recording: the calibration it was made with, not the
+            # device's current profile (which may have changed since).
+            self._apply_profile(None if recorded.is_identity else make_profile(
+                info.unique_id, recorded,
+                SensorSettings(info.odr_hz, info.accel_fs_g, info.gyro_fs_dps, info.sensor),
+                method="recorded",
+            ))
+            self.pipeline.set_level_reference(None)
+            self.tareChanged.emit(None)
+            return
         profile = None
         try:
             profile = self.profile_store.load_for_device(info.unique_id)
@@ -334,10 +347,14 @@ class DeviceWorker(QObject):
             elif name == "loop":
                 device.loop = bool(value)
             elif name in ("seek", "next_gap"):
-                target = float(value) if name == "seek" else device.next_gap()
-                if target is None:
-                    self.error.emit("No further gap in this recording.")
-                    return
+                if name == "seek":
+                    target = float(value)
+                else:
+                    later = [p for p in device.gap_positions_s if p > device.position_s + 1e-9]
+                    if not later:
+                        self.error.emit("No further gap in this recording.")
+                        return
+                    target = later[0]
                 # Time would run backwards: start the views afresh at the new position.
                 self.pipeline.configure(device.info.odr_hz)
                 device.seek(target)

@@ -60,3 +60,11 @@ def test_an_empty_ring_gives_empty_traces():
     for factor in (1, 5):
         t, v = trace.window(10.0, factor)
         assert t.shape == (0,) and v.shape == (0, 3)
+
+
+def test_connect_mask_breaks_the_line_before_the_first_sample_after_lost_data():
+    from app.core.decimation import connect_mask
+
+    gap = np.array([0.0, 0.0, 0.0, 1.0, 0.0])
+    assert connect_mask(gap).tolist() == [True, True, False, True, True]
+    assert connect_mask(np.zeros(0)).tolist() == []

@@ -88,3 +88,31 @@ def test_sample_recordings_are_offered_and_open(qtbot, window):
         samples.actions()[0].trigger()
     assert blocker.args[0].url.startswith("replay://")
     qtbot.waitUntil(lambda: window.session.pipeline.counters.samples > 50, timeout=TIMEOUT_MS)
+
+
+def test_lost_data_shows_as_a_break_in_the_plots(qtbot, window, tmp_path):
+    from app.core.recording import RecordingWriter, recording_metadata
+    from app.core.samples import RawBlock, ScaleFactors
+
+    path = tmp_path / "gap.csv"
+    n = 2000
+    t = np.arange(n) / 200.0
+    t[1000:] += 3.0  # three seconds lost
+    gap = np.zeros(n, bool)
+    gap[1000] = True
+    accel = np.tile([0.0, 0.0, 9.80665], (n, 1))
+    block = RawBlock(t, accel, np.zeros((n, 3)), np.full(n, 25.0), ScaleFactors(1.0, 1.0),
+                     gap=gap)
+    with RecordingWriter(path, recording_metadata(note="gap")) as writer:
+        writer.write(block)
+    with qtbot.waitSignal(window.session.connected, timeout=TIMEOUT_MS):
+        window.connect_device(f"replay://{path}?speed=max")
+    qtbot.waitUntil(lambda: window.session.pipeline.counters.samples == n, timeout=TIMEOUT_MS)
+    curve = window.plots.accel_curves[2]
+
+    def has_break() -> bool:
+        connect = curve.opts.get("connect")
+        return isinstance(connect, np.ndarray) and not connect.all()
+
+    qtbot.waitUntil(has_break, timeout=TIMEOUT_MS)
+    assert window.session.pipeline.counters.gaps == 1

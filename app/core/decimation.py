@@ -117,3 +117,16 @@ class IncrementalMinMax:
         out_t = np.concatenate([self._run_t.reshape(-1), t])
         out_values = np.concatenate([self._run_values.reshape(-1, self._width), values])
         return out_t, out_values
+
+
+def connect_mask(gap: np.ndarray) -> np.ndarray:
+    """pyqtgraph ``connect`` array: False between a point and the next one after lost data.
+
+    ``gap`` is the (possibly decimated) gap column: values > 0.5 mark the first sample after
+    a loss, so the line is broken just before it and the plot shows the hole.
+    """
+    gap = np.asarray(gap).reshape(-1)
+    connect = np.ones(len(gap), dtype=bool)
+    if len(gap) > 1:
+        connect[:-1] = gap[1:] <= 0.5
+    return connect

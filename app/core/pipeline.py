@@ -29,7 +29,7 @@ SAMPLE_COLUMNS = {
     "raw_accel": 3, "raw_gyro": 3,
 }
 ORIENTATION_COLUMNS = {
-    "t": 1, "quat": 4, "roll": 1, "pitch": 1, "tilt": 1, "direction": 1,
+    "t": 1, "quat": 4, "roll": 1, "pitch": 1, "tilt": 1, "direction": 1, "gap": 1,
     # From the reference orientation when the source knows it (NaN otherwise):
     "ref_roll": 1, "ref_pitch": 1, "ref_tilt": 1, "incl_error": 1,
 }
@@ -179,7 +179,7 @@ class Pipeline:
             {
                 "t": block.t_s, "quat": shown_quat, "roll": angles.roll_deg,
                 "pitch": angles.pitch_deg, "tilt": angles.tilt_deg,
-                "direction": angles.direction_deg, **ref_columns,
+                "direction": angles.direction_deg, "gap": block.gap, **ref_columns,
             }
         )
         for name, comparison in self.comparisons.items():

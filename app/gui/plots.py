@@ -130,22 +130,27 @@ class LivePlots(QWidget):
         gyro_dps: np.ndarray,
         angles_t_rel: np.ndarray,
         angles: dict[str, np.ndarray],
+        sensor_connect: np.ndarray | str = "all",
+        angle_connect: np.ndarray | str = "all",
     ) -> None:
         """Replace every curve: times (N,) relative to now and vectors (N, 3) for the sensor
         plots; times (M,) and traces (M,) for the angle plot.
 
         Angle traces missing from ``angles`` (or NaN at the newest sample: no reference) are
-        hidden.
+        hidden. ``*_connect`` are pyqtgraph ``connect`` arrays: False breaks the line after
+        that point (lost data shows as a hole).
         """
         for axis, curve in enumerate(self.accel_curves):
-            curve.setData(t_rel, accel_g[:, axis], skipFiniteCheck=True)
+            curve.setData(t_rel, accel_g[:, axis], connect=sensor_connect, skipFiniteCheck=True)
         for axis, curve in enumerate(self.gyro_curves):
-            curve.setData(t_rel, gyro_dps[:, axis], skipFiniteCheck=True)
+            curve.setData(t_rel, gyro_dps[:, axis], connect=sensor_connect, skipFiniteCheck=True)
         for name, curve in self.angle_curves.items():
             values = angles.get(name)
             visible = values is not None and len(values) > 0 and bool(np.isfinite(values[-1]))
             curve.setVisible(visible)
             if visible:
-                curve.setData(angles_t_rel, values, skipFiniteCheck=True)
+                curve.setData(
+                    angles_t_rel, values, connect=angle_connect, skipFiniteCheck=True
+                )
             elif curve.xData is not None and len(curve.xData):
                 curve.setData([], [])

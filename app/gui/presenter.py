@@ -14,7 +14,7 @@ from PySide6.QtCore import QObject, QTimer, Signal
 from PySide6.QtWidgets import QLabel
 
 from app.core.comparison import summarize_errors
-from app.core.decimation import IncrementalMinMax, decimation_factor
+from app.core.decimation import IncrementalMinMax, connect_mask, decimation_factor
 from app.core.filters import FILTERS
 from app.core.orientation import slope_from_angle
 from app.core.readout import averaged_angles
@@ -161,9 +161,9 @@ class LivePresenter(QObject):
 
     def _update_plots(self, samples, orientation) -> None:
         if self._sensor_trace is None or self._sensor_trace.ring is not samples:
-            self._sensor_trace = IncrementalMinMax(samples, ["accel", "gyro"])
+            self._sensor_trace = IncrementalMinMax(samples, ["accel", "gyro", "gap"])
         if self._angle_trace is None or self._angle_trace.ring is not orientation:
-            self._angle_trace = IncrementalMinMax(orientation, ANGLE_TRACES)
+            self._angle_trace = IncrementalMinMax(orientation, [*ANGLE_TRACES, "gap"])
         window = self.plots.window_s
         # A min/max pair per two pixel columns: all a plot can show at 1 px line width.
         info = self.session.device_info
@@ -179,9 +179,11 @@ class LivePresenter(QObject):
         self.plots.set_data(
             sensor_t - newest,
             sensor[:, :3] / STANDARD_GRAVITY_M_S2,
-            np.degrees(sensor[:, 3:]),
+            np.degrees(sensor[:, 3:6]),
             angle_t - newest,
             {key: angle_values[:, i] for i, key in enumerate(ANGLE_TRACES)},
+            sensor_connect=connect_mask(sensor[:, 6]),
+            angle_connect=connect_mask(angle_values[:, len(ANGLE_TRACES)]),
         )
 
     def _update_comparisons(self, window: float, factor: int, newest: float) -> None:
