@@ -331,7 +331,8 @@ class DeviceWorker(QObject):
 
     @Slot(str, object)
     def replay_control(self, name: str, value: object) -> None:
-        """play, pause, step, speed (0 = as fast as possible), loop, seek (s), next_gap."""
+        """play, pause, step, speed (0 = as fast as possible), loop, seek (s from the start),
+        next_gap, next_bookmark, add_bookmark."""
         device = self._device
         if getattr(device, "scheme", "") != "replay":
             return
@@ -346,9 +347,20 @@ class DeviceWorker(QObject):
                 device.set_speed(value if value else "max")
             elif name == "loop":
                 device.loop = bool(value)
-            elif name in ("seek", "next_gap"):
+            elif name == "add_bookmark":
+                device.add_bookmark()
+            elif name in ("seek", "next_gap", "next_bookmark"):
                 if name == "seek":
                     target = float(value)
+                elif name == "next_bookmark":
+                    later = [
+                        device.bookmark_position_s(b) for b in device.bookmarks
+                        if device.bookmark_position_s(b) > device.position_s + 1e-9
+                    ]
+                    if not later:
+                        self.error.emit("No further bookmark in this recording.")
+                        return
+                    target = min(later)
                 else:
                     later = [p for p in device.gap_positions_s if p > device.position_s + 1e-9]
                     if not later:

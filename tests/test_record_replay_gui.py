@@ -116,3 +116,36 @@ def test_lost_data_shows_as_a_break_in_the_plots(qtbot, window, tmp_path):
 
     qtbot.waitUntil(has_break, timeout=TIMEOUT_MS)
     assert window.session.pipeline.counters.gaps == 1
+
+
+def test_plots_export_to_png_and_svg(qtbot, window, tmp_path):
+    qtbot.waitUntil(lambda: window.session.pipeline.counters.samples > 300, timeout=TIMEOUT_MS)
+    png, svg = tmp_path / "plots.png", tmp_path / "plots.svg"
+    window.export_plots(str(png))
+    window.export_plots(str(svg))
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "<svg" in svg.read_text()
+    window.export_plots(str(tmp_path / "plots.bmp"))
+    assert "Plots not exported" in window.banner.label.text()
+
+
+def test_typed_seek_and_bookmarks_in_a_sample_recording(qtbot, window):
+    from app.core.recording import sample_recording
+    from drivers.replay import replay_url
+
+    with qtbot.waitSignal(window.session.connected, timeout=TIMEOUT_MS):
+        window.connect_device(replay_url(sample_recording("tour-104hz"), speed=5))
+    session = window.session
+    qtbot.waitUntil(lambda: session.pipeline.counters.samples > 50, timeout=TIMEOUT_MS)
+    stream = []
+    session.status.connect(stream.append)
+
+    window.replay_bar.goto_spin.setValue(30.0)
+    window.replay_bar.goto_spin.lineEdit().returnPressed.emit()
+    qtbot.waitUntil(lambda: bool(stream) and stream[-1].replay[0] >= 30.0, timeout=TIMEOUT_MS)
+    assert stream[-1].replay[0] < 40.0
+
+    window.replay_bar.bookmark_button.click()
+    position = stream[-1].replay[0]
+    qtbot.waitUntil(lambda: stream[-1].replay[0] != position, timeout=TIMEOUT_MS)
+    assert stream[-1].replay[0] > position

@@ -312,6 +312,10 @@ class MainWindow(QMainWindow):
             action = QAction(path.stem, self)
             action.triggered.connect(lambda _=False, p=path: self.open_recording(str(p)))
             samples_menu.addAction(action)
+        export_plots = QAction("&Export plots…", self)
+        export_plots.setToolTip("Save the live plots as PNG or SVG")
+        export_plots.triggered.connect(lambda: self.export_plots())
+        file_menu.addAction(export_plots)
         self.record_action = QAction("&Record…", self)
         self.record_action.setCheckable(True)
         self.record_action.setShortcut(QKeySequence("Ctrl+R"))
@@ -384,6 +388,22 @@ class MainWindow(QMainWindow):
             if not path:
                 return
         self.connect_device(replay_url(path))
+
+    def export_plots(self, path: str | None = None) -> None:
+        """Save the plots as they are shown: PNG (raster) or SVG (vector), by file suffix."""
+        if path is None:
+            path, _ = QFileDialog.getSaveFileName(
+                self, "Export plots", str(Path.home() / "inclinometer-plots.png"),
+                "PNG image (*.png);;SVG drawing (*.svg)",
+            )
+            if not path:
+                return
+        try:
+            self.plots.export(path)
+        except (OSError, ValueError) as exc:
+            self.show_error(f"Plots not exported: {exc}")
+            return
+        self.log(f"Exported the plots to {path}")
 
     def start_recording(self, path: str, note: str = "") -> None:
         self.session.requestStartRecording.emit(path, note)

@@ -107,6 +107,34 @@ class LivePlots(QWidget):
         curves[0].setData(t_rel, roll, skipFiniteCheck=True)
         curves[1].setData(t_rel, pitch, skipFiniteCheck=True)
 
+    def export(self, path: str) -> None:
+        """Write all plots to ``path``: ``.png`` (pyqtgraph's exporter) or ``.svg``.
+
+        SVG goes through Qt's own QSvgGenerator: pyqtgraph's SVG exporter fails on the
+        path data of current Qt releases.
+        """
+        suffix = path.lower().rsplit(".", 1)[-1]
+        if suffix == "png":
+            from pyqtgraph import exporters
+
+            exporters.ImageExporter(self.graphics.scene()).export(path)
+        elif suffix == "svg":
+            from PySide6.QtCore import QRect
+            from PySide6.QtGui import QPainter
+            from PySide6.QtSvg import QSvgGenerator
+
+            size = self.graphics.size()
+            generator = QSvgGenerator()
+            generator.setFileName(path)
+            generator.setSize(size)
+            generator.setViewBox(QRect(0, 0, size.width(), size.height()))
+            generator.setTitle("Inclinometer plots")
+            painter = QPainter(generator)
+            self.graphics.render(painter)
+            painter.end()
+        else:
+            raise ValueError(f"{path}: use a .png or .svg file name")
+
     def set_window(self, seconds: float) -> None:
         """Show the last ``seconds`` of data."""
         self._window_s = float(seconds)

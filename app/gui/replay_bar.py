@@ -7,7 +7,16 @@ Shown while a ``replay://`` device is connected. Every action is a request to th
 from __future__ import annotations
 
 from PySide6.QtCore import Qt, Signal
-from PySide6.QtWidgets import QCheckBox, QComboBox, QLabel, QSlider, QToolBar, QToolButton, QWidget
+from PySide6.QtWidgets import (
+    QCheckBox,
+    QComboBox,
+    QDoubleSpinBox,
+    QLabel,
+    QSlider,
+    QToolBar,
+    QToolButton,
+    QWidget,
+)
 
 SPEEDS = (("0.1×", 0.1), ("0.25×", 0.25), ("0.5×", 0.5), ("1×", 1.0), ("2×", 2.0),
           ("5×", 5.0), ("10×", 10.0), ("max", 0.0))
@@ -38,6 +47,15 @@ class ReplayBar(QToolBar):
         self.gap_button.setText("Next gap")
         self.gap_button.clicked.connect(lambda: self.control.emit("next_gap", None))
         self.addWidget(self.gap_button)
+        self.bookmark_button = QToolButton()
+        self.bookmark_button.setText("Next bookmark")
+        self.bookmark_button.clicked.connect(lambda: self.control.emit("next_bookmark", None))
+        self.addWidget(self.bookmark_button)
+        self.mark_button = QToolButton()
+        self.mark_button.setText("Add bookmark")
+        self.mark_button.setToolTip("Bookmark the current position (kept while replaying)")
+        self.mark_button.clicked.connect(lambda: self.control.emit("add_bookmark", None))
+        self.addWidget(self.mark_button)
         self.speed_combo = QComboBox()
         for label, speed in SPEEDS:
             self.speed_combo.addItem(label, speed)
@@ -57,6 +75,17 @@ class ReplayBar(QToolBar):
         self.addWidget(self.slider)
         self.position_label = QLabel("0.0 / 0.0 s")
         self.addWidget(self.position_label)
+        self.goto_spin = QDoubleSpinBox()
+        self.goto_spin.setDecimals(2)
+        self.goto_spin.setRange(0.0, 1e6)
+        self.goto_spin.setSuffix(" s")
+        self.goto_spin.setKeyboardTracking(False)
+        self.goto_spin.setToolTip("Type a time from the start and press Enter to go there")
+        self.goto_spin.lineEdit().returnPressed.connect(
+            lambda: self.control.emit("seek", self.goto_spin.value())
+        )
+        self.addWidget(QLabel(" Go to "))
+        self.addWidget(self.goto_spin)
         self._duration_s = 0.0
 
     def _on_play_toggled(self, playing: bool) -> None:
@@ -70,6 +99,7 @@ class ReplayBar(QToolBar):
     def show_position(self, position_s: float, duration_s: float, playing: bool) -> None:
         """Reflect the device's position (unless the user is dragging the slider)."""
         self._duration_s = duration_s
+        self.goto_spin.setMaximum(max(duration_s, 0.0))
         if not self.slider.isSliderDown() and duration_s > 0:
             self.slider.setValue(round(SLIDER_STEPS * position_s / duration_s))
         self.position_label.setText(f" {position_s:.1f} / {duration_s:.1f} s ")
