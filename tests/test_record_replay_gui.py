@@ -149,3 +149,34 @@ def test_typed_seek_and_bookmarks_in_a_sample_recording(qtbot, window):
     position = stream[-1].replay[0]
     qtbot.waitUntil(lambda: stream[-1].replay[0] != position, timeout=TIMEOUT_MS)
     assert stream[-1].replay[0] > position
+
+
+def test_compare_view_error_over_time_and_range_statistics(qtbot, window, artifacts_dir):
+    from app.core.recording import sample_recording
+    from drivers.replay import replay_url
+
+    with qtbot.waitSignal(window.session.connected, timeout=TIMEOUT_MS):
+        window.connect_device(replay_url(sample_recording("translation-208hz"), speed=2))
+    window.session.requestComparisons.emit(["vqf"])
+    session = window.session
+    qtbot.waitUntil(lambda: session.pipeline.counters.samples > 1500, timeout=TIMEOUT_MS)
+    # The recording has reference columns: the error plot appears with a curve per filter.
+    qtbot.waitUntil(lambda: window.plots.error_visible, timeout=TIMEOUT_MS)
+    qtbot.waitUntil(
+        lambda: curve_points(window.plots.error_curve) > 10
+        and "vqf" in window.plots.comparison_error_curves
+        and curve_points(window.plots.comparison_error_curves["vqf"]) > 10,
+        timeout=TIMEOUT_MS,
+    )
+    window.range_box.setChecked(True)
+    window.plots.region.setRegion((-2.0, -1.0))
+    window.plots.region.sigRegionChangeFinished.emit(window.plots.region)
+    text = window.range_label.text()
+    assert "roll mean" in text and "pitch mean" in text and "spread" in text
+    duration = float(text.split(" s,")[0])
+    assert duration == pytest.approx(1.0, abs=0.05)
+    window.grab().save(os.path.join(artifacts_dir, "compare_view.png"))
+
+
+def curve_points(curve) -> int:
+    return 0 if curve.xData is None else len(curve.xData)

@@ -108,8 +108,8 @@ class Pipeline:
     def set_comparisons(self, names: list[str]) -> list[str]:
         """Run these filters side by side with the main one (by registry name).
 
-        Filters already running keep their state; new ones start from the main filter's
-        current orientation. Returns the names now running.
+        Filters already running keep their state; new ones start on their own from the next
+        sample. Returns the names now running.
         """
         running = {}
         buffers = {}
@@ -120,8 +120,8 @@ class Pipeline:
                 continue
             new_filter = create_filter(name)
             new_filter.warm_up()
-            if self.counters.samples:
-                new_filter.reset(self.filter.quaternion, self.filter.last_time_s)
+            # It starts on its own (from the accelerometer at the next sample): inheriting the
+            # main filter's estimate would also inherit its current error.
             running[name] = new_filter
             buffers[name] = RingBuffer(self._capacity, COMPARISON_COLUMNS)
         # Replace whole dicts: a reader in another thread sees either the old or the new one.

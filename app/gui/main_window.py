@@ -10,6 +10,7 @@ from urllib.parse import urlsplit
 from PySide6.QtCore import QSettings, Qt, QTimer
 from PySide6.QtGui import QAction, QCloseEvent, QKeySequence, QShowEvent
 from PySide6.QtWidgets import (
+    QCheckBox,
     QComboBox,
     QDockWidget,
     QFileDialog,
@@ -204,6 +205,7 @@ class MainWindow(QMainWindow):
         session.reconnecting.connect(self._on_reconnecting)
         session.recordingChanged.connect(self._on_recording_changed)
         self.replay_bar.control.connect(session.requestReplayControl)
+        self.plots.rangeSelected.connect(self.show_range_statistics)
         self._awaiting_board = False
         self.calibration_wizard: CalibrationWizard | None = None
         self._show_calibration(None)
@@ -281,6 +283,13 @@ class MainWindow(QMainWindow):
             lambda _: self.plots.set_window(self.window_combo.currentData())
         )
         bar.addWidget(self.window_combo)
+        self.range_box = QCheckBox("Select range")
+        self.range_box.setToolTip("Drag a time range on the angle plot for its statistics")
+        self.range_box.toggled.connect(self._on_range_toggled)
+        bar.addWidget(self.range_box)
+        self.range_label = QLabel()
+        self.range_label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        bar.addWidget(self.range_label, 1)
         bar.addStretch(1)
         layout.addLayout(bar)
         layout.addWidget(self.plots, 1)
@@ -378,6 +387,30 @@ class MainWindow(QMainWindow):
         self.messages.appendPlainText(f"{stamp}  {'ERROR  ' if error else ''}{message}")
 
     # -- worker events ----------------------------------------------------------------------
+    # -- time-range statistics -----------------------------------------------------------------
+    def _on_range_toggled(self, enabled: bool) -> None:
+        self.plots.set_range_selection(enabled)
+        if not enabled:
+            self.range_label.setText("")
+
+    def show_range_statistics(self, *_args: object) -> None:
+        """Statistics per angle over the range selected on the angle plot."""
+        selected = self.plots.selected_range()
+        if selected is None:
+            return
+        result = self.presenter.range_statistics(*selected)
+        if result is None:
+            self.range_label.setText("No data in the selected range")
+            return
+        parts = [
+            f"{name} mean {a.mean:+.3f}° std {a.std:.3f}° min {a.minimum:+.3f}° "
+            f"max {a.maximum:+.3f}° spread {a.spread:.3f}°"
+            for name, a in (("roll", result.roll), ("pitch", result.pitch))
+        ]
+        self.range_label.setText(
+            f"{result.duration_s:.2f} s, {result.samples:,} samples · " + " · ".join(parts)
+        )
+
     # -- recording and replay ------------------------------------------------------------------
     def open_recording(self, path: str | None = None) -> None:
         """Replay a recording through the whole pipeline (it becomes the device)."""
@@ -474,6 +507,8 @@ class MainWindow(QMainWindow):
         self.log("Disconnected" + (f": {reason}" if reason else ""))
 
     def _on_status(self, status: StreamStatus) -> None:
+        if self.range_box.isChecked():
+            self.show_range_statistics()
         if status.replay is not None:
             self.replay_bar.show_position(*status.replay)
         stalled = status.measured_rate_hz <= 0.0 and status.samples > 0

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Qt
+from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import QVBoxLayout, QWidget
 
 from app.gui import theme
@@ -32,7 +32,9 @@ def _make_plot(title: str, unit: str) -> pg.PlotItem:
 
 
 class LivePlots(QWidget):
-    """Three stacked, x-linked plots. Times are given relative to the newest sample (<= 0)."""
+    """Stacked, x-linked plots. Times are given relative to the newest sample (<= 0)."""
+
+    rangeSelected = Signal(float, float)  # start, end in s relative to the newest sample
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -76,7 +78,58 @@ class LivePlots(QWidget):
             ),
         }
         self.comparison_curves: dict[str, tuple[pg.PlotDataItem, pg.PlotDataItem]] = {}
+
+        # Inclination error against the reference, shown only when the source has one.
+        self.error_plot = _make_plot("error", "°")
+        self.error_plot.setXLink(self.accel_plot)
+        self.error_curve = self.error_plot.plot(pen=pen(theme.TRACE_TILT), name="main filter")
+        self.comparison_error_curves: dict[str, pg.PlotDataItem] = {}
+        self._error_shown = False
+
+        # A time range the user selects on the angle plot (statistics per angle).
+        self.region = pg.LinearRegionItem(values=(-3.0, -1.0))
+        self.region.setZValue(-10)
+        self.region.sigRegionChangeFinished.connect(self._emit_range)
+        self._region_shown = False
         self.set_window(self._window_s)
+
+    def set_error_visible(self, visible: bool) -> None:
+        """Add or remove the inclination-error plot (below the angles)."""
+        if visible == self._error_shown:
+            return
+        self._error_shown = visible
+        if visible:
+            self.graphics.addItem(self.error_plot, row=3, col=0)
+        else:
+            self.graphics.removeItem(self.error_plot)
+
+    @property
+    def error_visible(self) -> bool:
+        return self._error_shown
+
+    def set_range_selection(self, enabled: bool) -> None:
+        """Show a draggable time range on the angle plot; its statistics are reported."""
+        if enabled == self._region_shown:
+            return
+        self._region_shown = enabled
+        if enabled:
+            self.region.setRegion((-0.3 * self._window_s, -0.1 * self._window_s))
+            self.angle_plot.addItem(self.region)
+            self._emit_range()
+        else:
+            self.angle_plot.removeItem(self.region)
+
+    def selected_range(self) -> tuple[float, float] | None:
+        """The selected range in seconds relative to the newest sample, or None."""
+        if not self._region_shown:
+            return None
+        start, end = self.region.getRegion()
+        return float(start), float(end)
+
+    def _emit_range(self) -> None:
+        selected = self.selected_range()
+        if selected is not None:
+            self.rangeSelected.emit(*selected)
 
     def set_comparisons(self, filters: list[tuple[str, str]]) -> None:
         """Show roll and pitch curves for these (name, title) filters; drop the others."""
@@ -96,16 +149,30 @@ class LivePlots(QWidget):
                 pen=pg.mkPen(colour, width=1, style=Qt.PenStyle.DotLine), name=f"{title} pitch"
             )
             self.comparison_curves[name] = (roll, pitch)
+            self.comparison_error_curves[name] = self.error_plot.plot(
+                pen=pg.mkPen(colour, width=1), name=title
+            )
+        for name in list(self.comparison_error_curves):
+            if name not in wanted:
+                self.error_plot.removeItem(self.comparison_error_curves.pop(name))
 
     def set_comparison_data(
-        self, name: str, t_rel: np.ndarray, roll: np.ndarray, pitch: np.ndarray
+        self, name: str, t_rel: np.ndarray, roll: np.ndarray, pitch: np.ndarray,
+        error: np.ndarray | None = None,
     ) -> None:
-        """Replace one compared filter's roll and pitch traces."""
+        """Replace one compared filter's roll and pitch traces (and its error trace)."""
         curves = self.comparison_curves.get(name)
         if curves is None:
             return
         curves[0].setData(t_rel, roll, skipFiniteCheck=True)
         curves[1].setData(t_rel, pitch, skipFiniteCheck=True)
+        if error is not None and self._error_shown and name in self.comparison_error_curves:
+            self.comparison_error_curves[name].setData(t_rel, error, skipFiniteCheck=True)
+
+    def set_error_data(self, t_rel: np.ndarray, error: np.ndarray) -> None:
+        """The main filter's inclination error (degrees) over time."""
+        if self._error_shown:
+            self.error_curve.setData(t_rel, error, skipFiniteCheck=True)
 
     def export(self, path: str) -> None:
         """Write all plots to ``path``: ``.png`` (pyqtgraph's exporter) or ``.svg``.

@@ -13,6 +13,7 @@ import numpy as np
 from PySide6.QtCore import QObject, QTimer, Signal
 from PySide6.QtWidgets import QLabel
 
+from app.core.calibration_procedures import StaticStatistics
 from app.core.comparison import summarize_errors
 from app.core.decimation import IncrementalMinMax, connect_mask, decimation_factor
 from app.core.filters import FILTERS
@@ -163,7 +164,9 @@ class LivePresenter(QObject):
         if self._sensor_trace is None or self._sensor_trace.ring is not samples:
             self._sensor_trace = IncrementalMinMax(samples, ["accel", "gyro", "gap"])
         if self._angle_trace is None or self._angle_trace.ring is not orientation:
-            self._angle_trace = IncrementalMinMax(orientation, [*ANGLE_TRACES, "gap"])
+            self._angle_trace = IncrementalMinMax(
+                orientation, [*ANGLE_TRACES, "gap", "incl_error"]
+            )
         window = self.plots.window_s
         # A min/max pair per two pixel columns: all a plot can show at 1 px line width.
         info = self.session.device_info
@@ -185,6 +188,9 @@ class LivePresenter(QObject):
             sensor_connect=connect_mask(sensor[:, 6]),
             angle_connect=connect_mask(angle_values[:, len(ANGLE_TRACES)]),
         )
+        error = angle_values[:, len(ANGLE_TRACES) + 1]
+        self.plots.set_error_visible(len(error) > 0 and bool(np.isfinite(error[-1])))
+        self.plots.set_error_data(angle_t - newest, error)
 
     def _update_comparisons(self, window: float, factor: int, newest: float) -> None:
         buffers = self.session.pipeline.comparison_buffers
@@ -192,11 +198,29 @@ class LivePresenter(QObject):
         for name, ring in buffers.items():
             trace = self._comparison_traces.get(name)
             traces[name] = trace if trace is not None and trace.ring is ring else (
-                IncrementalMinMax(ring, ["roll", "pitch"])
+                IncrementalMinMax(ring, ["roll", "pitch", "incl_error"])
             )
             t, values = traces[name].window(window, factor)
-            self.plots.set_comparison_data(name, t - newest, values[:, 0], values[:, 1])
+            self.plots.set_comparison_data(
+                name, t - newest, values[:, 0], values[:, 1], values[:, 2]
+            )
         self._comparison_traces = traces
+
+    def range_statistics(self, start_rel_s: float, end_rel_s: float):
+        """Statistics of roll, pitch and tilt over a range relative to the newest sample."""
+        orientation = self.session.pipeline.orientation
+        rows = orientation.window(self.plots.window_s, ["t", "roll", "pitch", "tilt"])
+        if len(rows["t"]) == 0:
+            return None
+        newest = rows["t"][-1]
+        inside = (rows["t"] >= newest + start_rel_s) & (rows["t"] <= newest + end_rel_s)
+        if not np.any(inside):
+            return None
+        statistics = StaticStatistics(duration_s=float("inf"))
+        statistics.update(
+            rows["t"][inside], rows["roll"][inside], rows["pitch"][inside], rows["tilt"][inside]
+        )
+        return statistics.result()
 
     def update_error_table(self) -> None:
         """Refresh the filter panel's error table (called at a low rate)."""
