@@ -144,6 +144,7 @@ class DeviceWorker(QObject):
             self.disconnected.emit(str(exc))
             return
         self._device = device
+        self._use_recorded_filter(device)
         self.pipeline.configure(info.odr_hz)
         self._time_offset_s = 0.0
         self._align_time = self._gap_pending = False
@@ -158,6 +159,20 @@ class DeviceWorker(QObject):
     @Slot()
     def disconnect_device(self) -> None:
         self._close_device("")
+
+    def _use_recorded_filter(self, device: Device) -> None:
+        """A replay runs the filter (and parameters) it was recorded with, to reproduce it."""
+        recording = getattr(device, "recording", None)
+        name = getattr(recording, "filter_name", None)
+        if not name:
+            return
+        try:
+            new_filter = self.pipeline.set_filter(name, **recording.filter_parameters)
+        except (KeyError, ValueError) as exc:
+            self.error.emit(f"The recording's filter cannot be restored ({exc}); "
+                            f"replaying with {self.pipeline.filter.title}")
+            return
+        self.filterChanged.emit(new_filter.name, new_filter.parameter_values())
 
     # -- calibration ------------------------------------------------------------------------
     def _load_profile(self, info: DeviceInfo) -> None:

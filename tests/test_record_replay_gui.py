@@ -180,3 +180,29 @@ def test_compare_view_error_over_time_and_range_statistics(qtbot, window, artifa
 
 def curve_points(curve) -> int:
     return 0 if curve.xData is None else len(curve.xData)
+
+
+def test_a_replay_restores_the_recorded_filter_and_parameters(qtbot, window, tmp_path):
+    session = window.session
+    with qtbot.waitSignal(session.filterChanged, timeout=TIMEOUT_MS):
+        session.requestFilter.emit("complementary")
+    with qtbot.waitSignal(session.filterChanged, timeout=TIMEOUT_MS):
+        session.requestFilterParameter.emit("tau_s", 2.5)
+    path = tmp_path / "complementary.csv"
+    statuses = []
+    session.recordingChanged.connect(statuses.append)
+    window.start_recording(str(path))
+    qtbot.waitUntil(
+        lambda: bool(statuses) and statuses[-1] is not None and statuses[-1].rows_synced > 200,
+        timeout=TIMEOUT_MS,
+    )
+    window.record_action.trigger()
+    qtbot.waitUntil(lambda: statuses[-1] is None, timeout=TIMEOUT_MS)
+    with qtbot.waitSignal(session.filterChanged, timeout=TIMEOUT_MS):
+        session.requestFilter.emit("madgwick")
+    with qtbot.waitSignal(session.connected, timeout=TIMEOUT_MS):
+        window.open_recording(str(path))
+    assert session.pipeline.filter.name == "complementary"
+    assert session.pipeline.filter.get_parameter("tau_s") == 2.5
+    qtbot.waitUntil(lambda: window.filter_panel.current_filter == "complementary",
+                    timeout=TIMEOUT_MS)
