@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from synthetic_blocks import G, accel_for, block
 
 from app.core.filters import FILTERS, create_filter
 from app.core.filters.base import ParameterSpec
@@ -12,22 +13,6 @@ from app.core.orientation import (
     quaternion_from_roll_pitch,
     up_in_sensor_frame,
 )
-from app.core.samples import SampleBlock
-
-G = 9.80665
-
-
-def block(t, accel, gyro=None, gap=None) -> SampleBlock:
-    t = np.asarray(t, dtype=float)
-    n = len(t)
-    accel = np.broadcast_to(np.asarray(accel, dtype=float), (n, 3)).copy()
-    gyro = np.zeros((n, 3)) if gyro is None else np.broadcast_to(gyro, (n, 3)).copy()
-    gap = np.zeros(n, bool) if gap is None else np.asarray(gap, bool)
-    return SampleBlock(t, accel, gyro, np.full(n, 25.0), gap)
-
-
-def accel_for(roll: float, pitch: float) -> np.ndarray:
-    return up_in_sensor_frame(quaternion_from_roll_pitch(roll, pitch)) * G
 
 
 def test_complementary_matches_the_thesis_formula_for_small_angles():

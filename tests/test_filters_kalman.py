@@ -13,6 +13,7 @@ import time
 
 import numpy as np
 import pytest
+from synthetic_blocks import G, accel_for, block
 
 from app.core import quaternion as quat
 from app.core.calibration import SensorCalibration
@@ -26,21 +27,7 @@ from app.core.orientation import (
 from app.core.samples import SampleBlock, convert_raw_block
 from drivers.registry import open_device
 
-G = 9.80665
 ODR = 208
-
-
-def block(t, accel, gyro=None, gap=None) -> SampleBlock:
-    t = np.asarray(t, dtype=float)
-    n = len(t)
-    accel = np.broadcast_to(np.asarray(accel, dtype=float), (n, 3)).copy()
-    gyro = np.zeros((n, 3)) if gyro is None else np.broadcast_to(gyro, (n, 3)).copy()
-    gap = np.zeros(n, bool) if gap is None else np.asarray(gap, bool)
-    return SampleBlock(t, accel, gyro, np.full(n, 25.0), gap)
-
-
-def accel_for(roll: float, pitch: float) -> np.ndarray:
-    return up_in_sensor_frame(quaternion_from_roll_pitch(roll, pitch)) * G
 
 
 def simulate(scenario: str, seconds: float, odr: float = ODR, **options) -> SampleBlock:
