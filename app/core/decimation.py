@@ -16,6 +16,21 @@ def decimation_factor(count: int, max_points: int) -> int:
     return max(1, int(np.ceil(2 * count / max(max_points, 2))))
 
 
+def _reduce_runs(
+    t: np.ndarray, values2d: np.ndarray, factor: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Whole runs of ``factor`` rows from the start: (runs, 2) first/last times and
+    (runs, 2, C) min/max values. Rows after the last whole run are ignored."""
+    runs = len(t) // factor
+    cut = runs * factor
+    starts = np.arange(0, cut, factor)
+    # reduceat runs along contiguous memory: ~10x faster than min over a reshaped axis.
+    low = np.minimum.reduceat(values2d[:cut], starts, axis=0)
+    high = np.maximum.reduceat(values2d[:cut], starts, axis=0)
+    run_t = t[:cut].reshape(runs, factor)[:, [0, -1]]
+    return run_t, np.stack([low, high], axis=1)
+
+
 def minmax_decimate(
     t: np.ndarray, values: np.ndarray, factor: int, first_index: int = 0
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -31,20 +46,11 @@ def minmax_decimate(
     head = (-first_index) % factor
     runs = (len(t) - head) // factor
     body_end = head + runs * factor
-    body = values2d[head:body_end]
-    starts = np.arange(0, runs * factor, factor)
-    # reduceat runs along contiguous memory: ~10x faster than min over a reshaped axis.
-    low = np.minimum.reduceat(body, starts, axis=0)
-    high = np.maximum.reduceat(body, starts, axis=0)
-    mid_values = np.empty((2 * runs, values2d.shape[1]))
-    mid_values[0::2] = low
-    mid_values[1::2] = high
-    run_t = t[head:body_end].reshape(runs, factor)
-    mid_t = np.empty(2 * runs)
-    mid_t[0::2] = run_t[:, 0]
-    mid_t[1::2] = run_t[:, -1]
-    out_t = np.concatenate([t[:head], mid_t, t[body_end:]])
-    out_v = np.concatenate([values2d[:head], mid_values, values2d[body_end:]])
+    run_t, run_values = _reduce_runs(t[head:body_end], values2d[head:body_end], factor)
+    out_t = np.concatenate([t[:head], run_t.reshape(-1), t[body_end:]])
+    out_v = np.concatenate(
+        [values2d[:head], run_values.reshape(-1, values2d.shape[1]), values2d[body_end:]]
+    )
     return out_t, out_v.reshape((len(out_t), *values.shape[1:]))
 
 
@@ -96,15 +102,11 @@ class IncrementalMinMax:
             self._run_values = self._run_values[:0]
             head = (-first) % factor
             t, values, first = t[head:], values[head:], first + head
-        runs = len(t) // factor
-        if runs:
-            cut = runs * factor
-            starts = np.arange(0, cut, factor)
-            low = np.minimum.reduceat(values[:cut], starts, axis=0)
-            high = np.maximum.reduceat(values[:cut], starts, axis=0)
-            run_t = t[:cut].reshape(runs, factor)[:, [0, -1]]
+        if len(t) >= factor:
+            run_t, run_values = _reduce_runs(t, values, factor)
+            cut = len(run_t) * factor
             self._run_t = np.concatenate([self._run_t, run_t])
-            self._run_values = np.concatenate([self._run_values, np.stack([low, high], 1)])
+            self._run_values = np.concatenate([self._run_values, run_values])
             t, values = t[cut:], values[cut:]
             first += cut
         self._next = first
