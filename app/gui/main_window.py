@@ -206,9 +206,6 @@ class MainWindow(QMainWindow):
         session.recordingChanged.connect(self._on_recording_changed)
         self.replay_bar.control.connect(session.requestReplayControl)
         self.plots.rangeSelected.connect(self.show_range_statistics)
-        self._awaiting_board = False
-        self.calibration_wizard: CalibrationWizard | None = None
-        self._show_calibration(None)
         self.simulator_panel.deviceRequested.connect(self.connect_device)
         self.simulator_panel.targetChanged.connect(session.requestSimulatorTarget)
         session.connected.connect(self._on_connected)
@@ -217,6 +214,9 @@ class MainWindow(QMainWindow):
         session.status.connect(self._on_status)
         session.filterChanged.connect(self._on_filter_changed)
 
+        self._awaiting_board = False
+        self.calibration_wizard: CalibrationWizard | None = None
+        self._show_calibration(None)
         self._restore_settings()
         self.refresh_devices()
         chosen_filter = filter_name or str(self.settings.value("filter", DEFAULT_FILTER))
