@@ -1,0 +1,529 @@
+/* Command handling and streaming: the firmware's behaviour, independent of the board. */
+#include "firmware.h"
+
+#include <string.h>
+
+#include "text.h"
+
+#define MESSAGE_SIZE 160
+/* Bits on I2C per FIFO word (7 bytes of 9 bits) and per poll (the FIFO_STATUS read and the
+ * burst's address phases), and the share of the bus clock the firmware plans to use. */
+#define I2C_BITS_PER_WORD 63u
+#define I2C_BITS_PER_POLL 80u
+#define I2C_USABLE_PERCENT 80u
+#define TEMPERATURE_BATCH_MHZ 12500u
+/* A full SAMPLES packet on the wire: 396 bytes + 2 of COBS + the 0x00, for 32 samples. */
+#define WIRE_BYTES_PER_FULL_PACKET 399u
+
+static const lsm_settings DEFAULT_SETTINGS = {4, 4, 250}; /* 104 Hz, +-4 g, +-250 dps */
+
+/* ---- sending */
+
+static uint32_t now_us(fw_state *fw)
+{
+    return fw->platform->micros(fw->platform->ctx);
+}
+
+/* Replies wait (briefly) for transmit room; the host repeats a command whose reply is lost. */
+static void send_reply(fw_state *fw, size_t length)
+{
+    const fw_platform *p = fw->platform;
+    uint32_t start = now_us(fw);
+    while (p->tx_free(p->ctx) < length) {
+        if ((uint32_t)(now_us(fw) - start) > FW_REPLY_TIMEOUT_US)
+            return;
+        p->delay_us(p->ctx, 100);
+    }
+    p->tx_write(p->ctx, fw->wire, length);
+}
+
+static void send_ack(fw_state *fw, uint8_t command, uint8_t status, const char *message)
+{
+    send_reply(fw, link_encode_ack(command, status, message, fw->wire));
+}
+
+static void send_log(fw_state *fw, uint8_t level, const char *message)
+{
+    send_reply(fw, link_encode_log(level, message, fw->wire));
+}
+
+static void send_config(fw_state *fw)
+{
+    link_config config = {
+        lsm_odr_mhz(&fw->chip), fw->chip.settings.accel_fs_g, fw->chip.settings.gyro_fs_dps,
+        lsm_tick_ns(&fw->chip),
+    };
+    send_reply(fw, link_encode_config(&config, fw->wire));
+}
+
+static void send_info(fw_state *fw)
+{
+    link_info info = {
+        {FW_VERSION_MAJOR, FW_VERSION_MINOR, FW_VERSION_PATCH}, fw->chip.who_am_i, {0},
+        fw->identity.name,
+    };
+    memcpy(info.unique_id, fw->identity.unique_id, sizeof info.unique_id);
+    send_reply(fw, link_encode_info(&info, fw->wire));
+}
+
+/* SAMPLES never wait: without room the packet is dropped and its sequence number tells. */
+static void send_samples(void *ctx, const fifo_packet *packet)
+{
+    fw_state *fw = ctx;
+    const fw_platform *p = fw->platform;
+    size_t n = link_encode_samples(packet->seq, packet->t0, packet->temperature_raw,
+                                   (const int16_t(*)[6])packet->samples, packet->count, fw->wire);
+    if (p->tx_free(p->ctx) >= n)
+        p->tx_write(p->ctx, fw->wire, n);
+    else
+        fw->counters.tx_dropped_packets++;
+}
+
+/* ---- the sensor */
+
+static void describe_sensor_error(fw_state *fw, int err, text *t)
+{
+    switch (err) {
+    case LSM_ERR_WHO_AM_I:
+        text_str(t, "WHO_AM_I at I2C address ");
+        text_hex8(t, fw->chip.address);
+        text_str(t, " reads ");
+        text_hex8(t, fw->chip.who_am_i);
+        text_str(t, ", an LSM6DSOX answers 0x6C: another part on the bus?");
+        break;
+    case LSM_ERR_RESET:
+        text_str(t, "the LSM6DSOX software reset did not finish within 50 ms");
+        break;
+    case LSM_ERR_READBACK:
+        text_str(t, "the LSM6DSOX did not keep its configuration (register read-back differs)");
+        break;
+    case LSM_ERR_NO_DATA:
+        text_str(t, "the LSM6DSOX produced no new data during the self-test");
+        break;
+    default:
+        text_str(t, "no LSM6DSOX answers on I2C1 (PB8 SCL, PB9 SDA) at 0x6A or 0x6B: "
+                    "check the wiring, the 3.3 V supply and the pull-ups");
+        break;
+    }
+}
+
+/* Probe (when needed) and configure with the current settings; false on failure, with a
+ * message in `t` when given. */
+static bool bring_up_sensor(fw_state *fw, text *t)
+{
+    int err = fw->chip.address && fw->chip.who_am_i == LSM6DSOX_WHO_AM_I_VALUE
+        ? LSM_OK : lsm_probe(&fw->chip);
+    if (!err)
+        err = lsm_configure(&fw->chip, &fw->chip.settings);
+    if (err == LSM_ERR_BUS && fw->chip.address) {
+        /* Answered before but not now: probe again (another address after a swap). */
+        err = lsm_probe(&fw->chip);
+        if (!err)
+            err = lsm_configure(&fw->chip, &fw->chip.settings);
+    }
+    fw->sensor_ok = err == LSM_OK;
+    if (!fw->sensor_ok) {
+        fw->counters.bus_errors++;
+        if (t)
+            describe_sensor_error(fw, err, t);
+    }
+    return fw->sensor_ok;
+}
+
+static bool start_stream(fw_state *fw)
+{
+    int16_t temperature = 0;
+    int err = lsm_fifo_reset(&fw->chip, true);
+    if (!err)
+        err = lsm_read_temperature(&fw->chip, &temperature);
+    if (err)
+        return false;
+    fifo_stream_restart(&fw->stream, lsm_odr_nominal_mhz(fw->chip.settings.odr_code),
+                        temperature);
+    fw->streaming = true;
+    fw->last_poll_us = now_us(fw);
+    return true;
+}
+
+static void sensor_lost(fw_state *fw)
+{
+    char message[MESSAGE_SIZE];
+    text t;
+    text_init(&t, message, sizeof message);
+    text_str(&t, "the LSM6DSOX at ");
+    text_hex8(&t, fw->chip.address);
+    text_str(&t, " stopped answering on I2C1; looking for it every 0.5 s");
+    fw->counters.bus_errors++;
+    fw->sensor_ok = false;
+    fw->chip.configured = false;
+    if (fw->streaming) {
+        fifo_stream_flush(&fw->stream, now_us(fw), true, send_samples, fw);
+        fw->streaming = false;
+    }
+    fw->last_retry_us = now_us(fw);
+    send_log(fw, LINK_LOG_ERROR, message);
+}
+
+/* ---- rates */
+
+bool fw_rate_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, char *why, size_t size)
+{
+    uint32_t odr_mhz = lsm_odr_nominal_mhz(odr_code);
+    text t;
+    text_init(&t, why, size);
+    if (!odr_mhz) {
+        text_str(&t, "unknown ODR code");
+        return false;
+    }
+    /* UART, 8N1: baud / 10 bytes/s; full packets take 399 bytes per 32 samples. */
+    uint64_t need_bytes_milli = (uint64_t)odr_mhz * WIRE_BYTES_PER_FULL_PACKET / LINK_MAX_SAMPLES;
+    if (baud && need_bytes_milli * 10u > (uint64_t)baud * 1000u) {
+        uint8_t highest = (uint8_t)(odr_code - 1u);
+        while (highest > LSM_ODR_CODE_MIN && !fw_rate_fits(highest, baud, 0, NULL, 0))
+            highest--;
+        text_str(&t, "ODR ");
+        text_mhz(&t, odr_mhz);
+        text_str(&t, " Hz needs ");
+        text_u32(&t, (uint32_t)(need_bytes_milli / 1000u));
+        text_str(&t, " bytes/s; the UART at ");
+        text_u32(&t, baud);
+        text_str(&t, " baud carries ");
+        text_u32(&t, baud / 10u);
+        text_str(&t, " (highest ODR ");
+        text_mhz(&t, lsm_odr_nominal_mhz(highest));
+        text_str(&t, " Hz)");
+        return false;
+    }
+    /* I2C: per sample a gyroscope and an accelerometer word, a timestamp word every 8th
+     * slot, temperature words at 12.5 Hz, and the polls' own traffic. */
+    if (i2c_hz) {
+        uint64_t words_milli = (uint64_t)odr_mhz * (2u * LSM_TIMESTAMP_DECIMATION + 1u) /
+                               LSM_TIMESTAMP_DECIMATION + TEMPERATURE_BATCH_MHZ;
+        uint64_t need_bits = words_milli * I2C_BITS_PER_WORD / 1000u +
+                             (uint64_t)I2C_BITS_PER_POLL * (1000000u / FW_POLL_INTERVAL_US);
+        uint64_t usable_bits = (uint64_t)i2c_hz * I2C_USABLE_PERCENT / 100u;
+        if (need_bits > usable_bits) {
+            uint8_t highest = (uint8_t)(odr_code - 1u);
+            while (highest > LSM_ODR_CODE_MIN && !fw_rate_fits(highest, 0, i2c_hz, NULL, 0))
+                highest--;
+            text_str(&t, "ODR ");
+            text_mhz(&t, odr_mhz);
+            text_str(&t, " Hz needs about ");
+            text_u32(&t, (uint32_t)(need_bits / 1000u));
+            text_str(&t, " kbit/s on I2C1; the bus at ");
+            text_u32(&t, i2c_hz / 1000u);
+            text_str(&t, " kHz carries about ");
+            text_u32(&t, (uint32_t)(usable_bits / 1000u));
+            text_str(&t, " (highest ODR ");
+            text_mhz(&t, lsm_odr_nominal_mhz(highest));
+            text_str(&t, " Hz)");
+            return false;
+        }
+    }
+    return true;
+}
+
+/* ---- commands */
+
+static bool check_length(fw_state *fw, uint8_t command, size_t length, size_t expected)
+{
+    if (length == expected)
+        return true;
+    char message[MESSAGE_SIZE];
+    text t;
+    text_init(&t, message, sizeof message);
+    text_str(&t, "payload of ");
+    text_u32(&t, (uint32_t)length);
+    text_str(&t, " bytes, expected ");
+    text_u32(&t, (uint32_t)expected);
+    send_ack(fw, command, LINK_ACK_BAD_ARGUMENT, message);
+    return false;
+}
+
+static void on_hello(fw_state *fw)
+{
+    char message[MESSAGE_SIZE];
+    text t;
+    text_init(&t, message, sizeof message);
+    if (!fw->sensor_ok)
+        bring_up_sensor(fw, &t);
+    send_info(fw);
+    send_config(fw);
+    if (!fw->sensor_ok)
+        send_log(fw, LINK_LOG_ERROR, message);
+}
+
+/* The reason a CONFIGURE is refused, or LINK_ACK_OK. */
+static uint8_t check_configure(fw_state *fw, const lsm_settings *s, text *t)
+{
+    if (!lsm_odr_nominal_mhz(s->odr_code)) {
+        text_str(t, "odr_code ");
+        text_u32(t, s->odr_code);
+        text_str(t, ": use 1 (12.5 Hz) to 10 (6667 Hz)");
+        return LINK_ACK_BAD_ARGUMENT;
+    }
+    if (lsm_fs_xl_code(s->accel_fs_g) < 0) {
+        text_str(t, "accel_fs_g ");
+        text_u32(t, s->accel_fs_g);
+        text_str(t, ": use 2, 4, 8 or 16");
+        return LINK_ACK_BAD_ARGUMENT;
+    }
+    if (lsm_fs_g_code(s->gyro_fs_dps) < 0) {
+        text_str(t, "gyro_fs_dps ");
+        text_u32(t, s->gyro_fs_dps);
+        text_str(t, ": use 125, 250, 500, 1000 or 2000");
+        return LINK_ACK_BAD_ARGUMENT;
+    }
+    if (fw->streaming) {
+        text_str(t, "streaming: send STOP first");
+        return LINK_ACK_BUSY;
+    }
+    if (!fw_rate_fits(s->odr_code, fw->identity.baud, fw->identity.i2c_hz, t->buf, t->size)) {
+        t->length = strlen(t->buf);
+        return LINK_ACK_BAD_ARGUMENT;
+    }
+    return LINK_ACK_OK;
+}
+
+static void on_configure(fw_state *fw, const uint8_t *payload)
+{
+    char message[MESSAGE_SIZE];
+    text t;
+    text_init(&t, message, sizeof message);
+    lsm_settings wanted = {payload[0], payload[1], get_u16(payload + 2)};
+    uint8_t status = check_configure(fw, &wanted, &t);
+    if (status == LINK_ACK_OK) {
+        lsm_settings previous = fw->chip.settings;
+        fw->chip.settings = wanted;
+        if (!bring_up_sensor(fw, &t)) {
+            fw->chip.settings = previous;
+            status = LINK_ACK_SENSOR_ERROR;
+        }
+    }
+    send_ack(fw, LINK_CONFIGURE, status, message);
+    send_config(fw);
+}
+
+static void on_start(fw_state *fw)
+{
+    char message[MESSAGE_SIZE];
+    text t;
+    text_init(&t, message, sizeof message);
+    if (fw->streaming) {
+        send_ack(fw, LINK_START, LINK_ACK_OK, "already streaming");
+        return;
+    }
+    if ((!fw->sensor_ok && !bring_up_sensor(fw, &t)) || !start_stream(fw)) {
+        if (!t.length) {
+            fw->sensor_ok = false;
+            describe_sensor_error(fw, LSM_ERR_BUS, &t);
+        }
+        send_ack(fw, LINK_START, LINK_ACK_SENSOR_ERROR, message);
+        return;
+    }
+    fw->want_streaming = true;
+    send_ack(fw, LINK_START, LINK_ACK_OK, NULL);
+    text_str(&t, "streaming ");
+    text_mhz(&t, lsm_odr_mhz(&fw->chip));
+    text_str(&t, " Hz, +-");
+    text_u32(&t, fw->chip.settings.accel_fs_g);
+    text_str(&t, " g, +-");
+    text_u32(&t, fw->chip.settings.gyro_fs_dps);
+    text_str(&t, " dps from the LSM6DSOX at ");
+    text_hex8(&t, fw->chip.address);
+    send_log(fw, LINK_LOG_INFO, message);
+}
+
+static void on_stop(fw_state *fw)
+{
+    if (fw->streaming) {
+        fifo_stream_flush(&fw->stream, now_us(fw), true, send_samples, fw);
+        fw->streaming = false;
+        if (lsm_fifo_reset(&fw->chip, false))
+            fw->sensor_ok = false;
+    }
+    fw->want_streaming = false;
+    send_ack(fw, LINK_STOP, LINK_ACK_OK, NULL);
+}
+
+static void on_self_test(fw_state *fw)
+{
+    char message[MESSAGE_SIZE];
+    text t;
+    text_init(&t, message, sizeof message);
+    if (fw->streaming) {
+        send_ack(fw, LINK_SELF_TEST, LINK_ACK_BUSY, "streaming: send STOP first");
+        return;
+    }
+    if (!fw->sensor_ok && !bring_up_sensor(fw, &t)) {
+        send_ack(fw, LINK_SELF_TEST, LINK_ACK_SENSOR_ERROR, message);
+        return;
+    }
+    lsm_self_test_result result;
+    int err = lsm_self_test(&fw->chip, &result);
+    if (err) {
+        fw->sensor_ok = false;
+        describe_sensor_error(fw, err, &t);
+        send_ack(fw, LINK_SELF_TEST, LINK_ACK_SENSOR_ERROR, message);
+        return;
+    }
+    send_ack(fw, LINK_SELF_TEST, LINK_ACK_OK, NULL);
+    link_selftest packet = {result.accel_pass, result.gyro_pass, {0}, {0}};
+    memcpy(packet.accel_delta_mg, result.accel_delta_mg, sizeof packet.accel_delta_mg);
+    memcpy(packet.gyro_delta_dps, result.gyro_delta_dps, sizeof packet.gyro_delta_dps);
+    send_reply(fw, link_encode_selftest(&packet, fw->wire));
+}
+
+static void handle(fw_state *fw, uint8_t type, const uint8_t *payload, size_t length)
+{
+    fw->counters.commands++;
+    switch (type) {
+    case LINK_HELLO:
+        if (check_length(fw, type, length, 0))
+            on_hello(fw);
+        break;
+    case LINK_CONFIGURE:
+        if (check_length(fw, type, length, 4))
+            on_configure(fw, payload);
+        else
+            send_config(fw);
+        break;
+    case LINK_START:
+        if (check_length(fw, type, length, 0))
+            on_start(fw);
+        break;
+    case LINK_STOP:
+        if (check_length(fw, type, length, 0))
+            on_stop(fw);
+        break;
+    case LINK_SELF_TEST:
+        if (check_length(fw, type, length, 0))
+            on_self_test(fw);
+        break;
+    case LINK_PING:
+        if (check_length(fw, type, length, 4))
+            send_reply(fw, link_encode_pong(get_u32(payload), fw->wire));
+        break;
+    default: {
+        char message[MESSAGE_SIZE];
+        text t;
+        text_init(&t, message, sizeof message);
+        text_str(&t, "unknown command ");
+        text_hex8(&t, type);
+        text_str(&t, " (protocol v1)");
+        send_ack(fw, type, LINK_ACK_UNSUPPORTED, message);
+        break;
+    }
+    }
+}
+
+/* ---- the loop */
+
+void fw_init(fw_state *fw, const fw_platform *platform, const fw_identity *identity)
+{
+    memset(fw, 0, sizeof *fw);
+    fw->platform = platform;
+    fw->identity = *identity;
+    link_rx_init(&fw->rx);
+    lsm_init(&fw->chip, platform);
+    fw->chip.settings = DEFAULT_SETTINGS;
+    fifo_stream_init(&fw->stream, FW_FLUSH_AFTER_US);
+    platform->delay_us(platform->ctx, FW_SENSOR_BOOT_US); /* powered up with the board */
+    bring_up_sensor(fw, NULL);
+    fw->last_retry_us = now_us(fw);
+}
+
+void fw_receive(fw_state *fw, const uint8_t *data, size_t length)
+{
+    size_t offset = 0;
+    uint8_t type;
+    const uint8_t *payload;
+    size_t payload_length;
+    while (link_rx_feed(&fw->rx, data, length, &offset, &type, &payload, &payload_length))
+        handle(fw, type, payload, payload_length);
+}
+
+static void drain_fifo(fw_state *fw)
+{
+    uint16_t words = 0;
+    bool overrun = false;
+    if (lsm_fifo_status(&fw->chip, &words, &overrun)) {
+        sensor_lost(fw);
+        return;
+    }
+    if (overrun) {
+        fifo_stream_overrun(&fw->stream, send_samples, fw);
+        send_log(fw, LINK_LOG_WARNING, "FIFO overrun: samples were lost before they could be "
+                                       "read (the host sees a gap)");
+    }
+    /* Read what is there now, in bursts; what arrives meanwhile waits for the next poll. */
+    while (words) {
+        uint16_t burst = words < FW_FIFO_BURST_WORDS ? words : (uint16_t)FW_FIFO_BURST_WORDS;
+        if (lsm_fifo_read(&fw->chip, fw->burst, burst)) {
+            sensor_lost(fw);
+            return;
+        }
+        fifo_stream_feed(&fw->stream, fw->burst, burst, now_us(fw), send_samples, fw);
+        words = (uint16_t)(words - burst);
+    }
+}
+
+static void report_tx_drops(fw_state *fw)
+{
+    uint32_t dropped = fw->counters.tx_dropped_packets - fw->reported_tx_drops;
+    const fw_platform *p = fw->platform;
+    if (!dropped || p->tx_free(p->ctx) < 2u * LINK_MAX_WIRE)
+        return;
+    char message[MESSAGE_SIZE];
+    text t;
+    text_init(&t, message, sizeof message);
+    text_u32(&t, dropped);
+    text_str(&t, " SAMPLES packets dropped: the host did not read the port fast enough");
+    fw->reported_tx_drops = fw->counters.tx_dropped_packets;
+    send_log(fw, LINK_LOG_WARNING, message);
+}
+
+void fw_poll(fw_state *fw)
+{
+    uint32_t now = now_us(fw);
+    if (!fw->sensor_ok) {
+        if ((uint32_t)(now - fw->last_retry_us) < FW_RETRY_INTERVAL_US)
+            return;
+        fw->last_retry_us = now;
+        if (!bring_up_sensor(fw, NULL))
+            return;
+        send_log(fw, LINK_LOG_INFO, "the LSM6DSOX answers again");
+        if (fw->want_streaming && !start_stream(fw))
+            sensor_lost(fw);
+        return;
+    }
+    if (!fw->streaming)
+        return;
+    if ((uint32_t)(now - fw->last_poll_us) >= FW_POLL_INTERVAL_US) {
+        fw->last_poll_us = now;
+        drain_fifo(fw);
+        if (!fw->streaming)
+            return;
+    }
+    fifo_stream_flush(&fw->stream, now_us(fw), false, send_samples, fw);
+    report_tx_drops(fw);
+}
+
+fw_led_mode fw_led_mode_now(const fw_state *fw)
+{
+    if (!fw->sensor_ok)
+        return FW_LED_ERROR;
+    return fw->streaming ? FW_LED_STREAMING : FW_LED_IDLE;
+}
+
+bool fw_led_lit(fw_led_mode mode, uint32_t now_ms)
+{
+    switch (mode) {
+    case FW_LED_STREAMING:
+        return now_ms % 1000u < 500u; /* 1 Hz */
+    case FW_LED_ERROR:
+        return now_ms % 125u < 62u;   /* 8 Hz */
+    default:
+        return true;
+    }
+}

@@ -1,0 +1,83 @@
+/* The firmware's portable core: command handling and streaming (docs/protocol.md).
+ *
+ * A board calls fw_init once, then in its main loop hands received bytes to fw_receive and calls
+ * fw_poll, which drains the LSM6DSOX FIFO into SAMPLES packets when streaming. Everything runs in
+ * that one loop; the core never blocks except for the half-second self-test. */
+#ifndef FW_FIRMWARE_H
+#define FW_FIRMWARE_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "fifo_stream.h"
+#include "link.h"
+#include "lsm6dsox.h"
+#include "platform.h"
+
+#define FW_VERSION_MAJOR 1
+#define FW_VERSION_MINOR 0
+#define FW_VERSION_PATCH 0
+
+#define FW_POLL_INTERVAL_US 2000u      /* FIFO polls while streaming */
+#define FW_FLUSH_AFTER_US 5000u        /* a packet leaves ~5 ms after its first sample */
+#define FW_RETRY_INTERVAL_US 500000u   /* looking for a lost sensor again */
+#define FW_FIFO_BURST_WORDS 128u       /* words per I2C burst */
+#define FW_REPLY_TIMEOUT_US 100000u    /* waiting for transmit room for a reply */
+#define FW_SENSOR_BOOT_US 20000u       /* LSM6DSOX boot after power-up: 10 ms (AN5272) */
+
+typedef struct fw_identity {
+    uint8_t unique_id[12]; /* the MCU's 96-bit unique id, in memory order */
+    const char *name;      /* "NUCLEO-F746ZG" */
+    uint32_t baud;         /* the UART's rate; 0 for native USB (no link limit) */
+    uint32_t i2c_hz;       /* the I2C bus clock: limits the rate the FIFO can be drained at */
+} fw_identity;
+
+typedef enum fw_led_mode {
+    FW_LED_IDLE = 0,      /* steady on: ready */
+    FW_LED_STREAMING = 1, /* blinking at 1 Hz */
+    FW_LED_ERROR = 2,     /* blinking fast: no sensor, or it stopped answering */
+} fw_led_mode;
+
+typedef struct fw_counters {
+    uint32_t commands;
+    uint32_t bus_errors;
+    uint32_t tx_dropped_packets; /* SAMPLES dropped for want of transmit room */
+} fw_counters;
+
+typedef struct fw_state {
+    const fw_platform *platform;
+    fw_identity identity;
+    link_rx rx;
+    lsm6dsox chip;
+    fifo_stream stream;
+    bool sensor_ok;       /* probed and configured */
+    bool streaming;
+    bool want_streaming;  /* the host asked for data: resume after the sensor comes back */
+    uint32_t last_poll_us;
+    uint32_t last_retry_us;
+    uint32_t reported_tx_drops;
+    fw_counters counters;
+    uint8_t wire[LINK_MAX_WIRE];
+    uint8_t burst[FW_FIFO_BURST_WORDS * LSM_FIFO_WORD_BYTES];
+} fw_state;
+
+/* Power-on: probe and configure the sensor with the defaults (104 Hz, 4 g, 250 dps). */
+void fw_init(fw_state *fw, const fw_platform *platform, const fw_identity *identity);
+
+/* Bytes from the host; commands are answered at once (through platform->tx_write). */
+void fw_receive(fw_state *fw, const uint8_t *data, size_t length);
+
+/* Call often: drains the FIFO every FW_POLL_INTERVAL_US while streaming, sends packets when
+ * due, and looks for a lost sensor again. */
+void fw_poll(fw_state *fw);
+
+/* What the LED should show, and whether it is lit at `now_ms` in that mode. */
+fw_led_mode fw_led_mode_now(const fw_state *fw);
+bool fw_led_lit(fw_led_mode mode, uint32_t now_ms);
+
+/* Whether the link and the I2C bus can carry an ODR code; when not, `why` (room for `size`
+ * bytes) says what limits it. Baud 0 means native USB. */
+bool fw_rate_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, char *why, size_t size);
+
+#endif

@@ -1,0 +1,384 @@
+/* Unit tests of the portable core in C, built with AddressSanitizer and UBSan (make host).
+ *
+ * The Python host tests check the core against the Python decoder and the emulated chip; these
+ * check what is easier to reach from C (edge cases of COBS and the receiver, the FIFO packet
+ * assembler with hand-made words) and feed random bytes through the whole core, so the
+ * sanitizers see every path. Exit status 0 when every check holds; failures are printed. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../core/cobs.h"
+#include "../core/crc16.h"
+#include "../core/fifo_stream.h"
+#include "../core/firmware.h"
+#include "../core/link.h"
+#include "../core/lsm6dsox.h"
+
+static int failures;
+static int checks;
+
+#define CHECK(cond)                                                                      \
+    do {                                                                                 \
+        checks++;                                                                        \
+        if (!(cond)) {                                                                   \
+            failures++;                                                                  \
+            fprintf(stderr, "%s:%d: check failed: %s\n", __FILE__, __LINE__, #cond);     \
+        }                                                                                \
+    } while (0)
+
+static uint32_t rng_state = 12345u;
+
+static uint32_t rnd(void)
+{
+    rng_state ^= rng_state << 13;
+    rng_state ^= rng_state >> 17;
+    rng_state ^= rng_state << 5;
+    return rng_state;
+}
+
+/* ---- CRC and COBS */
+
+static void test_crc(void)
+{
+    CHECK(crc16((const uint8_t *)"123456789", 9) == 0x29B1);
+    CHECK(crc16(NULL, 0) == 0xFFFF);
+    const uint8_t a[] = {1, 2, 3, 4, 5};
+    CHECK(crc16_update(crc16(a, 2), a + 2, 3) == crc16(a, 5));
+}
+
+static void test_cobs_round_trips(void)
+{
+    uint8_t in[700], enc[COBS_MAX_ENCODED(700)], dec[700];
+    for (int trial = 0; trial < 3000; trial++) {
+        size_t n = rnd() % sizeof in;
+        int zero_share = (int)(rnd() % 4); /* none, few, many, all */
+        for (size_t i = 0; i < n; i++) {
+            uint32_t r = rnd();
+            bool zero = zero_share == 0 ? false : zero_share == 3 ? true : r % (zero_share == 1 ? 100 : 3) == 0;
+            in[i] = zero ? 0 : (uint8_t)(1 + (r >> 8) % 255);
+        }
+        size_t e = cobs_encode(in, n, enc);
+        CHECK(e <= COBS_MAX_ENCODED(n));
+        CHECK(memchr(enc, 0, e) == NULL);
+        int d = cobs_decode(enc, e, dec, sizeof dec);
+        CHECK(d == (int)n);
+        CHECK(d < 0 || memcmp(in, dec, n) == 0);
+    }
+}
+
+static void test_cobs_rejects(void)
+{
+    uint8_t out[16];
+    const uint8_t past_end[] = {0x05, 0x01, 0x02};
+    CHECK(cobs_decode(past_end, sizeof past_end, out, sizeof out) == -1);
+    const uint8_t zero_inside[] = {0x03, 0x01, 0x00};
+    CHECK(cobs_decode(zero_inside, sizeof zero_inside, out, sizeof out) == -1);
+    const uint8_t zero_code[] = {0x00};
+    CHECK(cobs_decode(zero_code, sizeof zero_code, out, sizeof out) == -1);
+    const uint8_t too_long[] = {0x04, 1, 2, 3, 0x04, 4, 5, 6};
+    CHECK(cobs_decode(too_long, sizeof too_long, out, 5) == -1);
+    /* A run of exactly 254 non-zero bytes: with and without the trailing 0x01 block. */
+    uint8_t run[254], enc[COBS_MAX_ENCODED(254) + 1], dec[260];
+    for (size_t i = 0; i < sizeof run; i++)
+        run[i] = (uint8_t)(1 + i % 255);
+    size_t e = cobs_encode(run, sizeof run, enc);
+    CHECK(enc[0] == 0xFF);
+    CHECK(cobs_decode(enc, e, dec, sizeof dec) == 254);
+    CHECK(cobs_decode(enc, 255, dec, sizeof dec) == 254); /* without the 0x01 block */
+}
+
+/* ---- the frame receiver */
+
+static void test_rx_resync(void)
+{
+    uint8_t stream[4096];
+    size_t n = 0;
+    const uint8_t garbage[] = {0x13, 0x37, 0xFF, 0x00, 0x00, 0x02, 0x41};
+    memcpy(stream + n, garbage, sizeof garbage);
+    n += sizeof garbage;
+    stream[n++] = 0x00;
+    n += link_encode_pong(0xDEADBEEFu, stream + n);
+    /* An over-long run without a delimiter, then a good frame. */
+    memset(stream + n, 0x55, 700);
+    n += 700;
+    stream[n++] = 0x00;
+    n += link_encode_log(LINK_LOG_INFO, "hello", stream + n);
+    /* A frame with a flipped byte (bad CRC). */
+    size_t bad = link_encode_pong(1, stream + n);
+    stream[n + 3] ^= 0x40;
+    n += bad;
+    n += link_encode_ack(LINK_START, LINK_ACK_OK, NULL, stream + n);
+
+    for (int trial = 0; trial < 200; trial++) {
+        link_rx rx;
+        link_rx_init(&rx);
+        uint8_t types[8];
+        int found = 0;
+        size_t done = 0;
+        while (done < n) { /* random chunking */
+            size_t chunk = 1 + rnd() % 97;
+            if (chunk > n - done)
+                chunk = n - done;
+            size_t offset = 0;
+            uint8_t type;
+            const uint8_t *payload;
+            size_t length;
+            while (link_rx_feed(&rx, stream + done, chunk, &offset, &type, &payload, &length))
+                if (found < 8)
+                    types[found++] = type;
+            done += chunk;
+        }
+        CHECK(found == 3);
+        CHECK(found < 3 || (types[0] == LINK_PONG && types[1] == LINK_LOG && types[2] == LINK_ACK));
+        CHECK(rx.bad_frames >= 3); /* garbage, the over-long run, the bad CRC */
+    }
+}
+
+/* ---- the FIFO packet assembler */
+
+typedef struct sink_log {
+    int packets;
+    fifo_packet last[64];
+} sink_log;
+
+static void sink(void *ctx, const fifo_packet *packet)
+{
+    sink_log *log = ctx;
+    if (log->packets < 64)
+        log->last[log->packets] = *packet;
+    log->packets++;
+}
+
+/* Append a FIFO word with `tag` in time slot `slot` (TAG_CNT = slot mod 4). */
+static size_t word(uint8_t *out, uint8_t tag, uint32_t slot, const uint8_t data[6])
+{
+    out[0] = (uint8_t)((tag << 3) | ((slot & 3u) << 1));
+    memcpy(out + 1, data, 6);
+    return LSM_FIFO_WORD_BYTES;
+}
+
+/* Words of slots [first, first + count): timestamp every 8th slot at `ticks_per_slot`. */
+static uint16_t make_slots(uint8_t *out, uint32_t first, uint32_t count, uint32_t ticks0,
+                           uint32_t ticks_per_slot, uint32_t skip_accel_slot)
+{
+    uint16_t words = 0;
+    for (uint32_t slot = first; slot < first + count; slot++) {
+        uint8_t data[6] = {0};
+        if (slot % 8 == 0) {
+            put_u32(data, ticks0 + slot * ticks_per_slot);
+            words++, out += word(out, LSM_TAG_TIMESTAMP, slot, data);
+        }
+        put_u16(data, (uint16_t)slot);
+        words++, out += word(out, LSM_TAG_GYRO, slot, data);
+        if (slot != skip_accel_slot) {
+            put_u16(data, (uint16_t)(1000 + slot));
+            words++, out += word(out, LSM_TAG_ACCEL, slot, data);
+        }
+    }
+    return words;
+}
+
+static void test_fifo_stream_packets(void)
+{
+    static uint8_t buf[200 * 3 * LSM_FIFO_WORD_BYTES];
+    fifo_stream s;
+    sink_log log = {0};
+    fifo_stream_init(&s, 5000);
+    fifo_stream_restart(&s, 104000, 0);
+    /* 100 slots read at once, ticks 384.6 per slot (104 Hz): packets of 32, 32, 32 and 4. */
+    uint16_t words = make_slots(buf, 0, 100, 1000, 385, UINT32_MAX);
+    fifo_stream_feed(&s, buf, words, 0, sink, &log);
+    CHECK(log.packets == 3);
+    fifo_stream_flush(&s, 5000, false, sink, &log);
+    CHECK(log.packets == 4);
+    CHECK(log.last[0].count == 32 && log.last[3].count == 4);
+    for (int k = 0; k < 4; k++) {
+        CHECK(log.last[k].seq == k);
+        CHECK(log.last[k].t0 == 1000u + 32u * (uint32_t)k * 385u);
+        CHECK(log.last[k].samples[0][0] == 32 * k);       /* gyro x = slot */
+        CHECK(log.last[k].samples[0][3] == 1000 + 32 * k); /* accel x */
+    }
+    CHECK(s.counters.samples == 100 && s.counters.incomplete_slots == 0);
+}
+
+static void test_fifo_stream_hole_and_overrun(void)
+{
+    static uint8_t buf[200 * 3 * LSM_FIFO_WORD_BYTES];
+    fifo_stream s;
+    sink_log log = {0};
+    fifo_stream_init(&s, 5000);
+    fifo_stream_restart(&s, 104000, 0);
+    /* Slot 10 lacks its accelerometer word: the packet is cut there and a seq skipped. */
+    uint16_t words = make_slots(buf, 0, 20, 0, 385, 10);
+    fifo_stream_feed(&s, buf, words, 0, sink, &log);
+    fifo_stream_flush(&s, 0, true, sink, &log);
+    CHECK(log.packets == 2);
+    CHECK(log.last[0].count == 10 && log.last[0].seq == 0);
+    CHECK(log.last[1].count == 9 && log.last[1].seq == 2 && log.last[1].t0 == 11u * 385u);
+    CHECK(s.counters.incomplete_slots == 1);
+    /* An overrun: what waits is sent, a seq skipped, the next packet waits for an anchor. */
+    words = make_slots(buf, 20, 3, 0, 385, UINT32_MAX); /* slots 20..22, no anchor among them */
+    fifo_stream_feed(&s, buf, words, 0, sink, &log);
+    fifo_stream_overrun(&s, sink, &log);
+    CHECK(log.packets == 3 && log.last[2].seq == 3 && log.last[2].count == 3);
+    words = make_slots(buf, 61, 6, 0, 385, UINT32_MAX); /* slots 61..66: anchor at 64 */
+    fifo_stream_feed(&s, buf, words, 10000, sink, &log);
+    fifo_stream_flush(&s, 20000, false, sink, &log);
+    CHECK(log.packets == 4);
+    CHECK(log.last[3].seq == 5 && log.last[3].count == 6 && log.last[3].t0 == 61u * 385u);
+}
+
+static void test_fifo_stream_measures_rate(void)
+{
+    static uint8_t buf[400 * 3 * LSM_FIFO_WORD_BYTES];
+    fifo_stream s;
+    sink_log log = {0};
+    fifo_stream_init(&s, 5000);
+    fifo_stream_restart(&s, 104000, 0); /* nominal 384.6 ticks per slot; the chip runs 372 */
+    uint16_t words = make_slots(buf, 0, 330, 7, 372, UINT32_MAX);
+    fifo_stream_feed(&s, buf, words, 0, sink, &log);
+    fifo_stream_flush(&s, 0, true, sink, &log);
+    CHECK(log.packets == 11);
+    /* Packet 10 starts at slot 320, an anchor: exact; packet 9 (slot 288) too. */
+    CHECK(log.last[10].t0 == 7u + 320u * 372u);
+    CHECK((s.ticks_per_slot_q16 >> 16) == 372u);
+}
+
+/* ---- the whole core on a fake bus: random bytes must not upset it */
+
+typedef struct fake_chip {
+    uint8_t regs[256];
+    int writes;
+    uint32_t now_us;
+    uint8_t tx[1 << 16];
+    size_t tx_length;
+} fake_chip;
+
+static int fake_write(void *ctx, uint8_t address, uint8_t reg, const uint8_t *data, size_t n)
+{
+    fake_chip *chip = ctx;
+    if (address != LSM6DSOX_ADDRESS_SA0_HIGH)
+        return 1;
+    for (size_t i = 0; i < n; i++)
+        chip->regs[(uint8_t)(reg + i)] = data[i];
+    chip->regs[LSM_CTRL3_C] &= (uint8_t)~LSM_CTRL3_C_SW_RESET; /* the reset is instant */
+    chip->writes++;
+    return 0;
+}
+
+static int fake_read(void *ctx, uint8_t address, uint8_t reg, uint8_t *data, size_t n)
+{
+    fake_chip *chip = ctx;
+    if (address != LSM6DSOX_ADDRESS_SA0_HIGH)
+        return 1;
+    chip->regs[LSM_WHO_AM_I] = LSM6DSOX_WHO_AM_I_VALUE;
+    chip->regs[LSM_STATUS_REG] = LSM_STATUS_XLDA | LSM_STATUS_GDA;
+    for (size_t i = 0; i < n; i++) /* FIFO reads return random words */
+        data[i] = reg == LSM_FIFO_DATA_OUT_TAG ? (uint8_t)rnd() : chip->regs[(uint8_t)(reg + i)];
+    if (reg == LSM_FIFO_STATUS1 && n == 2) {
+        data[0] = (uint8_t)rnd();
+        data[1] = (uint8_t)(rnd() & 0x4Bu);
+    }
+    return 0;
+}
+
+static uint32_t fake_micros(void *ctx)
+{
+    fake_chip *chip = ctx;
+    return chip->now_us += 37;
+}
+
+static void fake_delay(void *ctx, uint32_t us)
+{
+    ((fake_chip *)ctx)->now_us += us;
+}
+
+static size_t fake_tx_free(void *ctx)
+{
+    fake_chip *chip = ctx;
+    return sizeof chip->tx - chip->tx_length;
+}
+
+static void fake_tx_write(void *ctx, const uint8_t *data, size_t n)
+{
+    fake_chip *chip = ctx;
+    memcpy(chip->tx + chip->tx_length, data, n);
+    chip->tx_length += n;
+}
+
+static void test_core_with_fake_bus(void)
+{
+    static fake_chip chip;
+    static fw_state fw;
+    fw_platform platform = {&chip, fake_write, fake_read, fake_micros, fake_delay,
+                            fake_tx_free, fake_tx_write};
+    fw_identity identity = {{1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12}, "NUCLEO-F746ZG", 921600,
+                            400000};
+    fw_init(&fw, &platform, &identity);
+    CHECK(fw.sensor_ok);
+    CHECK(fw.chip.address == LSM6DSOX_ADDRESS_SA0_HIGH); /* found at the second address */
+    CHECK(chip.writes == (int)LSM_SEQUENCE_LENGTH);
+    CHECK(chip.regs[LSM_CTRL1_XL] == 0x48 && chip.regs[LSM_CTRL2_G] == 0x40);
+
+    /* START, then random commands and noise with valid frames among them. */
+    uint8_t wire[LINK_MAX_WIRE];
+    size_t n = link_frame(LINK_START, NULL, 0, wire);
+    fw_receive(&fw, wire, n);
+    CHECK(fw.streaming);
+    for (int round = 0; round < 20000; round++) {
+        uint8_t bytes[64];
+        size_t length = rnd() % sizeof bytes;
+        if (rnd() % 4 == 0) {
+            uint8_t payload[8];
+            for (size_t i = 0; i < sizeof payload; i++)
+                payload[i] = (uint8_t)rnd();
+            uint8_t type = (uint8_t)(0x80u + rnd() % 8u);
+            if (type == LINK_SELF_TEST)
+                type = LINK_PING; /* the self-test waits on the clock: tested in Python */
+            length = link_frame(type, payload, rnd() % 6, bytes);
+        } else {
+            for (size_t i = 0; i < length; i++)
+                bytes[i] = (uint8_t)rnd();
+        }
+        fw_receive(&fw, bytes, length);
+        fw_poll(&fw);
+        if (chip.tx_length > sizeof chip.tx / 2)
+            chip.tx_length = 0;
+    }
+    CHECK(fw.counters.commands > 1000);
+    CHECK(fw.rx.bad_frames > 1000);
+}
+
+static void test_rates(void)
+{
+    /* docs/protocol.md section 6: the highest ODR per baud rate. */
+    const struct { uint32_t baud; uint8_t highest; } table[] = {
+        {115200, 7}, {230400, 8}, {460800, 9}, {921600, 10},
+    };
+    char why[160];
+    for (size_t i = 0; i < sizeof table / sizeof table[0]; i++) {
+        CHECK(fw_rate_fits(table[i].highest, table[i].baud, 0, why, sizeof why));
+        if (table[i].highest < LSM_ODR_CODE_MAX)
+            CHECK(!fw_rate_fits((uint8_t)(table[i].highest + 1), table[i].baud, 0, why,
+                                sizeof why));
+    }
+    CHECK(fw_rate_fits(8, 921600, 400000, why, sizeof why));
+    CHECK(!fw_rate_fits(9, 921600, 400000, why, sizeof why));
+    CHECK(strstr(why, "highest ODR 1667 Hz") != NULL);
+}
+
+int main(void)
+{
+    test_crc();
+    test_cobs_round_trips();
+    test_cobs_rejects();
+    test_rx_resync();
+    test_fifo_stream_packets();
+    test_fifo_stream_hole_and_overrun();
+    test_fifo_stream_measures_rate();
+    test_core_with_fake_bus();
+    test_rates();
+    printf("%d checks, %d failed\n", checks, failures);
+    return failures ? 1 : 0;
+}
