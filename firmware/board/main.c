@@ -1,0 +1,131 @@
+/* NUCLEO-F746ZG board: brings up the hardware, hands the portable core its platform, and runs
+ * the main loop (UART bytes in, fw_poll, LEDs, watchdog). */
+#include <stdint.h>
+
+#include "clock.h"
+#include "firmware.h"
+#include "i2c.h"
+#include "led.h"
+#include "stm32f7.h"
+#include "uart.h"
+
+#define BOARD_NAME "NUCLEO-F746ZG"
+#define RX_CHUNK 256u
+#define RX_CHUNKS_PER_LOOP 16u /* 4 KB: more than the 2 KB ring holds */
+
+/* IWDG: LSI ~32 kHz / 64 = 500 Hz; reload 999 -> 1000 ticks = 2.0 s. The LSI spreads from
+ * 17 to 47 kHz over parts and temperature (datasheet), so the timeout is 1.4 to 3.8 s. */
+#define IWDG_PRESCALER_DIV64 4u
+#define IWDG_RELOAD 999u
+#define IWDG_UPDATE_TIMEOUT_US 50000u /* PVU/RVU clear after ~5 LSI periods */
+
+static fw_state fw; /* ~2 KB: static, not on the stack */
+
+static void watchdog_start(void)
+{
+    DBGMCU_APB1_FZ |= DBGMCU_APB1_FZ_IWDG_STOP; /* stop the count while a debugger halts us */
+    IWDG->KR = IWDG_KEY_START;       /* start the watchdog (it cannot be stopped again) */
+    IWDG->KR = IWDG_KEY_UNLOCK;      /* allow writes to PR and RLR */
+    IWDG->PR = IWDG_PRESCALER_DIV64; /* LSI / 64 */
+    IWDG->RLR = IWDG_RELOAD;         /* 1000 ticks */
+    uint32_t t0 = board_micros();
+    while ((IWDG->SR & IWDG_SR_BUSY) && board_micros() - t0 < IWDG_UPDATE_TIMEOUT_US) {
+        /* the new values cross into the LSI domain */
+    }
+    IWDG->KR = IWDG_KEY_RELOAD;      /* load the counter with the new reload value */
+}
+
+void board_watchdog_feed(void)
+{
+    IWDG->KR = IWDG_KEY_RELOAD;      /* reload the down-counter */
+}
+
+/* ---- the platform the core runs on */
+
+static int plat_i2c_write(void *ctx, uint8_t address, uint8_t reg, const uint8_t *data,
+                          size_t length)
+{
+    (void)ctx;
+    return i2c_write_regs(address, reg, data, length);
+}
+
+static int plat_i2c_read(void *ctx, uint8_t address, uint8_t reg, uint8_t *data, size_t length)
+{
+    (void)ctx;
+    return i2c_read_regs(address, reg, data, length);
+}
+
+static uint32_t plat_micros(void *ctx)
+{
+    (void)ctx;
+    return board_micros();
+}
+
+static void plat_delay_us(void *ctx, uint32_t us)
+{
+    (void)ctx;
+    board_delay_us(us);
+}
+
+static size_t plat_tx_free(void *ctx)
+{
+    (void)ctx;
+    return uart_tx_free();
+}
+
+static void plat_tx_write(void *ctx, const uint8_t *data, size_t length)
+{
+    (void)ctx;
+    uart_write(data, length);
+}
+
+static const fw_platform platform = {
+    .ctx = NULL,
+    .i2c_write = plat_i2c_write,
+    .i2c_read = plat_i2c_read,
+    .micros = plat_micros,
+    .delay_us = plat_delay_us,
+    .tx_free = plat_tx_free,
+    .tx_write = plat_tx_write,
+};
+
+int main(void)
+{
+    clock_source source = clock_init();
+    led_init();
+    led_set(LED_BLUE, source != CLOCK_HSE_BYPASS_PLL); /* blue: not on the ST-LINK clock */
+    watchdog_start();
+    uart_init();
+    i2c_init();
+
+    fw_identity identity = {
+        .name = BOARD_NAME,
+        .baud = UART_BAUD,
+        .i2c_hz = I2C_BUS_HZ,
+    };
+    const volatile uint8_t *uid = (const volatile uint8_t *)(uintptr_t)UNIQUE_ID_BASE;
+    for (unsigned i = 0; i < UNIQUE_ID_BYTES; i++) {
+        identity.unique_id[i] = uid[i]; /* byte by byte, in memory order */
+    }
+    _Static_assert(sizeof identity.unique_id == UNIQUE_ID_BYTES, "96-bit unique id");
+
+    fw_init(&fw, &platform, &identity);
+
+    static uint8_t rx[RX_CHUNK];
+    for (;;) {
+        /* Drain what arrived, a chunk at a time, but never loop forever on a flood. */
+        for (unsigned i = 0; i < RX_CHUNKS_PER_LOOP; i++) {
+            size_t n = uart_read(rx, sizeof rx);
+            if (n == 0u) {
+                break;
+            }
+            fw_receive(&fw, rx, n);
+        }
+        fw_poll(&fw);
+
+        fw_led_mode mode = fw_led_mode_now(&fw);
+        led_set(LED_GREEN, fw_led_lit(mode, board_millis()));
+        led_set(LED_RED, mode == FW_LED_ERROR);
+        board_watchdog_feed();
+    }
+}
