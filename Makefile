@@ -18,7 +18,7 @@ run: $(STAMP)
 	$(BIN)/inclinometer
 
 test: $(STAMP)
-	$(BIN)/ruff check app drivers tests benchmarks
+	$(BIN)/ruff check app drivers tests benchmarks firmware/host
 	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest
 
 bench: $(STAMP)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 import tempfile
 import traceback
 from weakref import WeakKeyDictionary
@@ -16,6 +17,16 @@ for _variable in ("XDG_DATA_HOME", "XDG_CONFIG_HOME", "XDG_CACHE_HOME", "XDG_STA
     os.environ[_variable] = os.path.join(_USER_DIRS, _variable.lower())
 
 ARTIFACTS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "test-artifacts")
+# The firmware's host harness (firmware/host/fwcore.py) lives beside the firmware sources.
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "firmware", "host"))
+
+
+@pytest.fixture(scope="session")
+def firmware_lib(tmp_path_factory):
+    """The firmware's portable core built for this machine (``make -C firmware host``)."""
+    from fwcore import build_library
+
+    return build_library(tmp_path_factory.mktemp("firmware-build"))
 
 
 @pytest.fixture

@@ -1,0 +1,57 @@
+"""Serve the firmware's portable core on a pseudo-terminal, with the emulated LSM6DSOX behind it.
+
+The real firmware core (COBS, CRC, commands, the LSM6DSOX sequence, FIFO streaming), built for
+this machine, in real time, so the app connects to it exactly as to a NUCLEO board:
+
+    python firmware/host/serve.py --scenario wobble
+    inclinometer --device /dev/pts/7            # the port it prints
+
+Needs gcc and make (it builds the host library into a temporary folder). Ctrl+C stops it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import threading
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository, for drivers/
+
+from fwcore import FirmwareCore, PtyBoard, build_library  # noqa: E402
+
+from drivers.lsm6dsox_direct.emulated_chip import EmulatedLsm6dsox  # noqa: E402
+from drivers.sim import SCENARIOS  # noqa: E402
+from drivers.sim.options import SimOptions  # noqa: E402
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenario", default="wobble", choices=sorted(SCENARIOS))
+    parser.add_argument("--seed", type=int, default=1, help="picks the simulated unit")
+    parser.add_argument("--baud", type=int, default=921_600,
+                        help="the UART rate the firmware limits the ODR by (0: native USB)")
+    parser.add_argument("--i2c-hz", type=int, default=400_000,
+                        help="the I2C clock the firmware limits the ODR by (0: no limit)")
+    args = parser.parse_args(argv)
+    with tempfile.TemporaryDirectory(prefix="inclinometer-fw-") as build:
+        lib = build_library(Path(build))
+
+        def core() -> FirmwareCore:
+            chip = EmulatedLsm6dsox(SimOptions(args.scenario, seed=args.seed))
+            return FirmwareCore(lib, chip, baud=args.baud, i2c_hz=args.i2c_hz)
+
+        board = PtyBoard(core)
+        print(f"firmware core on {board.port}: inclinometer --device {board.port}", flush=True)
+        try:
+            threading.Event().wait()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            board.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
