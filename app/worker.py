@@ -84,6 +84,7 @@ class DeviceWorker(QObject):
     tareChanged = Signal(object)  # the active TareReference, or None
     reconnecting = Signal(str)  # the cable was pulled; the session waits for the board
     recordingChanged = Signal(object)  # WriterStatus of the recording, or None when none
+    deviceMessage = Signal(int, str)  # level (0 debug .. 3 error), text: the device's own LOG
 
     def __init__(self, pipeline: Pipeline, profile_store: ProfileStore | None = None) -> None:
         super().__init__()
@@ -296,6 +297,8 @@ class DeviceWorker(QObject):
             return
         try:
             raw = device.read(READ_TIMEOUT_S)
+            for message in device.take_messages():
+                self.deviceMessage.emit(message.level, message.text)
             if raw is not None and len(raw):
                 self._continue_time_axis(device, raw)
                 self.pipeline.process(raw)
@@ -546,6 +549,7 @@ class DeviceSession(QObject):
     tareChanged = Signal(object)
     reconnecting = Signal(str)
     recordingChanged = Signal(object)
+    deviceMessage = Signal(int, str)
 
     requestConnect = Signal(str)
     requestDisconnect = Signal()
@@ -602,6 +606,7 @@ class DeviceSession(QObject):
         self.worker.tareChanged.connect(self.tareChanged)
         self.worker.reconnecting.connect(self.reconnecting)
         self.worker.recordingChanged.connect(self.recordingChanged)
+        self.worker.deviceMessage.connect(self.deviceMessage)
         self.connected.connect(self._on_connected)
         self.disconnected.connect(self._on_disconnected)
         self.thread.start()

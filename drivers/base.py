@@ -33,6 +33,15 @@ class DeviceInfo:
 
 
 @dataclass(frozen=True, slots=True)
+class DeviceMessage:
+    """Something the device itself reported for the user (a board's LOG packet)."""
+
+    level: int
+    """0 debug, 1 info, 2 warning, 3 error."""
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
 class DeviceDescriptor:
     """One entry of a device listing: a URL to open and a line to show the user."""
 
@@ -82,6 +91,13 @@ class Device(ABC):
             self._close()
         finally:
             self._info = None
+
+    def take_messages(self) -> list[DeviceMessage]:
+        """Messages the device reported since the last call, oldest first (default: none).
+
+        Call from the thread that reads.
+        """
+        return []
 
     @property
     def info(self) -> DeviceInfo | None:

@@ -49,7 +49,7 @@ import serial
 
 from app.core.samples import RawBlock
 from drivers import lsm6dsox
-from drivers.base import Device, DeviceDescriptor, DeviceInfo
+from drivers.base import Device, DeviceDescriptor, DeviceInfo, DeviceMessage
 from drivers.errors import DeviceError, DeviceIOError, DeviceOpenError, DeviceUrlError
 from drivers.link import protocol as p
 from drivers.link.decoder import LinkCounters, LinkDecoder
@@ -257,6 +257,7 @@ class SerialLinkDevice(Device):
         self._blocks: deque[RawBlock] = deque()
         self._replies: deque[p.Packet] = deque(maxlen=64)
         self._logs: deque[p.Log] = deque(maxlen=200)
+        self._unread_logs: deque[p.Log] = deque(maxlen=200)
         self._probe = bytearray()
         self._streaming = False
         self._disconnected = False
@@ -286,6 +287,13 @@ class SerialLinkDevice(Device):
         """The board's latest LOG messages, oldest first. Thread-safe."""
         with self._state:
             return list(self._logs)
+
+    def take_messages(self) -> list[DeviceMessage]:
+        """The board's LOG messages since the last call (thread-safe)."""
+        with self._state:
+            logs = list(self._unread_logs)
+            self._unread_logs.clear()
+        return [DeviceMessage(entry.level, entry.text) for entry in logs]
 
     @property
     def usb_serial(self) -> str | None:
@@ -610,6 +618,7 @@ class SerialLinkDevice(Device):
             for packet in self._decoder.feed(data):
                 if isinstance(packet, p.Log):
                     self._logs.append(packet)
+                    self._unread_logs.append(packet)
                     log.log(10 + 10 * min(packet.level, 3), "%s: %s", self.port, packet.text)
                 else:
                     self._replies.append(packet)

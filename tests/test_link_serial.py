@@ -26,7 +26,7 @@ import serial
 
 from app.core.samples import RawBlock, convert_raw_block
 from drivers import lsm6dsox
-from drivers.base import Device, DeviceInfo
+from drivers.base import Device, DeviceInfo, DeviceMessage
 from drivers.emulated_nucleo import EmulatedNucleo, NucleoFaults, odr_fits_link
 from drivers.errors import DeviceError, DeviceIOError, DeviceOpenError, DeviceUrlError
 from drivers.link import protocol as p
@@ -263,6 +263,10 @@ def test_self_test_ping_and_logs(boards, devices):
     levels = {entry.text: entry.level for entry in device.recent_logs()}
     assert levels["sensor hiccup"] == 3
     assert any(text.startswith("streaming at") for text in levels)
+    # The same messages, once each, for the app to show the user.
+    messages = device.take_messages()
+    assert DeviceMessage(3, "sensor hiccup") in messages
+    assert device.take_messages() == []
 
 
 def test_self_test_from_another_thread_while_streaming(boards, devices):

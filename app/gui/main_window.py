@@ -53,6 +53,9 @@ from drivers.replay import replay_url
 PLOT_WINDOWS_S = (2, 5, 10, 20, 30, 60)
 AVERAGING_S = (0.05, 0.2, 0.5, 1.0, 2.0, 5.0)
 LEVEL_RANGES_DEG = (0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 90.0)
+DEVICE_MESSAGE_WARNING = 2
+DEVICE_MESSAGE_ERROR = 3
+"""Levels of a device's own messages (the link protocol's LOG levels)."""
 
 
 def recordings_dir() -> Path:
@@ -211,6 +214,7 @@ class MainWindow(QMainWindow):
         session.connected.connect(self._on_connected)
         session.disconnected.connect(self._on_disconnected)
         session.error.connect(self.show_error)
+        session.deviceMessage.connect(self._on_device_message)
         session.status.connect(self._on_status)
         session.filterChanged.connect(self._on_filter_changed)
 
@@ -469,6 +473,16 @@ class MainWindow(QMainWindow):
             if recording else f"Recording {status.state}"
         )
         self.status_recording.setStyleSheet(f"color: {theme.ALARM_RED}; font-weight: bold;")
+
+    def _on_device_message(self, level: int, text: str) -> None:
+        """A message from the device itself (the board's firmware): errors also on the banner."""
+        info = self.session.device_info
+        source = info.name if info is not None else "device"
+        if level >= DEVICE_MESSAGE_ERROR:
+            self.show_error(f"{source}: {text}")
+        else:
+            prefix = "warning: " if level == DEVICE_MESSAGE_WARNING else ""
+            self.log(f"{source}: {prefix}{text}")
 
     def _on_reconnecting(self, message: str) -> None:
         self._awaiting_board = True
