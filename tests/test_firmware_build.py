@@ -38,9 +38,13 @@ def symbol_address(nm_output: str, name: str) -> int:
     raise AssertionError(f"no symbol {name}")
 
 
-@pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None,
-                    reason="no ARM toolchain: apt-get install gcc-arm-none-eabi "
-                           "libnewlib-arm-none-eabi (.ci/run does)")
+NO_ARM_TOOLCHAIN = pytest.mark.skipif(
+    shutil.which("arm-none-eabi-gcc") is None,
+    reason="no ARM toolchain: apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi "
+           "(.ci/run does)")
+
+
+@NO_ARM_TOOLCHAIN
 def test_arm_image_builds_and_boots_from_its_vector_table(tmp_path) -> None:
     result = subprocess.run(["make", "-C", str(FIRMWARE), f"BUILD={tmp_path}"],
                             capture_output=True, text=True, check=False)
@@ -62,3 +66,16 @@ def test_arm_image_builds_and_boots_from_its_vector_table(tmp_path) -> None:
     for needed in ("fw_init", "fw_poll", "fw_receive", "lsm_configure", "cobs_encode"):
         symbol_address(nm, needed)
     assert " malloc" not in nm and "printf" not in nm
+
+
+@NO_ARM_TOOLCHAIN
+@pytest.mark.skipif(shutil.which("qemu-system-arm") is None,
+                    reason="no QEMU: apt-get install qemu-system-arm (.ci/run does)")
+def test_c_unit_tests_pass_on_an_emulated_cortex_m7(tmp_path) -> None:
+    """Built by the cross compiler with the firmware's flags: 32-bit size_t, unsigned char."""
+    result = subprocess.run(["make", "-C", str(FIRMWARE), "qemu-test", f"BUILD={tmp_path}"],
+                            capture_output=True, text=True, check=False)
+    assert result.returncode == 0, result.stdout + result.stderr
+    summary = next(line for line in result.stdout.splitlines() if line.endswith(" failed"))
+    checks, _, failed, _ = summary.split()
+    assert int(checks) > 10_000 and failed == "0"

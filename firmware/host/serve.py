@@ -19,11 +19,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository, for drivers/
 
-from fwcore import FirmwareCore, PtyBoard, build_library  # noqa: E402
+from fwcore import FirmwareCore, PtyBoard, build_library
 
-from drivers.lsm6dsox_direct.emulated_chip import EmulatedLsm6dsox  # noqa: E402
-from drivers.sim import SCENARIOS  # noqa: E402
-from drivers.sim.options import SimOptions  # noqa: E402
+from drivers.lsm6dsox_direct.emulated_chip import EmulatedLsm6dsox
+from drivers.sim import SCENARIOS
+from drivers.sim.options import SimOptions
 
 
 def main(argv: list[str] | None = None) -> int:
