@@ -21,6 +21,21 @@
 
 static fw_state fw; /* ~2 KB: static, not on the stack */
 
+/* The X-NUCLEO-IKS01A3 routes the DIL24 sensor's INT1 to Arduino A5 = PF10. An LSM6DSOX that
+ * sees INT1 high when it resets (at power-up, or at the firmware's SW_RESET) enters I3C mode
+ * and stops answering on I2C; the board's level shifter can hold a '1' across an MCU reset.
+ * ST's own IKS01A3 example drives the line low before it talks to the sensor. The firmware
+ * routes no interrupt to INT1, so the chip keeps the pin low too: no contention. */
+#define SENSOR_INT1_PIN 10u /* PF10 */
+
+static void sensor_int1_low(void)
+{
+    RCC->AHB1ENR |= RCC_AHB1ENR_GPIOFEN;                 /* clock port F */
+    (void)RCC->AHB1ENR;
+    GPIOF->BSRR = 1u << (SENSOR_INT1_PIN + 16u);         /* latch low first ... */
+    gpio_field2(&GPIOF->MODER, SENSOR_INT1_PIN, GPIO_MODE_OUTPUT); /* ... then drive it */
+}
+
 static void watchdog_start(void)
 {
     DBGMCU_APB1_FZ |= DBGMCU_APB1_FZ_IWDG_STOP; /* stop the count while a debugger halts us */
@@ -95,6 +110,7 @@ int main(void)
     led_init();
     led_set(LED_BLUE, source != CLOCK_HSE_BYPASS_PLL); /* blue: not on the ST-LINK clock */
     watchdog_start();
+    sensor_int1_low();
     uart_init();
     i2c_init();
 

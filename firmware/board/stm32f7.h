@@ -64,6 +64,7 @@ _Static_assert(offsetof(rcc_regs, DCKCFGR2) == 0x90, "RCC_DCKCFGR2 offset");
 #define RCC_CFGR_PPRE2_DIV2 (0x4u << 13)
 #define RCC_AHB1ENR_GPIOBEN (1u << 1)
 #define RCC_AHB1ENR_GPIODEN (1u << 3)
+#define RCC_AHB1ENR_GPIOFEN (1u << 5)
 #define RCC_APB1_USART3 (1u << 18) /* same bit in APB1ENR and APB1RSTR */
 #define RCC_APB1_I2C1 (1u << 21)
 #define RCC_APB1ENR_PWREN (1u << 28)
@@ -101,6 +102,7 @@ typedef struct {
 _Static_assert(offsetof(gpio_regs, AFR) == 0x20, "GPIO_AFRL offset");
 #define GPIOB ((gpio_regs *)(AHB1_BASE + 0x0400u))
 #define GPIOD ((gpio_regs *)(AHB1_BASE + 0x0C00u))
+#define GPIOF ((gpio_regs *)(AHB1_BASE + 0x1400u))
 #define GPIO_MODE_OUTPUT 0x1u /* MODER, 2 bits a pin */
 #define GPIO_MODE_AF 0x2u
 #define GPIO_SPEED_HIGH 0x2u  /* OSPEEDR, 2 bits a pin */

@@ -264,6 +264,8 @@ class FirmwareCore:
     def _i2c_read(self, address: int, register: int, out, length: int) -> int:
         try:
             data = self.bus.read_registers(address, register, length)
+            if len(data) != length:  # a short read is a failed transfer, as on a real bus
+                return 1
             ctypes.memmove(out, data, length)
             return 0
         except DeviceIOError:
