@@ -323,3 +323,48 @@ def test_led_patterns(board) -> None:
     assert sum(streaming) == 1000 and streaming[0] and not streaming[500]
     error = [core.led_lit(LED_ERROR, ms) for ms in range(1000)]
     assert sum(error) == 8 * 62  # 8 flashes a second
+
+
+class StubbornBus(RecordingBus):
+    """A chip that ignores writes to one register, or never finishes its software reset."""
+
+    def __init__(self, inner: EmulatedLsm6dsox, *, ignore: int | None = None,
+                 stuck_in_reset: bool = False) -> None:
+        super().__init__(inner)
+        self.ignore = ignore
+        self.stuck_in_reset = stuck_in_reset
+
+    def write_register(self, address: int, register: int, data: bytes) -> None:
+        if register == self.ignore:
+            self.writes.append((register, data[0]))
+            return
+        super().write_register(address, register, data)
+
+    def read_registers(self, address: int, register: int, length: int) -> bytes:
+        data = super().read_registers(address, register, length)
+        if self.stuck_in_reset and register == reg.CTRL3_C:
+            return bytes([data[0] | reg.CTRL3_C_SW_RESET]) + data[1:]
+        return data
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    ({"ignore": reg.CTRL2_G},
+     "the LSM6DSOX did not keep its configuration (register read-back differs)"),
+    ({"stuck_in_reset": True}, "the LSM6DSOX software reset did not finish within 50 ms"),
+])
+def test_a_chip_that_does_not_take_the_setting_is_a_sensor_error(firmware_lib, options,
+                                                                  message) -> None:
+    chip = EmulatedLsm6dsox(SimOptions("static", seed=3), clock=VirtualClock(10.0))
+    healthy = RecordingBus(chip)
+    core = FirmwareCore(firmware_lib, healthy, unique_id=UNIQUE_ID)
+    assert core.led_mode == LED_IDLE
+    core.bus = StubbornBus(chip, **options)  # the chip goes bad after power-on
+    core.send(p.Configure(5, 8, 500))
+    ack, config = core.packets()
+    assert ack == p.Ack(p.CONFIGURE, p.ACK_SENSOR_ERROR, message)
+    assert (config.accel_fs_g, config.gyro_fs_dps) == (4, 250)  # the settings in effect
+    assert core.led_mode == LED_ERROR
+    core.send(p.Start())
+    (ack,) = core.packets()
+    assert ack.status == p.ACK_SENSOR_ERROR
+    core.close()

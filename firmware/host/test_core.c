@@ -245,6 +245,48 @@ static void test_fifo_stream_measures_rate(void)
     CHECK((s.ticks_per_slot_q16 >> 16) == 372u);
 }
 
+static void test_fifo_stream_timestamps_wrap(void)
+{
+    static uint8_t buf[100 * 3 * LSM_FIFO_WORD_BYTES];
+    fifo_stream s;
+    sink_log log = {0};
+    fifo_stream_init(&s, 5000);
+    fifo_stream_restart(&s, 104000, 0);
+    /* The 32-bit tick counter wraps inside the second packet. */
+    uint32_t ticks0 = 0xFFFFFFFFu - 40u * 385u;
+    uint16_t words = make_slots(buf, 0, 96, ticks0, 385, UINT32_MAX);
+    fifo_stream_feed(&s, buf, words, 0, sink, &log);
+    CHECK(log.packets == 3);
+    for (int k = 0; k < 3; k++)
+        CHECK(log.last[k].t0 == (uint32_t)(ticks0 + 32u * (uint32_t)k * 385u));
+    CHECK((s.ticks_per_slot_q16 >> 16) == 385u);
+}
+
+static void test_fifo_stream_long_runs_keep_the_rate(void)
+{
+    /* 12.5 Hz for longer than 2^30 ticks (7.5 hours): the rate base moves, t0 stays exact. */
+    static uint8_t buf[64 * 3 * LSM_FIFO_WORD_BYTES];
+    fifo_stream s;
+    sink_log log = {0};
+    fifo_stream_init(&s, 5000);
+    fifo_stream_restart(&s, 12500, 0);
+    const uint32_t per_slot = 3190; /* the chip runs 0.3 % fast */
+    uint32_t slots = (1u << 30) / per_slot + 2000u;
+    bool exact = true;
+    for (uint32_t first = 0; first < slots; first += 64) {
+        log.packets = 0;
+        uint16_t words = make_slots(buf, first, 64, 12345, per_slot, UINT32_MAX);
+        fifo_stream_feed(&s, buf, words, 0, sink, &log);
+        exact &= log.packets == 2;
+        for (int k = 0; k < 2; k++)
+            exact &= log.last[k].t0 == (uint32_t)(12345u + (first + 32u * (uint32_t)k) * per_slot);
+    }
+    CHECK(exact);
+    CHECK((s.ticks_per_slot_q16 >> 16) == per_slot);
+    CHECK(s.have_base && s.base_slot > 0); /* the rate base moved on the way */
+    CHECK(s.counters.dropped_packets == 0);
+}
+
 /* ---- the whole core on a fake bus: random bytes must not upset it */
 
 typedef struct fake_chip {
@@ -377,6 +419,8 @@ int main(void)
     test_fifo_stream_packets();
     test_fifo_stream_hole_and_overrun();
     test_fifo_stream_measures_rate();
+    test_fifo_stream_timestamps_wrap();
+    test_fifo_stream_long_runs_keep_the_rate();
     test_core_with_fake_bus();
     test_rates();
     printf("%d checks, %d failed\n", checks, failures);
