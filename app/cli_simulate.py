@@ -39,6 +39,10 @@ def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
     simulate.add_argument("--baud", type=int, default=921600,
                           help="the board's UART rate: faster ODRs than it carries are "
                                "refused; 0 for native USB, no limit (default %(default)s)")
+    simulate.add_argument("--i2c-khz", type=int, default=400, metavar="KHZ",
+                          help="the I2C clock the firmware reads the sensor at: faster ODRs "
+                               "than it drains are refused, as by the real firmware (above "
+                               "1667 Hz at 400 kHz); 0 for no limit (default %(default)s)")
 
 
 def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
@@ -54,7 +58,8 @@ def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
 
         board = EmulatedNucleo(
             args.scenario, odr_hz=args.odr, accel_fs_g=args.accel_fs, gyro_fs_dps=args.gyro_fs,
-            seed=args.seed, baud=args.baud or None, share_port=True,
+            seed=args.seed, baud=args.baud or None,
+            sensor_bus_hz=args.i2c_khz * 1000 or None, share_port=True,
         )
     except ImportError as exc:
         print(f"inclinometer: pseudo-terminals need Linux or macOS ({exc})", file=sys.stderr)

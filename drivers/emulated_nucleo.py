@@ -86,6 +86,28 @@ def odr_fits_link(odr_hz: float, baud: int | None) -> bool:
     return baud is None or odr_hz * link_bytes_per_sample() <= link_capacity_bytes_s(baud)
 
 
+# The firmware's rule for the sensor bus (firmware/core/firmware.c, fw_rate_fits): per sample a
+# gyroscope and an accelerometer FIFO word and a timestamp word every 8th, temperature words at
+# 12.5 Hz, 7 bytes of 9 bits each, plus 80 bits for each of its 500 polls a second; it plans on
+# 80 % of the bus clock.
+_FIFO_WORDS_PER_SAMPLE = 2.0 + 1.0 / 8.0
+_TEMPERATURE_WORDS_S = 12.5
+_BITS_PER_FIFO_WORD = 7 * 9
+_POLL_BITS_S = 80 * 500
+_BUS_USABLE = 0.8
+
+
+def sensor_bus_bits_s(odr_hz: float) -> float:
+    """Bits per second the firmware moves over I2C to drain the FIFO at ``odr_hz``."""
+    words_s = odr_hz * _FIFO_WORDS_PER_SAMPLE + _TEMPERATURE_WORDS_S
+    return words_s * _BITS_PER_FIFO_WORD + _POLL_BITS_S
+
+
+def odr_fits_sensor_bus(odr_hz: float, bus_hz: int | None) -> bool:
+    """True when the firmware can drain the FIFO at ``odr_hz`` over I2C at ``bus_hz``."""
+    return bus_hz is None or sensor_bus_bits_s(odr_hz) <= _BUS_USABLE * bus_hz
+
+
 def usb_serial_for_seed(seed: int) -> str:
     """A 24-digit hex USB serial number, stable per seed (like an ST-LINK's)."""
     digest = hashlib.blake2b(f"emulated-stlink:{seed}".encode(), digest_size=9).hexdigest()
@@ -129,6 +151,8 @@ class EmulatedNucleo:
     seed : picks the simulated unit: its errors, unique id and USB serial number.
     baud : the UART's baud rate, used to refuse rates the link cannot carry; None for native
         USB (no limit). A pseudo-terminal itself has no speed.
+    sensor_bus_hz : the I2C clock the firmware reads the sensor at, used to refuse rates it
+        cannot drain (the NUCLEO firmware: 400 000, up to 1667 Hz); None for no limit.
     errors, noise : as the simulator's options.
     who_am_i : what INFO reports (another value tests the host's check).
     faults : fault injection.
@@ -150,6 +174,7 @@ class EmulatedNucleo:
         gyro_fs_dps: int = 250,
         seed: int = 1,
         baud: int | None = p.DEFAULT_BAUD,
+        sensor_bus_hz: int | None = None,
         errors: bool = True,
         noise: bool = True,
         who_am_i: int = lsm6dsox.WHO_AM_I_VALUE,
@@ -163,9 +188,12 @@ class EmulatedNucleo:
         odr_code = lsm6dsox.odr_code_for(odr_hz)
         if not odr_fits_link(lsm6dsox.ODR_CODES_HZ[odr_code], baud):
             raise ValueError(f"{odr_hz:g} Hz does not fit a {baud} baud link")
+        if not odr_fits_sensor_bus(lsm6dsox.ODR_CODES_HZ[odr_code], sensor_bus_hz):
+            raise ValueError(f"{odr_hz:g} Hz does not fit I2C at {sensor_bus_hz} Hz")
         self.scenario = scenario
         self.seed = seed
         self.baud = baud
+        self.sensor_bus_hz = sensor_bus_hz
         self.errors = errors
         self.noise = noise
         self.who_am_i = who_am_i
@@ -434,6 +462,13 @@ class EmulatedNucleo:
             needed = odr * link_bytes_per_sample()
             problem = (f"{odr:g} Hz needs {needed:,.0f} bytes/s; {self.baud} baud carries "
                        f"{link_capacity_bytes_s(self.baud or 0):,.0f}")
+        elif not odr_fits_sensor_bus(lsm6dsox.ODR_CODES_HZ[command.odr_code],
+                                     self.sensor_bus_hz):
+            odr = lsm6dsox.ODR_CODES_HZ[command.odr_code]
+            bus_hz = self.sensor_bus_hz or 0
+            problem = (f"ODR {odr:g} Hz needs about {sensor_bus_bits_s(odr) / 1e3:.0f} kbit/s "
+                       f"on I2C1; the bus at {bus_hz / 1e3:g} kHz carries about "
+                       f"{_BUS_USABLE * bus_hz / 1e3:.0f}")
         if problem:
             self._queue(p.Ack(p.CONFIGURE, p.ACK_BAD_ARGUMENT, problem))
         elif self._streaming:

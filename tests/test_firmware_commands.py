@@ -15,7 +15,7 @@ import pytest
 from fwcore import LED_ERROR, LED_IDLE, LED_STREAMING, FirmwareCore, rate_fits
 
 from drivers import lsm6dsox
-from drivers.errors import DeviceIOError
+from drivers.errors import DeviceError, DeviceIOError
 from drivers.link import protocol as p
 from drivers.link.framing import frame_bytes
 from drivers.lsm6dsox_direct import registers as reg
@@ -368,3 +368,29 @@ def test_a_chip_that_does_not_take_the_setting_is_a_sensor_error(firmware_lib, o
     (ack,) = core.packets()
     assert ack.status == p.ACK_SENSOR_ERROR
     core.close()
+
+
+@pytest.mark.parametrize("bus_hz", [100_000, 400_000, 1_000_000])
+def test_the_emulated_board_limits_rates_as_the_firmware_does(firmware_lib, bus_hz) -> None:
+    """``inclinometer simulate`` (the Python emulated NUCLEO) follows the firmware's rule."""
+    from drivers.emulated_nucleo import odr_fits_sensor_bus
+
+    for code, hz in lsm6dsox.ODR_CODES_HZ.items():
+        assert odr_fits_sensor_bus(hz, bus_hz) == rate_fits(firmware_lib, code, 0, bus_hz)[0]
+
+
+def test_the_emulated_board_refuses_what_i2c_cannot_carry() -> None:
+    from drivers.emulated_nucleo import EmulatedNucleo
+    from drivers.serial_link import SerialLinkDevice
+
+    board = EmulatedNucleo("static", sensor_bus_hz=400_000)
+    device = SerialLinkDevice(f"serial://{board.port}?odr=3333")
+    try:
+        with pytest.raises(DeviceError, match=r"kbit/s on I2C1; the bus at 400 kHz"):
+            device.open()
+        device.close()
+        ok = SerialLinkDevice(f"serial://{board.port}?odr=1667")
+        assert ok.open().odr_nominal_hz == 1667.0
+        ok.close()
+    finally:
+        board.close()
