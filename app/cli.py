@@ -7,6 +7,7 @@
 ``inclinometer record ... OUT.csv`` record a device headless (see app/cli_recording.py)
 ``inclinometer replay IN.csv ...``  run filters over a recording, export their angles
 ``inclinometer simulate --pty``     an emulated NUCLEO board on a pseudo-terminal
+``inclinometer check-board PORT``   put a NUCLEO board through its paces (app/cli_check.py)
 ``inclinometer --version``
 """
 
@@ -18,6 +19,7 @@ import sys
 from typing import TYPE_CHECKING, TextIO
 
 from app import __version__
+from app.cli_check import add_check_parser, check_command
 from app.cli_recording import add_recording_parsers, record_command, replay_command
 from app.cli_simulate import add_simulate_parser, simulate_command
 
@@ -41,6 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_evaluate_parser(commands)
     add_recording_parsers(commands)
     add_simulate_parser(commands)
+    add_check_parser(commands)
     return parser
 
 
@@ -197,6 +200,8 @@ def main(argv: list[str] | None = None) -> int:
         return replay_command(args)
     if args.command == "simulate":
         return simulate_command(args)
+    if args.command == "check-board":
+        return check_command(args)
     if args.filter is not None:
         from app.core.filters import FILTERS
 

@@ -1,0 +1,206 @@
+"""``inclinometer check-board PORT``: put a NUCLEO board (link protocol v1) through its paces.
+
+For someone who has just flashed the firmware: one command that says whether the board, the
+sensor and the link work, rate by rate. It reports what the board says about itself, the
+PING round trip, and for every output data rate the board accepts a few seconds of streaming:
+samples against the expected count, lost samples, sequence gaps, CRC errors, the regularity
+of the device time axis and the board clock against the computer's; then the sensor's
+self-test (it must lie still). Rates the board refuses (its link or sensor bus cannot carry
+them) are listed with its reason; they are not failures. Exit status 0 when everything passed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from dataclasses import dataclass
+from typing import TextIO
+
+import numpy as np
+
+CHECK_SECONDS = 3.0
+MIN_SAMPLES = 40
+"""Each rate streams at least this many samples (12.5 Hz takes longer than the seconds asked)."""
+PINGS = 20
+COUNT_TOLERANCE = 0.03
+"""Samples may differ from rate x time by this share (startup, the last packet in flight)."""
+CLOCK_TOLERANCE_PPM = 30_000
+"""Device clock against the computer's: the trimmed chip clock is within a few percent."""
+
+
+def add_check_parser(commands: argparse._SubParsersAction) -> None:
+    check = commands.add_parser(
+        "check-board",
+        help="check a NUCLEO board running the Inclinometer firmware, rate by rate",
+        description=__doc__.splitlines()[0].split(": ", 1)[1],
+    )
+    check.add_argument("port", metavar="PORT", help="its serial port (/dev/ttyACM0, COM5)")
+    check.add_argument("--seconds", type=float, default=CHECK_SECONDS, metavar="S",
+                       help="streaming time per rate (default %(default)g)")
+    check.add_argument("--rates", metavar="HZ,...",
+                       help="output data rates to try (default: all ten)")
+    check.add_argument("--no-self-test", action="store_true",
+                       help="skip the self-test (it needs the sensor lying still)")
+
+
+@dataclass(frozen=True, slots=True)
+class RateResult:
+    """One rate's streaming check."""
+
+    odr_nominal_hz: float
+    refused: str = ""
+    samples: int = 0
+    expected: float = 0.0
+    lost: int = 0
+    seq_gaps: int = 0
+    crc_errors: int = 0
+    worst_step_error: float = 0.0
+    """Largest |dt - 1/ODR| of the device time axis, in sample periods."""
+    clock_ppm: float = 0.0
+    """Device time against the computer's, over the run (ppm)."""
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.refused) or (
+            abs(self.samples - self.expected) <= COUNT_TOLERANCE * self.expected + 2
+            and self.lost == self.seq_gaps == self.crc_errors == 0
+            and self.worst_step_error < 0.5
+            and abs(self.clock_ppm) < CLOCK_TOLERANCE_PPM
+        )
+
+
+def check_rate(port: str, odr_hz: float, seconds: float) -> RateResult:
+    """Stream ``odr_hz`` for ``seconds`` (at least :data:`MIN_SAMPLES` samples)."""
+    from drivers.errors import DeviceOpenError
+    from drivers.serial_link import SerialLinkDevice
+
+    device = SerialLinkDevice(f"serial://{port}?odr={odr_hz:g}")
+    try:
+        try:
+            info = device.open()
+        except DeviceOpenError as exc:
+            if "status 1" in str(exc):  # the board refused the rate
+                return RateResult(odr_hz, refused=str(exc).rsplit(": ", 1)[-1])
+            raise
+        duration = max(seconds, MIN_SAMPLES / info.odr_hz)
+        times: list[np.ndarray] = []
+        first_wall = last_wall = None
+        deadline = time.monotonic() + duration + 5.0
+        while sum(len(t) for t in times) < duration * info.odr_hz:
+            if time.monotonic() > deadline:
+                break
+            block = device.read(0.2)
+            if block is not None and len(block):
+                now = time.monotonic()
+                first_wall = now if first_wall is None else first_wall
+                last_wall = now
+                times.append(block.t_s)
+        t = np.concatenate(times) if times else np.zeros(0)
+        counters = device.counters
+        period = 1.0 / info.odr_hz
+        steps = np.diff(t)
+        worst = float(np.max(np.abs(steps - period)) / period) if len(steps) else 1.0
+        wall = (last_wall or 0.0) - (first_wall or 0.0)
+        device_span = float(t[-1] - t[0]) if len(t) > 1 else 0.0
+        # The first and last reads each hold up to a packet's worth (about 5 ms) of latency.
+        clock_ppm = (device_span / wall - 1.0) * 1e6 if wall > 1.0 else 0.0
+        return RateResult(
+            odr_hz, samples=len(t), expected=duration * info.odr_hz,
+            lost=counters.lost_samples, seq_gaps=counters.seq_gaps,
+            crc_errors=counters.crc_errors + counters.undecodable, worst_step_error=worst,
+            clock_ppm=clock_ppm,
+        )
+    finally:
+        device.close()
+
+
+def check_board(port: str, rates: list[float], seconds: float, self_test: bool,
+                out: TextIO) -> bool:
+    """Run the checks, print a report to ``out``; True when everything passed."""
+    from drivers.errors import DeviceError
+    from drivers.serial_link import SerialLinkDevice
+
+    ok = True
+    device = SerialLinkDevice(f"serial://{port}")
+    try:
+        info = device.open()
+    except DeviceError as exc:
+        print(f"FAIL  open: {exc}", file=out)
+        return False
+    try:
+        extra = info.extra
+        print(f"board     {info.name}, firmware {info.firmware}, unique id {info.unique_id}",
+              file=out)
+        print(f"sensor    {info.sensor} (WHO_AM_I 0x{extra.get('who_am_i', 0):02X}), "
+              f"{info.odr_hz:g} Hz (nominal {info.odr_nominal_hz:g}), tick "
+              f"{extra.get('tick_ns')} ns, +-{info.accel_fs_g} g, +-{info.gyro_fs_dps} dps",
+              file=out)
+        if extra.get("usb_vid_pid"):
+            print(f"usb       {extra['usb_vid_pid']}, serial {extra.get('usb_serial')}", file=out)
+        trips = [device.ping() * 1e3 for _ in range(PINGS)]
+        print(f"ping      {len(trips)} round trips: median {statistics.median(trips):.1f} ms, "
+              f"max {max(trips):.1f} ms", file=out)
+    except DeviceError as exc:
+        print(f"FAIL  {exc}", file=out)
+        return False
+    finally:
+        device.close()
+
+    print(f"{'rate':>7}  {'samples':>14}  lost  gaps  crc  step  clock ppm  result", file=out)
+    for odr in rates:
+        try:
+            result = check_rate(port, odr, seconds)
+        except DeviceError as exc:
+            print(f"{odr:>7g}  FAIL  {exc}", file=out)
+            ok = False
+            continue
+        if result.refused:
+            print(f"{odr:>7g}  refused by the board: {result.refused}", file=out)
+            continue
+        ok &= result.passed
+        counts = f"{result.samples}/{result.expected:.0f}"
+        print(f"{odr:>7g}  {counts:>14}  {result.lost:>4}  "
+              f"{result.seq_gaps:>4}  {result.crc_errors:>3}  {result.worst_step_error:>4.2f}  "
+              f"{result.clock_ppm:>+9.0f}  {'ok' if result.passed else 'FAIL'}", file=out)
+
+    if self_test:
+        device = SerialLinkDevice(f"serial://{port}")
+        try:
+            device.open()
+            st = device.self_test()
+            accel = "/".join(str(v) for v in st.accel_delta_mg)
+            gyro = "/".join(str(v) for v in st.gyro_delta_dps)
+            print(f"self-test accelerometer {'pass' if st.accel_pass else 'FAIL'} ({accel} mg), "
+                  f"gyroscope {'pass' if st.gyro_pass else 'FAIL'} ({gyro} dps)", file=out)
+            ok &= st.accel_pass and st.gyro_pass
+        except DeviceError as exc:
+            print(f"FAIL  self-test: {exc}", file=out)
+            ok = False
+        finally:
+            device.close()
+    print("PASS: the board works." if ok else "FAIL: see the lines marked FAIL.", file=out)
+    return ok
+
+
+def check_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """Run the ``check-board`` sub-command."""
+    from drivers import lsm6dsox
+
+    out = sys.stdout if out is None else out
+    rates = list(lsm6dsox.ODR_CODES_HZ.values())
+    if args.rates:
+        try:
+            rates = [float(text) for text in args.rates.split(",") if text.strip()]
+        except ValueError:
+            print(f"inclinometer: --rates wants numbers like 104,833: {args.rates!r}",
+                  file=sys.stderr)
+            return 2
+    unknown = [r for r in rates if r not in lsm6dsox.ODR_CODES_HZ.values()]
+    if unknown:
+        choices = ", ".join(f"{hz:g}" for hz in lsm6dsox.ODR_CODES_HZ.values())
+        print(f"inclinometer: {unknown[0]:g} Hz is not an LSM6DSOX rate; use {choices}",
+              file=sys.stderr)
+        return 2
+    return 0 if check_board(args.port, rates, args.seconds, not args.no_self_test, out) else 1

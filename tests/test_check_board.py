@@ -1,0 +1,67 @@
+"""``inclinometer check-board``: the bring-up check, against the firmware's own core on a pty and
+against an emulated board that loses packets."""
+
+from __future__ import annotations
+
+import argparse
+import io
+import sys
+
+import pytest
+from fwcore import FirmwareCore, PtyBoard
+
+from app.cli import build_parser
+from app.cli_check import check_board, check_command
+from drivers.emulated_nucleo import EmulatedNucleo, NucleoFaults
+from drivers.lsm6dsox_direct.emulated_chip import EmulatedLsm6dsox
+from drivers.sim.options import SimOptions
+
+pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals")
+
+
+def test_the_firmware_core_passes_and_says_which_rates_it_refuses(firmware_lib) -> None:
+    board = PtyBoard(lambda: FirmwareCore(
+        firmware_lib, EmulatedLsm6dsox(SimOptions("static", seed=9)), unique_id=bytes(12)))
+    out = io.StringIO()
+    try:
+        passed = check_board(board.port, [104.0, 1667.0, 3333.0], 0.5, True, out)
+    finally:
+        board.close()
+    report = out.getvalue()
+    assert passed, report
+    assert "board     NUCLEO-F746ZG, firmware 1.0.0, unique id 000000000000000000000000" in report
+    assert "WHO_AM_I 0x6C" in report and "ping      20 round trips" in report
+    lines = {line.split()[0]: line for line in report.splitlines() if line.strip()}
+    assert lines["104"].endswith("ok") and lines["1667"].endswith("ok")
+    assert "refused by the board" in lines["3333"] and "highest ODR 1667 Hz" in lines["3333"]
+    assert "self-test accelerometer pass" in report
+    assert report.rstrip().endswith("PASS: the board works.")
+
+
+def test_lost_packets_fail_the_check() -> None:
+    board = EmulatedNucleo("static", seed=3, faults=NucleoFaults(drop_seqs=frozenset({20, 21})))
+    out = io.StringIO()
+    try:
+        passed = check_board(board.port, [833.0], 1.0, False, out)
+    finally:
+        board.close()
+    report = out.getvalue()
+    assert not passed
+    row = next(line for line in report.splitlines() if line.strip().startswith("833"))
+    lost, gaps = (int(value) for value in row.split()[2:4])
+    assert lost > 0 and gaps == 1 and row.endswith("FAIL")
+    assert report.rstrip().endswith("FAIL: see the lines marked FAIL.")
+
+
+def test_a_port_without_a_board_fails_at_open(tmp_path) -> None:
+    out = io.StringIO()
+    assert not check_board(str(tmp_path / "ttyNONE"), [104.0], 0.5, False, out)
+    assert out.getvalue().startswith("FAIL  open:")
+
+
+def test_rates_are_checked_before_anything_is_opened(capsys) -> None:
+    args = build_parser().parse_args(["check-board", "/dev/null", "--rates", "104,100"])
+    assert check_command(args) == 2
+    assert "100 Hz is not an LSM6DSOX rate" in capsys.readouterr().err
+    bad = argparse.Namespace(port="/dev/null", rates="fast", seconds=1.0, no_self_test=True)
+    assert check_command(bad) == 2
