@@ -19,11 +19,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "firmware" / "host"))
 
-from fwcore import FirmwareCore, build_library, rate_fits
+from fwcore import FirmwareCore, ForwardingBus, build_library, rate_fits
 
 from drivers import lsm6dsox
 from drivers.link import protocol as p
-from drivers.lsm6dsox_direct.bus import I2CBus
 from drivers.lsm6dsox_direct.emulated_chip import EmulatedLsm6dsox, VirtualClock
 from drivers.sim.options import SimOptions
 
@@ -31,33 +30,24 @@ BAUD = 921_600
 I2C_HZ = 400_000
 
 
-class CountingBus(I2CBus):
-    """Forwards to the emulated chip and counts the bits each transfer puts on the bus."""
+class CountingBus(ForwardingBus):
+    """Counts the bits each transfer puts on the bus."""
 
     def __init__(self, inner: EmulatedLsm6dsox) -> None:
-        self.inner = inner
+        super().__init__(inner)
         self.bits = 0
         self.transfers = 0
 
     def write_register(self, address: int, register: int, data: bytes) -> None:
-        self.inner.write_register(address, register, data)
+        super().write_register(address, register, data)
         self.transfers += 1
         self.bits += 1 + 9 * (2 + len(data)) + 1  # START, address, register, data, STOP
 
     def read_registers(self, address: int, register: int, length: int) -> bytes:
-        data = self.inner.read_registers(address, register, length)
+        data = super().read_registers(address, register, length)
         self.transfers += 1
         self.bits += 1 + 9 * 2 + 1 + 9 * (1 + length) + 1  # ..., Sr, address, data, STOP
         return data
-
-    def close(self) -> None:
-        self.inner.close()
-
-    def monotonic(self) -> float:
-        return self.inner.monotonic()
-
-    def delay(self, seconds: float) -> None:
-        self.inner.delay(seconds)
 
 
 def measure(lib, odr_code: int, seconds: float) -> dict[str, float]:

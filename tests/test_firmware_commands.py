@@ -12,14 +12,13 @@ import json
 from pathlib import Path
 
 import pytest
-from fwcore import LED_ERROR, LED_IDLE, LED_STREAMING, FirmwareCore, rate_fits
+from fwcore import LED_ERROR, LED_IDLE, LED_STREAMING, FirmwareCore, ForwardingBus, rate_fits
 
 from drivers import lsm6dsox
 from drivers.errors import DeviceError, DeviceIOError
 from drivers.link import protocol as p
 from drivers.link.framing import frame_bytes
 from drivers.lsm6dsox_direct import registers as reg
-from drivers.lsm6dsox_direct.bus import I2CBus
 from drivers.lsm6dsox_direct.driver import Lsm6dsoxDriver
 from drivers.lsm6dsox_direct.emulated_chip import EmulatedLsm6dsox, VirtualClock
 from drivers.sim.options import SimOptions
@@ -30,35 +29,26 @@ CONFIG_VECTORS = json.loads(
 UNIQUE_ID = bytes.fromhex("1A0036000851393235363300")
 
 
-class RecordingBus(I2CBus):
-    """Forwards to ``inner`` and records every register write; ``present=False`` unplugs it."""
+class RecordingBus(ForwardingBus):
+    """Records every register write; ``present=False`` unplugs the chip."""
 
     def __init__(self, inner: EmulatedLsm6dsox) -> None:
-        self.inner = inner
+        super().__init__(inner)
         self.writes: list[tuple[int, int]] = []
         self.present = True
 
     def write_register(self, address: int, register: int, data: bytes) -> None:
         self._check()
-        self.inner.write_register(address, register, data)
+        super().write_register(address, register, data)
         self.writes += [(register + i, value) for i, value in enumerate(data)]
 
     def read_registers(self, address: int, register: int, length: int) -> bytes:
         self._check()
-        return self.inner.read_registers(address, register, length)
+        return super().read_registers(address, register, length)
 
     def _check(self) -> None:
         if not self.present:
             raise DeviceIOError("unplugged")
-
-    def close(self) -> None:
-        self.inner.close()
-
-    def monotonic(self) -> float:
-        return self.inner.monotonic()
-
-    def delay(self, seconds: float) -> None:
-        self.inner.delay(seconds)
 
     def take_writes(self) -> list[tuple[int, int]]:
         writes, self.writes = self.writes, []

@@ -150,6 +150,29 @@ def rate_fits(lib: ctypes.CDLL, odr_code: int, baud: int, i2c_hz: int) -> tuple[
     return bool(fits), why.value.decode()
 
 
+class ForwardingBus(I2CBus):
+    """An I2C bus that hands every transfer to ``inner``: subclass it to record, count or break
+    transfers between the firmware and the (emulated) chip."""
+
+    def __init__(self, inner: I2CBus) -> None:
+        self.inner = inner
+
+    def write_register(self, address: int, register: int, data: bytes) -> None:
+        self.inner.write_register(address, register, data)
+
+    def read_registers(self, address: int, register: int, length: int) -> bytes:
+        return self.inner.read_registers(address, register, length)
+
+    def close(self) -> None:
+        self.inner.close()
+
+    def monotonic(self) -> float:
+        return self.inner.monotonic()
+
+    def delay(self, seconds: float) -> None:
+        self.inner.delay(seconds)
+
+
 def c_encode(lib: ctypes.CDLL, packet: p.Packet) -> bytes:
     """The wire frame (COBS + 0x00) the firmware's C encoder makes of a device packet."""
     wire = (ctypes.c_uint8 * 516)()
