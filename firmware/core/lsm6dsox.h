@@ -27,8 +27,6 @@
 
 /* Registers. */
 enum {
-    LSM_FIFO_CTRL1 = 0x07,
-    LSM_FIFO_CTRL2 = 0x08,
     LSM_FIFO_CTRL3 = 0x09,
     LSM_FIFO_CTRL4 = 0x0A,
     LSM_WHO_AM_I = 0x0F,
@@ -67,7 +65,6 @@ enum {
 
 /* FIFO words: a tag byte (TAG_SENSOR[7:3], TAG_CNT[2:1], TAG_PARITY[0]) and 6 data bytes. */
 #define LSM_FIFO_WORD_BYTES 7u
-#define LSM_FIFO_CAPACITY_WORDS 512u
 enum { LSM_TAG_GYRO = 0x01, LSM_TAG_ACCEL = 0x02, LSM_TAG_TEMPERATURE = 0x03,
        LSM_TAG_TIMESTAMP = 0x04, LSM_TAG_CFG_CHANGE = 0x05 };
 #define LSM_TIMESTAMP_DECIMATION 8u /* a timestamp word every 8th slot */
