@@ -29,6 +29,7 @@ from app.core.calibration_procedures import (
 from app.core.pipeline import Pipeline
 from app.core.recording import RecordingError, RecordingWriter, recording_metadata
 from app.core.recording.recorder import reference_source_of
+from app.core.self_test import SelfTestReport
 from drivers.base import Device, DeviceInfo
 from drivers.errors import DeviceError, DeviceIOError
 from drivers.registry import create_device
@@ -85,6 +86,8 @@ class DeviceWorker(QObject):
     reconnecting = Signal(str)  # the cable was pulled; the session waits for the board
     recordingChanged = Signal(object)  # WriterStatus of the recording, or None when none
     deviceMessage = Signal(int, str)  # level (0 debug .. 3 error), text: the device's own LOG
+    selfTestAvailable = Signal(bool)  # the connected device can run the sensor's self-test
+    selfTestFinished = Signal(object, str)  # SelfTestReport or None, and an error message
 
     def __init__(self, pipeline: Pipeline, profile_store: ProfileStore | None = None) -> None:
         super().__init__()
@@ -156,10 +159,31 @@ class DeviceWorker(QObject):
         self._poll_timer.start()
         self._status_timer.start()
         self.connected.emit(info)
+        self.selfTestAvailable.emit(device.supports_self_test)
 
     @Slot()
     def disconnect_device(self) -> None:
         self._close_device("")
+
+    @Slot()
+    def run_self_test(self) -> None:
+        """The sensor's self-test (about a second; streaming pauses and the pause is a gap)."""
+        device = self._device
+        if device is None or not device.supports_self_test:
+            self.selfTestFinished.emit(None, "The connected device has no self-test: it needs "
+                                             "the NUCLEO firmware or a register-level LSM6DSOX.")
+            return
+        try:
+            result = device.self_test()  # type: ignore[attr-defined]
+        except DeviceIOError as exc:
+            self.selfTestFinished.emit(None, str(exc))
+            if not self._await_board(device, str(exc)):
+                self._close_device(str(exc))
+            return
+        except DeviceError as exc:
+            self.selfTestFinished.emit(None, str(exc))
+            return
+        self.selfTestFinished.emit(SelfTestReport.from_result(result), "")
 
     def _use_recorded_filter(self, device: Device) -> None:
         """A replay runs the filter (and parameters) it was recorded with, to reproduce it."""
@@ -449,6 +473,7 @@ class DeviceWorker(QObject):
             device.close()
         except DeviceError as exc:
             log.warning("closing %s: %s", info.url, exc)
+        self.selfTestAvailable.emit(False)
         self.reconnecting.emit(
             f"{reason}. The session is kept: waiting for the board (USB serial {usb_serial}) "
             "to come back on any port."
@@ -488,6 +513,7 @@ class DeviceWorker(QObject):
         assert self._status_timer is not None
         self._status_timer.start()
         self.connected.emit(info)
+        self.selfTestAvailable.emit(device.supports_self_test)
 
     def _continue_time_axis(self, device: Device, raw) -> None:
         """Shift a reconnected board's time so the session's time axis keeps real time."""
@@ -528,6 +554,7 @@ class DeviceWorker(QObject):
             device.close()
         except DeviceError as exc:
             log.warning("closing %s: %s", device.url, exc)
+        self.selfTestAvailable.emit(False)
         self.disconnected.emit(reason)
 
 
@@ -550,6 +577,8 @@ class DeviceSession(QObject):
     reconnecting = Signal(str)
     recordingChanged = Signal(object)
     deviceMessage = Signal(int, str)
+    selfTestAvailable = Signal(bool)
+    selfTestFinished = Signal(object, str)
 
     requestConnect = Signal(str)
     requestDisconnect = Signal()
@@ -565,6 +594,7 @@ class DeviceSession(QObject):
     requestStartRecording = Signal(str, str)  # path, note
     requestStopRecording = Signal()
     requestReplayControl = Signal(str, object)
+    requestSelfTest = Signal()
 
     def __init__(
         self,
@@ -594,6 +624,7 @@ class DeviceSession(QObject):
         self.requestStartRecording.connect(self.worker.start_recording)
         self.requestStopRecording.connect(self.worker.stop_recording)
         self.requestReplayControl.connect(self.worker.replay_control)
+        self.requestSelfTest.connect(self.worker.run_self_test)
         self.device_info: DeviceInfo | None = None
         # Queued into the GUI thread (this object lives there).
         self.worker.connected.connect(self.connected)
@@ -607,6 +638,8 @@ class DeviceSession(QObject):
         self.worker.reconnecting.connect(self.reconnecting)
         self.worker.recordingChanged.connect(self.recordingChanged)
         self.worker.deviceMessage.connect(self.deviceMessage)
+        self.worker.selfTestAvailable.connect(self.selfTestAvailable)
+        self.worker.selfTestFinished.connect(self.selfTestFinished)
         self.connected.connect(self._on_connected)
         self.disconnected.connect(self._on_disconnected)
         self.thread.start()

@@ -92,6 +92,15 @@ class Device(ABC):
         finally:
             self._info = None
 
+    @property
+    def supports_self_test(self) -> bool:
+        """Whether :meth:`self_test` runs the sensor's own self-test (default: no such method).
+
+        Drivers that have one return an object with ``accel_pass``, ``gyro_pass``,
+        ``accel_delta_mg`` and ``gyro_delta_dps``.
+        """
+        return False
+
     def take_messages(self) -> list[DeviceMessage]:
         """Messages the device reported since the last call, oldest first (default: none).
 

@@ -288,6 +288,10 @@ class SerialLinkDevice(Device):
         with self._state:
             return list(self._logs)
 
+    @property
+    def supports_self_test(self) -> bool:
+        return True
+
     def take_messages(self) -> list[DeviceMessage]:
         """The board's LOG messages since the last call (thread-safe)."""
         with self._state:
@@ -682,6 +686,10 @@ class PortDevice(SerialLinkDevice):
         if text is not None and hasattr(text, "counters"):
             return text.counters
         return super().counters
+
+    @property
+    def supports_self_test(self) -> bool:
+        return self.text_device is None  # a sketch printing text lines has none
 
     def _require_open(self) -> None:
         if self.text_device is not None:

@@ -11,7 +11,7 @@ import sys
 
 import pytest
 from fwcore import FirmwareCore, PtyBoard
-from PySide6.QtCore import QSettings
+from PySide6.QtCore import QSettings, Qt
 from test_firmware_commands import RecordingBus
 
 from app.gui import theme
@@ -60,3 +60,57 @@ def test_the_window_streams_from_the_firmware_and_shows_its_messages(
         window.close()
         session.shutdown()
         board.close()
+
+
+def test_the_sensor_self_test_from_the_device_panel(qtbot, qapp, tmp_path, firmware_lib,
+                                                    artifacts_dir) -> None:
+    chip = EmulatedLsm6dsox(SimOptions("static", seed=13))
+    board = PtyBoard(lambda: FirmwareCore(firmware_lib, chip, unique_id=bytes(range(12))))
+    theme.apply_theme(qapp)
+    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+    session = DeviceSession()
+    window = MainWindow(session, settings, f"{board.port}?odr=104")
+    qtbot.addWidget(window)
+    panel = window.device_panel
+    try:
+        window.resize(1280, 860)
+        window.show()
+        window.docks["device"].raise_()
+        qtbot.waitUntil(panel.self_test_button.isEnabled, timeout=TIMEOUT_MS)
+        pipeline = session.pipeline
+        qtbot.waitUntil(lambda: pipeline.counters.samples > 100, timeout=TIMEOUT_MS)
+        with qtbot.waitSignal(session.selfTestFinished, timeout=TIMEOUT_MS) as finished:
+            qtbot.mouseClick(panel.self_test_button, Qt.MouseButton.LeftButton)
+            assert not panel.self_test_button.isEnabled()  # one at a time
+        report, error = finished.args
+        assert error == "" and report.passed
+        expected = chip.self_test_response.accel_mg
+        assert all(abs(a - e) < 5 for a, e in zip(report.accel_delta_mg, expected, strict=True))
+        changes = " / ".join(f"{v:.0f}" for v in report.accel_delta_mg)
+        assert panel.self_test_result.text().splitlines()[:2] == [
+            "Self-test passed", f"accelerometer pass: change {changes} mg"]
+        assert "Self-test passed" in window.messages.toPlainText()
+        qapp.processEvents()  # lay the panel out again before the screenshot
+        window.grab().save(os.path.join(artifacts_dir, "firmware_self_test.png"))
+        # Streaming resumes after the pause, which is marked as a gap.
+        before = pipeline.counters.samples
+        qtbot.waitUntil(lambda: pipeline.counters.samples > before + 50, timeout=TIMEOUT_MS)
+        assert pipeline.counters.gaps >= 1
+    finally:
+        window.close()
+        session.shutdown()
+        board.close()
+
+
+def test_a_device_without_a_self_test_says_so(qtbot) -> None:
+    session = DeviceSession()
+    try:
+        with qtbot.waitSignal(session.selfTestAvailable, timeout=TIMEOUT_MS) as available:
+            session.requestConnect.emit("sim://static?realtime=0")
+        assert available.args == [False]
+        with qtbot.waitSignal(session.selfTestFinished, timeout=TIMEOUT_MS) as finished:
+            session.requestSelfTest.emit()
+        report, error = finished.args
+        assert report is None and "has no self-test" in error
+    finally:
+        session.shutdown()

@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
-from PySide6.QtCore import Qt
-from PySide6.QtWidgets import QFormLayout, QLabel, QVBoxLayout, QWidget
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import QFormLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
+from app.core.self_test import SelfTestReport
+from app.gui import theme
 from app.worker import StreamStatus
 from drivers.base import DeviceInfo
+
+SELF_TEST_UNAVAILABLE = ("The sensor's self-test needs the NUCLEO firmware or a register-level "
+                         "LSM6DSOX (lsm6dsox://).")
 
 _FIELDS = (
     ("name", "Device"), ("url", "URL"), ("unique_id", "Unique id"), ("sensor", "Sensor"),
@@ -17,13 +22,28 @@ _FIELDS = (
 
 
 class DevicePanel(QWidget):
-    """A read-only form of device facts and stream counters."""
+    """A read-only form of device facts and stream counters, and the sensor's self-test."""
+
+    selfTestRequested = Signal()
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         layout = QVBoxLayout(self)
         form = QFormLayout()
         layout.addLayout(form)
+        self.self_test_button = QPushButton("Run sensor self-test")
+        self.self_test_button.setToolTip(
+            "ST's self-test: a known force on the accelerometer and the gyroscope, and their "
+            "output change checked against the datasheet. Keep the sensor still; streaming "
+            "pauses for about a second.")
+        self.self_test_button.setEnabled(False)
+        self.self_test_button.clicked.connect(self._request_self_test)
+        self.self_test_result = QLabel(SELF_TEST_UNAVAILABLE)
+        self.self_test_result.setWordWrap(True)
+        self.self_test_result.setTextInteractionFlags(
+            Qt.TextInteractionFlag.TextSelectableByMouse)
+        layout.addWidget(self.self_test_button)
+        layout.addWidget(self.self_test_result)
         layout.addStretch(1)
         self.values: dict[str, QLabel] = {}
         for key, title in _FIELDS:
@@ -45,6 +65,26 @@ class DevicePanel(QWidget):
         self.values["firmware"].setText(info.firmware or "—")
         self.values["odr"].setText(f"{info.odr_hz:.2f} Hz (nominal {info.odr_nominal_hz:g} Hz)")
         self.values["ranges"].setText(f"±{info.accel_fs_g} g, ±{info.gyro_fs_dps} °/s")
+
+    def set_self_test_available(self, available: bool) -> None:
+        self.self_test_button.setEnabled(available)
+        self.self_test_result.setText("" if available else SELF_TEST_UNAVAILABLE)
+        self.self_test_result.setStyleSheet("")
+
+    def _request_self_test(self) -> None:
+        self.self_test_button.setEnabled(False)
+        self.self_test_result.setStyleSheet("")
+        self.self_test_result.setText("Self-test running: keep the sensor still…")
+        self.selfTestRequested.emit()
+
+    def show_self_test(self, report: SelfTestReport | None, error: str) -> None:
+        """The outcome (``report``), or why there is none (``error``)."""
+        self.self_test_button.setEnabled(True)
+        text = "\n".join(report.lines()) if report is not None else f"Self-test not run: {error}"
+        good = report is not None and report.passed
+        self.self_test_result.setText(text)
+        self.self_test_result.setStyleSheet(
+            f"color: {theme.OK_GREEN if good else theme.ALARM_RED};")
 
     def show_status(self, status: StreamStatus) -> None:
         self.values["rate"].setText(f"{status.measured_rate_hz:.1f} Hz")

@@ -33,6 +33,7 @@ from app.core.calibration_procedures import CalibrationProfile, ProfileError
 from app.core.calibration_procedures.profiles import read_profile_file
 from app.core.filters import DEFAULT_FILTER, FILTERS
 from app.core.recording import sample_recordings
+from app.core.self_test import SelfTestReport
 from app.gui import theme
 from app.gui.bubble_level import BubbleLevel
 from app.gui.calibration_wizard import CalibrationWizard
@@ -215,6 +216,9 @@ class MainWindow(QMainWindow):
         session.disconnected.connect(self._on_disconnected)
         session.error.connect(self.show_error)
         session.deviceMessage.connect(self._on_device_message)
+        self.device_panel.selfTestRequested.connect(session.requestSelfTest)
+        session.selfTestAvailable.connect(self.device_panel.set_self_test_available)
+        session.selfTestFinished.connect(self._on_self_test_finished)
         session.status.connect(self._on_status)
         session.filterChanged.connect(self._on_filter_changed)
 
@@ -473,6 +477,13 @@ class MainWindow(QMainWindow):
             if recording else f"Recording {status.state}"
         )
         self.status_recording.setStyleSheet(f"color: {theme.ALARM_RED}; font-weight: bold;")
+
+    def _on_self_test_finished(self, report: SelfTestReport | None, error: str) -> None:
+        self.device_panel.show_self_test(report, error)
+        if report is None:
+            self.show_error(f"Self-test not run: {error}")
+        else:
+            self.log(report.summary(), error=not report.passed)
 
     def _on_device_message(self, level: int, text: str) -> None:
         """A message from the device itself (the board's firmware): errors also on the banner."""

@@ -242,6 +242,10 @@ class Lsm6dsoxDirectDevice(Device):
         """What the chip was configured with, and its clock trim."""
         return None if self._driver is None else self._driver.settings
 
+    @property
+    def supports_self_test(self) -> bool:
+        return True
+
     def self_test(self) -> SelfTestResult:
         """Run the chip's self-test (about 0.5 s), then stream again; the pause is a gap."""
         driver, bus = self._driver, self._bus
