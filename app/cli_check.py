@@ -73,17 +73,15 @@ class RateResult:
 
 def check_rate(port: str, odr_hz: float, seconds: float) -> RateResult:
     """Stream ``odr_hz`` for ``seconds`` (at least :data:`MIN_SAMPLES` samples)."""
-    from drivers.errors import DeviceOpenError
+    from drivers.errors import SettingRefusedError
     from drivers.serial_link import SerialLinkDevice
 
     device = SerialLinkDevice(f"serial://{port}?odr={odr_hz:g}")
     try:
         try:
             info = device.open()
-        except DeviceOpenError as exc:
-            if "status 1" in str(exc):  # the board refused the rate
-                return RateResult(odr_hz, refused=str(exc).rsplit(": ", 1)[-1])
-            raise
+        except SettingRefusedError as exc:
+            return RateResult(odr_hz, refused=exc.reason)
         duration = max(seconds, MIN_SAMPLES / info.odr_hz)
         times: list[np.ndarray] = []
         first_wall = last_wall = None

@@ -50,7 +50,13 @@ import serial
 from app.core.samples import RawBlock
 from drivers import lsm6dsox
 from drivers.base import Device, DeviceDescriptor, DeviceInfo, DeviceMessage
-from drivers.errors import DeviceError, DeviceIOError, DeviceOpenError, DeviceUrlError
+from drivers.errors import (
+    DeviceError,
+    DeviceIOError,
+    DeviceOpenError,
+    DeviceUrlError,
+    SettingRefusedError,
+)
 from drivers.link import protocol as p
 from drivers.link.decoder import LinkCounters, LinkDecoder
 from drivers.link.framing import DELIMITER, encode_packet
@@ -506,6 +512,9 @@ class SerialLinkDevice(Device):
             self._replies = deque((r for r in self._replies if not isinstance(r, p.Config)),
                                   maxlen=self._replies.maxlen)
         ack = self._exchange(p.Configure(odr_code, accel, gyro), COMMAND_TIMEOUT_S)
+        if ack.status == p.ACK_BAD_ARGUMENT:
+            raise SettingRefusedError(ack_message(self.port, f"configuring {wanted}", ack),
+                                      ack.message)
         if not ack.ok:
             raise DeviceOpenError(ack_message(self.port, f"configuring {wanted}", ack))
         config = self._wait_for(lambda pkt: isinstance(pkt, p.Config), COMMAND_TIMEOUT_S)
