@@ -71,6 +71,12 @@ class OrientationFilter(ABC):
     title: ClassVar[str] = ""
     description: ClassVar[str] = ""
     parameters: ClassVar[tuple[ParameterSpec, ...]] = ()
+    offline: ClassVar[bool] = False
+    """True for an acausal filter (a smoother): it needs the whole recording in one block, so it
+    is offered for recorded sessions only, never for a live stream."""
+    reference_only: ClassVar[bool] = False
+    """True for a filter kept as a faithful reference (the thesis's), not meant for measurement:
+    labelled so in the filter list and left out of the default side-by-side set."""
 
     def __init__(self, **values: Any) -> None:
         self._values: dict[str, Any] = {spec.name: spec.default for spec in self.parameters}
