@@ -9,12 +9,24 @@ it in large blocks and scores it:
   (:func:`app.core.orientation.inclination_error_deg`), as RMSE and maximum in degrees. The
   first ``skip_s`` seconds (default :data:`DEFAULT_SKIP_S`, 2 s) after the stream's first sample
   are not scored: every filter starts from the accelerometer and needs time to converge.
-  Re-convergence after a gap *is* scored (that is what a gap costs).
+  Re-convergence after a gap *is* scored (that is what a gap costs). A stream may instead carry
+  a **score mask** (:attr:`StreamSource.score_mask`): then exactly the rows it marks are scored
+  and ``skip_s`` does not apply. A recording's ``movement`` column gives one
+  (:func:`recording_score_mask`: rows with ``movement == 1``; BROAD's metric, whose rest phase
+  before the movement is the convergence time). Rows without a known reference are never
+  scored.
 - **throughput**: samples per second of wall time inside ``filter.process`` only.
 - **flag**: ``ok``; ``NaN`` when an estimate is not finite; ``diverged`` when the error RMS over
   the last 10 % of the scored samples exceeds :data:`DIVERGED_DEG` and
   :data:`DIVERGED_RATIO` times that over the rest (the estimate runs away); ``error`` when the
   filter raised (``message`` says what).
+
+An *offline* filter (``OrientationFilter.offline``: an acausal smoother) gets the whole stream
+in one ``process`` call; the others get it in blocks of ``block`` samples.
+
+:func:`evaluate_source` scores several filters on one :class:`StreamSource`,
+:func:`summarize` gives each filter's mean over several sources, and :func:`results_json`
+puts both in a JSON-ready dict (what ``inclinometer evaluate --json`` writes).
 
 This module is numpy only (no Qt). It imports ``drivers`` lazily, only in the simulator helper.
 """
@@ -23,8 +35,8 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -40,6 +52,10 @@ DEFAULT_BLOCK = 65536
 """Samples per ``filter.process`` call during evaluation (large: a batch, as a recording)."""
 DEFAULT_REPEATS = 3
 """Runs per filter and stream; the throughput is that of the fastest."""
+LARGE_STREAM = 1_000_000
+"""A stream with at least this many samples is timed in one run (it times well as it is)."""
+SCORE_COLUMN = "movement"
+"""The optional recording column that says which rows are scored (1 = score this row)."""
 DIVERGED_DEG = 5.0
 DIVERGED_RATIO = 1.5
 LATE_FRACTION = 0.1
@@ -66,11 +82,40 @@ class FilterScore:
 
 @dataclass(slots=True)
 class StreamSource:
-    """A named stream factory: ``blocks()`` yields the stream afresh each time it is called."""
+    """A named stream factory: ``blocks()`` yields the stream afresh each time it is called.
+
+    ``score_mask``: None to score every row after the first ``skip_s`` seconds, or (N,) bool
+    over the whole (concatenated) stream: exactly the rows to score, ``skip_s`` then does not
+    apply. ``scoring`` says in words which rows the mask marks.
+    """
 
     label: str
     blocks: Callable[[], Iterable[SampleBlock]]
     description: str = ""
+    score_mask: np.ndarray | None = None
+    scoring: str = ""
+
+
+@dataclass(slots=True)
+class SourceResult:
+    """Every filter's score on one source, and what the source was."""
+
+    label: str
+    description: str
+    duration_s: float
+    samples: int
+    rate_hz: float
+    gaps: int
+    scored_samples: int
+    """Rows that count (mask or time rule, and a known reference), before NaN estimates."""
+    scoring: str
+    """Which rows are scored, in words."""
+    masked: bool
+    """True when a score mask chose the rows (False: the first ``skip_s`` s skipped)."""
+    scores: list[FilterScore] = field(default_factory=list)
+
+    def score(self, name: str) -> FilterScore | None:
+        return next((s for s in self.scores if s.name == name), None)
 
 
 # -- streams ---------------------------------------------------------------------------------
@@ -205,6 +250,9 @@ def recording_source(
     as a replay does; otherwise the raw samples are scored. Reads the file at once: raises
     :class:`app.core.recording.errors.RecordingError` for a bad file and ValueError when it
     has no reference orientation.
+
+    When the recording has a ``movement`` column (:data:`SCORE_COLUMN`), its rows with
+    ``movement == 1`` are the ones scored (:func:`recording_score_mask`).
     """
     from app.core.recording.reader import read_recording
 
@@ -215,18 +263,65 @@ def recording_source(
     calibration = recording.calibration if recalibrate else None
     applied = (f"recorded calibration {calibration.name!r} applied" if calibration is not None
                else "raw samples, no calibration")
+    mask = recording_score_mask(recording)
 
     def blocks() -> Iterable[SampleBlock]:
         return [recording.sample_block(calibration)]
 
-    return StreamSource(label or str(path), blocks, applied)
+    scoring = f"rows with {SCORE_COLUMN} == 1" if mask is not None else ""
+    return StreamSource(label or str(path), blocks, applied, mask, scoring)
+
+
+def recording_score_mask(recording: Any) -> np.ndarray | None:
+    """(N,) bool: the rows a recording's ``movement`` column marks 1; None without the column.
+
+    ``recording`` is an :class:`app.core.recording.reader.Recording`. The column is not one of
+    format v1's known columns, so the reader keeps it as it keeps any other
+    (:attr:`~app.core.recording.reader.Recording.unknown_columns`): as floats (NaN where
+    empty), or as text when a field is not a number. Raises ValueError for such text.
+    """
+    values = recording.columns.get(SCORE_COLUMN)  # unknown_columns today; any column will do
+    if values is None:
+        return None
+    if values.dtype == object:
+        try:
+            values = np.array([float(v) if str(v).strip() else math.nan for v in values])
+        except ValueError:
+            where = f"{recording.path}: " if getattr(recording, "path", None) else ""
+            raise ValueError(f"{where}the {SCORE_COLUMN!r} column holds text; it must be a "
+                             "flag (1 = score this row, 0 or empty = do not)") from None
+    return np.asarray(values, dtype=np.float64) == 1.0
 
 
 # -- scoring ---------------------------------------------------------------------------------
+def scoring_rows(
+    reference: np.ndarray, t_s: np.ndarray, skip_s: float = DEFAULT_SKIP_S,
+    score_mask: np.ndarray | None = None,
+) -> np.ndarray:
+    """(N,) bool: the rows that count, before any estimate is looked at.
+
+    With ``score_mask``, the rows it marks; else those from ``skip_s`` seconds after the first
+    sample on. Either way only rows with a known (finite) reference.
+    """
+    known = np.all(np.isfinite(reference), axis=1)
+    if score_mask is not None:
+        mask = np.asarray(score_mask, dtype=bool)
+        if mask.shape != t_s.shape:
+            raise ValueError(f"the score mask has shape {mask.shape}, the stream {t_s.shape}")
+        return mask & known
+    if len(t_s) == 0:
+        return known
+    return (t_s >= t_s[0] + skip_s) & known
+
+
 def error_statistics(
-    quat: np.ndarray, reference: np.ndarray, t_s: np.ndarray, skip_s: float = DEFAULT_SKIP_S
+    quat: np.ndarray, reference: np.ndarray, t_s: np.ndarray, skip_s: float = DEFAULT_SKIP_S,
+    score_mask: np.ndarray | None = None,
 ) -> dict[str, Any]:
-    """RMSE and maximum inclination error (degrees) after the first ``skip_s`` seconds.
+    """RMSE and maximum inclination error (degrees) over the scored rows.
+
+    The scored rows are those ``score_mask`` (N,) marks, or without one those after the first
+    ``skip_s`` seconds (:func:`scoring_rows`); rows without a known reference never count.
 
     Returns ``rmse_deg``, ``max_deg``, ``scored`` (samples scored), ``nan`` (samples whose
     estimate is not finite, counted over the whole stream) and ``diverged`` (see the module
@@ -237,8 +332,7 @@ def error_statistics(
     if len(t_s) == 0:
         return {"rmse_deg": math.nan, "max_deg": math.nan, "scored": 0, "nan": 0,
                 "diverged": False}
-    # Rows whose reference is unknown (empty reference columns in a recording) are not scored.
-    scored = (t_s >= t_s[0] + skip_s) & finite & np.all(np.isfinite(reference), axis=1)
+    scored = scoring_rows(reference, t_s, skip_s, score_mask) & finite
     errors = inclination_error_deg(quat[scored], reference[scored])
     if len(errors) == 0:
         return {"rmse_deg": math.nan, "max_deg": math.nan, "scored": 0, "nan": nan_count,
@@ -268,12 +362,17 @@ def _resolve(spec: FilterSpec) -> type[OrientationFilter]:
 def run_filter(
     orientation_filter: OrientationFilter, stream: SampleBlock, block: int = DEFAULT_BLOCK
 ) -> tuple[np.ndarray, float]:
-    """Quaternions (N, 4) of a filter over ``stream`` and the seconds spent in ``process``."""
+    """Quaternions (N, 4) of a filter over ``stream`` and the seconds spent in ``process``.
+
+    The stream goes in blocks of ``block`` samples, except to an offline filter (a smoother,
+    ``offline`` True): that one gets the whole stream in a single ``process`` call.
+    """
     orientation_filter.warm_up()
     out = np.empty((len(stream), 4))
     elapsed = 0.0
     row = 0
-    for piece in split_block(stream, block):
+    pieces = [stream] if type(orientation_filter).offline else split_block(stream, block)
+    for piece in pieces:
         start = time.perf_counter()
         result = orientation_filter.process(piece)
         elapsed += time.perf_counter() - start
@@ -284,12 +383,14 @@ def run_filter(
 
 def evaluate_filter(
     spec: FilterSpec, stream: SampleBlock, *, skip_s: float = DEFAULT_SKIP_S,
-    block: int = DEFAULT_BLOCK, repeats: int = DEFAULT_REPEATS, **values: Any,
+    block: int = DEFAULT_BLOCK, repeats: int = DEFAULT_REPEATS,
+    score_mask: np.ndarray | None = None, **values: Any,
 ) -> FilterScore:
     """Score one filter (fresh, with parameter ``values``) on a stream with a reference.
 
     The stream is run ``repeats`` times by fresh filters; the errors come from the first run,
-    the throughput from the fastest (short streams time noisily).
+    the throughput from the fastest (short streams time noisily). ``score_mask`` (N,) bool:
+    score exactly these rows instead of those after ``skip_s`` (see :func:`error_statistics`).
     """
     if stream.reference_quat is None:
         raise ValueError("the stream has no reference orientation to compare with")
@@ -303,7 +404,7 @@ def evaluate_filter(
         score.flag = "error"
         score.message = f"{type(exc).__name__}: {exc}"
         return score
-    stats = error_statistics(quat, stream.reference_quat, stream.t_s, skip_s)
+    stats = error_statistics(quat, stream.reference_quat, stream.t_s, skip_s, score_mask)
     score.rmse_deg = stats["rmse_deg"]
     score.max_deg = stats["max_deg"]
     score.scored_samples = stats["scored"]
@@ -323,12 +424,19 @@ def evaluate(
     skip_s: float = DEFAULT_SKIP_S,
     block: int = DEFAULT_BLOCK,
     repeats: int = DEFAULT_REPEATS,
+    score_mask: np.ndarray | None = None,
+    parameters: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> list[FilterScore]:
-    """Score each filter (default: every registered one) on the same stream."""
+    """Score each filter (default: every registered one) on the same stream.
+
+    ``parameters``: filter name -> parameter values (the others keep their defaults).
+    """
     stream = blocks if isinstance(blocks, SampleBlock) else concatenate_blocks(blocks)
     names: Sequence[FilterSpec] = list(FILTERS) if filters is None else filters
+    chosen = parameters or {}
     return [
-        evaluate_filter(spec, stream, skip_s=skip_s, block=block, repeats=repeats)
+        evaluate_filter(spec, stream, skip_s=skip_s, block=block, repeats=repeats,
+                        score_mask=score_mask, **dict(chosen.get(_resolve(spec).name, {})))
         for spec in names
     ]
 
@@ -341,6 +449,116 @@ def stream_summary(stream: SampleBlock) -> dict[str, float]:
     rate = 1.0 / float(np.median(steps)) if len(steps) else math.nan
     return {"duration_s": duration, "samples": n, "rate_hz": rate,
             "gaps": int(np.count_nonzero(stream.gap))}
+
+
+def evaluate_source(
+    source: StreamSource,
+    filters: Sequence[FilterSpec] | None = None,
+    *,
+    skip_s: float = DEFAULT_SKIP_S,
+    block: int = DEFAULT_BLOCK,
+    repeats: int | None = None,
+    parameters: Mapping[str, Mapping[str, Any]] | None = None,
+) -> SourceResult:
+    """Score each filter on one source (its score mask, if any, chooses the rows).
+
+    ``repeats`` None: one run for a stream of :data:`LARGE_STREAM` samples or more, else
+    :data:`DEFAULT_REPEATS` (only the throughput depends on it).
+    """
+    stream = concatenate_blocks(source.blocks())
+    if stream.reference_quat is None:
+        raise ValueError(f"{source.label}: the stream has no reference orientation")
+    info = stream_summary(stream)
+    mask = source.score_mask
+    rows = scoring_rows(stream.reference_quat, stream.t_s, skip_s, mask)
+    if mask is not None:
+        scoring = source.scoring or "rows marked by the score mask"
+    else:
+        scoring = f"after the first {skip_s:g} s"
+    if repeats is None:
+        repeats = 1 if len(stream) >= LARGE_STREAM else DEFAULT_REPEATS
+    result = SourceResult(
+        source.label, source.description, info["duration_s"], info["samples"], info["rate_hz"],
+        info["gaps"], int(np.count_nonzero(rows)), scoring, mask is not None,
+    )
+    result.scores = evaluate(stream, filters, skip_s=skip_s, block=block, repeats=repeats,
+                             score_mask=mask, parameters=parameters)
+    return result
+
+
+def summarize(results: Sequence[SourceResult]) -> dict[str, dict[str, float | int]]:
+    """Per filter over the sources: ``mean_rmse_deg`` (NaN unless every source has an RMSE:
+    a mean over fewer sources would not compare), ``worst_rmse_deg`` (the largest per-source
+    RMSE), ``max_deg`` (the largest error anywhere) and ``sources`` (how many have an RMSE)."""
+    names = list(dict.fromkeys(s.name for r in results for s in r.scores))
+    summary: dict[str, dict[str, float | int]] = {}
+    for name in names:
+        scores = [r.score(name) for r in results]
+        rmses = [s.rmse_deg if s is not None else math.nan for s in scores]
+        finite = [v for v in rmses if math.isfinite(v)]
+        maxima = [s.max_deg for s in scores if s is not None and math.isfinite(s.max_deg)]
+        complete = len(finite) == len(rmses) and len(rmses) > 0
+        summary[name] = {
+            "mean_rmse_deg": float(np.mean(finite)) if complete else math.nan,
+            "worst_rmse_deg": max(finite) if finite else math.nan,
+            "max_deg": max(maxima) if maxima else math.nan,
+            "sources": len(finite),
+        }
+    return summary
+
+
+def _json_number(value: float) -> float | None:
+    """JSON has no NaN or infinity: those become null."""
+    return float(value) if math.isfinite(value) else None
+
+
+def results_json(
+    results: Sequence[SourceResult], *, settings: Mapping[str, Any] | None = None,
+    filters: Sequence[FilterSpec] | None = None,
+    parameters: Mapping[str, Mapping[str, Any]] | None = None,
+) -> dict[str, Any]:
+    """The results as a JSON-ready dict (NaN and infinity as null).
+
+    ``{"settings": ..., "filters": [{name, title, offline, reference_only, parameters}],
+    "sources": [{label, description, duration_s, samples, rate_hz, gaps, scored_samples,
+    scoring, masked, filters: {name: {rmse_deg, max_deg, samples_per_s, flag, message,
+    scored_samples, nan_samples}}}], "mean": {name: {rmse_deg, worst_rmse_deg, max_deg,
+    sources}}}``.
+    """
+    specs = list(filters) if filters is not None else list(
+        dict.fromkeys(s.name for r in results for s in r.scores))
+    chosen = parameters or {}
+    described = []
+    for spec in specs:
+        cls = _resolve(spec)
+        values = cls(**dict(chosen.get(cls.name, {}))).parameter_values()
+        described.append({"name": cls.name, "title": cls.title or cls.name,
+                          "offline": bool(cls.offline),
+                          "reference_only": bool(cls.reference_only), "parameters": values})
+    sources = []
+    for result in results:
+        sources.append({
+            "label": result.label, "description": result.description,
+            "duration_s": _json_number(result.duration_s), "samples": result.samples,
+            "rate_hz": _json_number(result.rate_hz), "gaps": result.gaps,
+            "scored_samples": result.scored_samples, "scoring": result.scoring,
+            "masked": result.masked,
+            "filters": {
+                s.name: {"rmse_deg": _json_number(s.rmse_deg), "max_deg": _json_number(s.max_deg),
+                         "samples_per_s": _json_number(s.samples_per_s), "flag": s.flag,
+                         "message": s.message, "scored_samples": s.scored_samples,
+                         "nan_samples": s.nan_samples}
+                for s in result.scores
+            },
+        })
+    mean = {
+        name: {"rmse_deg": _json_number(float(v["mean_rmse_deg"])),
+               "worst_rmse_deg": _json_number(float(v["worst_rmse_deg"])),
+               "max_deg": _json_number(float(v["max_deg"])), "sources": v["sources"]}
+        for name, v in summarize(results).items()
+    }
+    return {"settings": dict(settings or {}), "filters": described, "sources": sources,
+            "mean": mean}
 
 
 # -- the standard set ------------------------------------------------------------------------

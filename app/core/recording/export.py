@@ -4,6 +4,8 @@
 (``convert_raw_block``, then the calibration, then ``filter.process`` per block), on the blocks
 the device delivered while recording (the ``block_start`` column), with the recorded filter
 parameters: the same filter then gives the same angles, bit for bit, as it gave live.
+An offline filter (``offline``: a smoother, which needs the whole recording) gets every sample
+in a single ``process`` call instead.
 
 :func:`write_angles_csv` writes them: ``t``, then per filter ``NAME.roll``, ``NAME.pitch``,
 ``NAME.tilt``, ``NAME.direction`` (degrees) and ``NAME.qw`` ... ``NAME.qz``; with a reference,
@@ -95,7 +97,8 @@ def run_filters(
         filter's defaults.
     block : None: the recorded device blocks (exact replay); else blocks of this many samples
         (faster for tiny recorded blocks; partition-sensitive filters such as VQF then differ
-        from the live run in the last bits).
+        from the live run in the last bits). Offline filters (``offline`` True) ignore it:
+        they get the whole recording in one ``process`` call.
     """
     cal = resolve_calibration(recording, calibration)
     recorded = recorded_filter_parameters(recording)
@@ -105,18 +108,28 @@ def run_filters(
     n = len(recording)
     quats = [np.empty((n, 4)) for _ in objects]
     angles = [{key: np.empty(n) for key in ANGLE_NAMES} for _ in objects]
+    offline = [k for k, f in enumerate(objects) if type(f).offline]
+    online = [k for k in range(len(objects)) if k not in offline]
+
+    def keep(k: int, row: int, output: Any) -> None:
+        stop = row + len(output.quat)
+        quats[k][row:stop] = output.quat
+        angles[k]["roll"][row:stop] = output.angles.roll_deg
+        angles[k]["pitch"][row:stop] = output.angles.pitch_deg
+        angles[k]["tilt"][row:stop] = output.angles.tilt_deg
+        angles[k]["direction"][row:stop] = output.angles.direction_deg
+
     row = 0
-    for raw in recording.raw_blocks(block):
-        samples = cal.apply(convert_raw_block(raw))
-        stop = row + len(samples)
-        for k, orientation_filter in enumerate(objects):
-            output = orientation_filter.process(samples)
-            quats[k][row:stop] = output.quat
-            angles[k]["roll"][row:stop] = output.angles.roll_deg
-            angles[k]["pitch"][row:stop] = output.angles.pitch_deg
-            angles[k]["tilt"][row:stop] = output.angles.tilt_deg
-            angles[k]["direction"][row:stop] = output.angles.direction_deg
-        row = stop
+    if online:
+        for raw in recording.raw_blocks(block):
+            samples = cal.apply(convert_raw_block(raw))
+            for k in online:
+                keep(k, row, objects[k].process(samples))
+            row += len(samples)
+    if offline and n:
+        whole = cal.apply(convert_raw_block(recording.raw_block()))
+        for k in offline:
+            keep(k, 0, objects[k].process(whole))
     return [
         FilterOutput(f.name, f.title or f.name, f.parameter_values(), quats[k],
                      angles[k]["roll"], angles[k]["pitch"], angles[k]["tilt"],
