@@ -3,7 +3,7 @@
 ``inclinometer``                    the GUI on the simulated device
 ``inclinometer --device URL``       the GUI on another device
 ``inclinometer devices``            list what can be connected
-``inclinometer evaluate SOURCE``    score the orientation filters against a known truth
+``inclinometer evaluate SOURCE...`` score the orientation filters against a known truth
 ``inclinometer record ... OUT.csv`` record a device headless (see app/cli_recording.py)
 ``inclinometer replay IN.csv ...``  run filters over a recording, export their angles
 ``inclinometer simulate --pty``     an emulated NUCLEO board on a pseudo-terminal
@@ -14,17 +14,28 @@
 from __future__ import annotations
 
 import argparse
+import glob
+import json
 import math
+import os
 import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from app import __version__
 from app.cli_check import add_check_parser, check_command
-from app.cli_recording import add_recording_parsers, record_command, replay_command
+from app.cli_recording import (
+    add_param_argument,
+    add_recording_parsers,
+    record_command,
+    replay_command,
+)
 from app.cli_simulate import add_simulate_parser, simulate_command
 
 if TYPE_CHECKING:
-    from app.core.evaluation import FilterScore
+    from app.core.evaluation import FilterScore, SourceResult, StreamSource
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -48,43 +59,66 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 EVALUATE_DEFAULT_SECONDS = 60.0
+GLOB_CHARACTERS = "*?["
 
 
 def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
     evaluate = commands.add_parser(
         "evaluate",
-        help="score the orientation filters on a source with a known true orientation",
+        help="score the orientation filters on sources with a known true orientation",
         description=(
-            "Run orientation filters over a stream whose true orientation is known and print, "
-            "per filter, the inclination error (RMSE and maximum, after the first seconds of "
-            "convergence), the batch throughput and a flag (ok, NaN, diverged or error). "
-            "The simulator's static sensor errors are compensated with their true values "
-            "unless --raw is given."
+            "Run orientation filters over streams whose true orientation is known and print, "
+            "per filter, the inclination error (RMSE and maximum), the batch throughput and a "
+            "flag (ok, NaN, diverged or error). Scored are the rows after the first seconds "
+            "of convergence (--skip) or, in a recording with a 'movement' column, exactly "
+            "the rows with movement == 1; rows without a reference never count. With several "
+            "sources, a table of RMSE per source and filter follows, with each filter's mean "
+            "over the sources. The simulator's static sensor errors are compensated with "
+            "their true values unless --raw is given."
         ),
     )
     evaluate.add_argument(
-        "source", metavar="SOURCE",
-        help="a simulator URL such as 'sim://translation?odr=208' (never paced in real time), "
-        "a recording with reference columns (IN.csv; its recorded calibration is applied "
-        "again unless --raw; always the whole recording), or 'scenarios': every simulator "
-        "scenario with motion plus the hard cases (an hour at "
-        "rest, 90 degrees of pitch, upside down, a stream with a gap)",
+        "sources", metavar="SOURCE", nargs="+",
+        help="one or more of: a simulator URL such as 'sim://translation?odr=208' (never "
+        "paced in real time); a recording with reference columns (IN.csv or replay://IN.csv; "
+        "its recorded calibration is applied again unless --raw; always the whole "
+        "recording), or a glob of them ('DIR/*.csv', quoted or not); 'scenarios': every "
+        "simulator scenario with motion plus the hard cases (an hour at rest, 90 degrees of "
+        "pitch, upside down, a stream with a gap)",
     )
     evaluate.add_argument(
         "--filter", dest="filters", metavar="NAME", action="extend", nargs="+",
         help="filter(s) to evaluate (repeatable; default: all)",
     )
+    add_param_argument(evaluate)
     evaluate.add_argument(
         "--seconds", type=float, default=EVALUATE_DEFAULT_SECONDS, metavar="S",
-        help="length of each stream (default %(default)g; the hour at rest is always an hour)",
+        help="length of each simulator stream (default %(default)g; the hour at rest is "
+        "always an hour)",
     )
     evaluate.add_argument(
         "--skip", type=float, default=None, metavar="S",
-        help="seconds at the start not scored while filters converge (default 2)",
+        help="seconds at the start not scored while filters converge (default 2; not used "
+        "for a recording with a 'movement' column)",
     )
     evaluate.add_argument(
         "--raw", action="store_true",
         help="leave the sensor's static errors (bias, scale, cross-axis) uncompensated",
+    )
+    evaluate.add_argument(
+        "--repeats", type=int, default=None, metavar="N",
+        help="runs per filter and source, the throughput being the fastest's (default: 3, "
+        "1 for a million samples or more); the errors never depend on it",
+    )
+    evaluate.add_argument(
+        "--json", metavar="FILE",
+        help="also write every figure as JSON to FILE ('-': to stdout, the tables then go "
+        "to stderr)",
+    )
+    evaluate.add_argument(
+        "--per-source", action=argparse.BooleanOptionalAction, default=None,
+        help="print each source's full table (RMSE, maximum, throughput, flag); default: "
+        "when a single SOURCE that is not a glob is given",
     )
 
 
@@ -103,77 +137,269 @@ def list_devices(out=sys.stdout) -> int:
 
 
 def _format_score(score: FilterScore, width: int) -> str:
-    def number(value: float, spec: str) -> str:
-        return format(value, spec) if math.isfinite(value) else "-"
-
-    rate = number(score.samples_per_s, ",.0f")
+    rate = _number(score.samples_per_s, ",.0f")
     flag = score.flag if not score.message else f"{score.flag}: {score.message}"
-    return (f"  {score.name:<{width}}  {number(score.rmse_deg, '.3f'):>9}  "
-            f"{number(score.max_deg, '.3f'):>9}  {rate:>14}  {flag}")
+    return (f"  {score.name:<{width}}  {_number(score.rmse_deg, '.3f'):>9}  "
+            f"{_number(score.max_deg, '.3f'):>9}  {rate:>14}  {flag}")
+
+
+def _number(value: float, spec: str) -> str:
+    return format(value, spec) if math.isfinite(value) else "-"
+
+
+class _Usage(Exception):
+    """A source or option the command cannot use: message for the user, exit 2."""
+
+
+@dataclass
+class _Pending:
+    """A source named on the command line, checked but not read yet (recordings are read one
+    at a time, just before they are evaluated)."""
+
+    label: str
+    short: str
+    treatment: str
+    """How the samples are prepared, in words (calibration)."""
+    load: Callable[[], StreamSource]
+
+
+def _recording_pending(path: Path, label: str, compensate: bool) -> _Pending:
+    """Check a recording's head now (format, columns, reference); read it later."""
+    from app.core import evaluation
+    from app.core.recording.errors import RecordingError
+    from app.core.recording.format import REFERENCE_COLUMNS
+    from app.core.recording.reader import read_metadata, read_recording
+
+    if not path.is_file():
+        raise _Usage(f"{label}: no such file" if not path.exists() else f"{label}: not a file")
+    try:
+        _, header = read_metadata(path)
+    except RecordingError as exc:
+        raise _Usage(str(exc)) from None
+    except OSError as exc:
+        raise _Usage(f"{label}: cannot read the recording: {exc.strerror or exc}") from None
+    if not all(column in header for column in REFERENCE_COLUMNS):
+        try:  # a broken row says more than the missing columns: read the file for it
+            read_recording(path)
+        except RecordingError as exc:
+            raise _Usage(str(exc)) from None
+        raise _Usage(f"{path}: the recording has no reference orientation (columns qw, qx, "
+                     "qy, qz) to compare the filters with")
+    treatment = "recorded calibration" if compensate else "raw samples (--raw)"
+    short = path.stem if path.suffix.lower() == ".csv" else path.name
+
+    def load() -> StreamSource:
+        return evaluation.recording_source(str(path), recalibrate=compensate, label=label)
+
+    return _Pending(label, short, treatment, load)
+
+
+def resolve_sources(items: list[str], seconds: float, compensate: bool) -> list[_Pending]:
+    """The sources named by ``items`` (scenarios, sim:// URLs, recordings, globs), in order.
+
+    Raises :class:`_Usage` for a URL that cannot be evaluated, a file that is not a recording
+    with a reference, or a glob that matches nothing. A file named twice is evaluated once.
+    """
+    from app.core import evaluation
+    from drivers.errors import DeviceError, DeviceUrlError
+    from drivers.registry import scheme_of
+    from drivers.replay import recording_path
+
+    errors = "static errors uncompensated" if not compensate else "static errors compensated"
+    pending: list[_Pending] = []
+    seen: set[Path] = set()
+
+    def add_recording(path: Path, label: str) -> None:
+        key = path.resolve()
+        if key not in seen:
+            seen.add(key)
+            pending.append(_recording_pending(path, label, compensate))
+
+    for item in items:
+        if item == "scenarios":
+            for source in evaluation.standard_sources(seconds, compensate=compensate):
+                pending.append(_Pending(source.label, source.label, errors,
+                                        lambda source=source: source))
+            continue
+        if "://" in item:
+            try:
+                scheme = scheme_of(item)
+            except DeviceUrlError as exc:
+                raise _Usage(str(exc)) from None
+            if scheme == "replay":
+                add_recording(recording_path(item), item)
+                continue
+            if scheme != "sim":
+                raise _Usage(f"{item}: only sources that know their true orientation can be "
+                             "evaluated (sim:// URLs and recordings with reference columns)")
+            try:
+                source = evaluation.simulator_source(item, seconds, compensate=compensate)
+            except DeviceError as exc:
+                raise _Usage(str(exc)) from None
+            pending.append(_Pending(item, item, errors, lambda source=source: source))
+            continue
+        if any(c in item for c in GLOB_CHARACTERS) and not Path(item).exists():
+            matches = sorted(glob.glob(os.path.expanduser(item)))
+            if not matches:
+                raise _Usage(f"{item}: no file matches")
+            for match in matches:
+                add_recording(Path(match), match)
+            continue
+        if item.strip().lower().endswith(".csv") or Path(item).exists():
+            add_recording(Path(item), item)
+            continue
+        try:
+            scheme_of(item)  # a bare serial port, or not a URL at all
+        except DeviceUrlError:
+            raise _Usage(f"{item}: no such file, and not a device URL (give a recording, a "
+                         "glob of recordings, a sim:// URL or 'scenarios')") from None
+        raise _Usage(f"{item}: only sources that know their true orientation can be "
+                     "evaluated (sim:// URLs and recordings with reference columns)")
+    return pending
+
+
+def _print_details(
+    result: SourceResult, treatment: str, skip: float, width: int, out: TextIO
+) -> None:
+    about = f" ({result.description})" if result.description else ""
+    print(f"{result.label}{about}", file=out)
+    if result.masked:
+        scored = f"scored: {result.scoring} ({result.scored_samples} samples)"
+    else:
+        scored = f"first {skip:g} s not scored"
+    print(f"  {result.duration_s:.0f} s, {result.samples} samples at {result.rate_hz:.4g} Hz, "
+          f"{result.gaps} gap(s), {treatment}, {scored}", file=out)
+    print(f"  {'filter':<{width}}  {'RMSE deg':>9}  {'max deg':>9}  {'samples/s':>14}  flag",
+          file=out)
+    for score in result.scores:
+        print(_format_score(score, width), file=out)
+    print(file=out)
+
+
+class _Matrix:
+    """The table of RMSE per source (rows) and filter (columns), printed row by row."""
+
+    def __init__(self, labels: list[str], filters: list[str], out: TextIO) -> None:
+        self.filters = filters
+        self.out = out
+        self.label_width = max(6, *(len(label) for label in labels))
+        self.widths = [max(7, len(name)) for name in filters]
+        self.flagged: list[str] = []
+
+    def header(self) -> None:
+        print("Inclination error RMSE (degrees) per source and filter", file=self.out)
+        cells = "".join(f"  {name:>{w}} " for name, w in zip(self.filters, self.widths,
+                                                                strict=True))
+        print(f"{'source':<{self.label_width}}  {'scored':>7}{cells}".rstrip(), file=self.out)
+
+    def row(self, label: str, result: SourceResult) -> None:
+        cells = []
+        for name, width in zip(self.filters, self.widths, strict=True):
+            score = result.score(name)
+            value = math.nan if score is None else score.rmse_deg
+            mark = " "
+            if score is not None and score.flag != "ok":
+                mark = "!"
+                why = score.flag if not score.message else f"{score.flag}: {score.message}"
+                self.flagged.append(f"{name} on {label}: {why}")
+            cells.append(f"  {_number(value, '.3f'):>{width}}{mark}")
+        print(f"{label:<{self.label_width}}  {result.scored_samples:>7}{''.join(cells)}"
+              .rstrip(), file=self.out)
+        self.out.flush()
+
+    def footer(self, summary: dict[str, dict[str, float | int]], sources: int) -> None:
+        for key, title in (("mean_rmse_deg", f"mean of {sources}"),
+                           ("worst_rmse_deg", "worst")):
+            cells = "".join(
+                f"  {_number(float(summary[name][key]), '.3f'):>{w}} "
+                for name, w in zip(self.filters, self.widths, strict=True))
+            print(f"{title:<{self.label_width}}  {'':>7}{cells}".rstrip(), file=self.out)
+        for line in self.flagged:
+            print(f"  ! {line}", file=self.out)
 
 
 def evaluate_sources(args: argparse.Namespace, out: TextIO | None = None) -> int:
-    """The ``evaluate`` sub-command: one table per source."""
+    """The ``evaluate`` sub-command: per source a table, and with several a summary table."""
+    from app.cli_recording import check_parameters_for, parse_filter_parameters
     from app.core import evaluation
     from app.core.filters import FILTERS
-    from drivers.errors import DeviceError
-    from drivers.registry import scheme_of
+    from app.core.recording.errors import RecordingError
 
     out = sys.stdout if out is None else out
-
-    filters = args.filters or list(FILTERS)
+    filters = list(dict.fromkeys(args.filters or list(FILTERS)))
     unknown = [name for name in filters if name not in FILTERS]
     if unknown:
         print(f"inclinometer: no filter {unknown[0]!r}; choose from {', '.join(FILTERS)}",
               file=sys.stderr)
         return 2
-    if args.seconds <= 0:
-        print("inclinometer: --seconds must be positive", file=sys.stderr)
+    try:
+        parameters = parse_filter_parameters(args.params)
+        check_parameters_for(parameters, filters)
+        if args.seconds <= 0:
+            raise _Usage("--seconds must be positive")
+        if args.repeats is not None and args.repeats < 1:
+            raise _Usage("--repeats must be at least 1")
+        if args.json not in (None, "-") and not Path(args.json).resolve().parent.is_dir():
+            raise _Usage(f"--json {args.json}: no such directory")
+        pending = resolve_sources(args.sources, args.seconds, compensate=not args.raw)
+    except (_Usage, ValueError) as exc:
+        print(f"inclinometer: {exc}", file=sys.stderr)
         return 2
     skip = evaluation.DEFAULT_SKIP_S if args.skip is None else args.skip
-    compensate = not args.raw
-    errors = "static errors uncompensated" if args.raw else "static errors compensated"
-    if args.source == "scenarios":
-        sources = evaluation.standard_sources(args.seconds, compensate=compensate)
-    elif scheme_of_recording(args.source):
-        from app.core.recording.errors import RecordingError
-        from drivers.replay import recording_path
-
+    if args.json == "-":
+        out = sys.stderr  # stdout carries the JSON alone
+    single = len(args.sources) == 1 and not any(c in args.sources[0] for c in GLOB_CHARACTERS)
+    details = args.per_source if args.per_source is not None else (single or len(pending) == 1)
+    matrix = _Matrix([p.short for p in pending], filters, out) if len(pending) > 1 else None
+    if parameters:
+        chosen = ", ".join(f"{f}.{k}={v}" for f, values in parameters.items()
+                           for k, v in values.items())
+        print(f"parameters: {chosen}", file=out)
+    if matrix is not None and not details:
+        matrix.header()
+    width = max(6, *(len(name) for name in filters))
+    results: list[SourceResult] = []
+    for item in pending:
         try:
-            sources = [evaluation.recording_source(str(recording_path(args.source)),
-                                                   recalibrate=compensate)]
+            source = item.load()
+            result = evaluation.evaluate_source(source, filters, skip_s=skip,
+                                                repeats=args.repeats, parameters=parameters)
         except (RecordingError, ValueError) as exc:
             print(f"inclinometer: {exc}", file=sys.stderr)
             return 2
-        errors = "raw samples (--raw)" if args.raw else "recorded calibration"
-    else:
-        try:
-            if scheme_of(args.source) != "sim":
-                print(f"inclinometer: {args.source}: only sources that know their true "
-                      "orientation can be evaluated (sim:// URLs)", file=sys.stderr)
-                return 2
-            sources = [evaluation.simulator_source(args.source, args.seconds,
-                                                   compensate=compensate)]
-        except DeviceError as exc:
-            print(f"inclinometer: {exc}", file=sys.stderr)
-            return 2
-    width = max(6, *(len(name) for name in filters))
-    for source in sources:
-        stream = evaluation.concatenate_blocks(source.blocks())
-        info = evaluation.stream_summary(stream)
-        about = f" ({source.description})" if source.description else ""
-        print(f"{source.label}{about}", file=out)
-        print(f"  {info['duration_s']:.0f} s, {info['samples']} samples at "
-              f"{info['rate_hz']:.4g} Hz, {info['gaps']} gap(s), {errors}, "
-              f"first {skip:g} s not scored", file=out)
-        print(f"  {'filter':<{width}}  {'RMSE deg':>9}  {'max deg':>9}  {'samples/s':>14}  flag",
-              file=out)
-        # A long stream (an hour-long recording) times well in one run; short ones need three.
-        repeats = 1 if info["samples"] >= 1_000_000 else evaluation.DEFAULT_REPEATS
-        for score in evaluation.evaluate(stream, filters, skip_s=skip, repeats=repeats):
-            print(_format_score(score, width), file=out)
-        print(file=out)
+        results.append(result)
+        if details:
+            _print_details(result, item.treatment, skip, width, out)
+        elif matrix is not None:
+            matrix.row(item.short, result)
         out.flush()
+    summary = evaluation.summarize(results)
+    if matrix is not None:
+        if details:
+            matrix.header()
+            for item, result in zip(pending, results, strict=True):
+                matrix.row(item.short, result)
+        matrix.footer(summary, len(results))
+        rules = sorted({r.scoring for r in results})
+        print(f"scored: {'; '.join(rules)}; rows without a reference never count", file=out)
+    notes = [f"{name}: {FILTERS[name].title}, kept as a reference implementation, not for "
+             "measurement" for name in filters if FILTERS[name].reference_only]
+    for note in notes:
+        print(note, file=out)
+    out.flush()
+    if args.json is not None:
+        settings = {
+            "sources": list(args.sources), "skip_s": skip, "seconds": args.seconds,
+            "compensated": not args.raw, "repeats": args.repeats, "app_version": __version__,
+        }
+        document = evaluation.results_json(results, settings=settings, filters=filters,
+                                           parameters=parameters)
+        text = json.dumps(document, indent=2) + "\n"
+        if args.json == "-":
+            sys.stdout.write(text)
+            sys.stdout.flush()
+        else:
+            Path(args.json).write_text(text, encoding="utf-8")
     return 0
 
 

@@ -3,8 +3,11 @@
 ``inclinometer record --device URL [--duration S] OUT.csv``
     read a device headless, run the pipeline, write a recording; Ctrl-C (or SIGTERM) ends it
     cleanly and keeps the file.
-``inclinometer replay IN.csv [--filter NAME...] --out ANGLES.csv``
+``inclinometer replay IN.csv [--filter NAME...] [--param FILTER.NAME=VALUE...] --out ANGLES.csv``
     run filters over a recording as fast as possible, exactly as live, and export their angles.
+
+:func:`add_param_argument` and :func:`parse_filter_parameters` give ``replay`` and
+``evaluate`` the same ``--param FILTER.NAME=VALUE`` option.
 """
 
 from __future__ import annotations
@@ -20,6 +23,66 @@ from typing import Any, TextIO
 
 EXIT_USAGE = 2
 EXIT_FAILED = 1
+TRUE_WORDS = ("true", "1", "yes", "on")
+FALSE_WORDS = ("false", "0", "no", "off")
+
+
+def add_param_argument(parser: argparse.ArgumentParser) -> None:
+    """Add the repeatable ``--param FILTER.NAME=VALUE`` option (``dest="params"``)."""
+    parser.add_argument(
+        "--param", dest="params", metavar="FILTER.NAME=VALUE", action="append", default=[],
+        help="set a filter parameter, e.g. --param ekf.gyro_noise=2.5 (repeatable; checked "
+             "against the filter's range; booleans take true/false/1/0)",
+    )
+
+
+def parse_filter_parameters(items: list[str] | None) -> dict[str, dict[str, Any]]:
+    """``["ekf.gyro_noise=2.5", ...]`` -> ``{"ekf": {"gyro_noise": 2.5}}``, validated.
+
+    Each value goes through the parameter's :class:`~app.core.filters.ParameterSpec` (type and
+    range). Raises ValueError with a message for the user: bad form, unknown filter or
+    parameter, a value out of range or not a number, a boolean that is not true/false/1/0.
+    """
+    from app.core.filters import FILTERS
+
+    found: dict[str, dict[str, Any]] = {}
+    for item in items or []:
+        target, equals, text = item.partition("=")
+        filter_name, dot, name = target.strip().partition(".")
+        text = text.strip()
+        if not equals or not dot or not filter_name or not name or not text:
+            raise ValueError(f"--param {item!r}: write FILTER.NAME=VALUE, e.g. "
+                             "ekf.gyro_noise=2.5")
+        cls = FILTERS.get(filter_name)
+        if cls is None:
+            raise ValueError(f"--param {item!r}: no filter {filter_name!r}; choose from "
+                             f"{', '.join(FILTERS)}")
+        try:
+            spec = cls.parameter_spec(name)
+        except KeyError:
+            known = ", ".join(s.name for s in cls.parameters) or "none"
+            raise ValueError(f"--param {item!r}: {filter_name} has no parameter {name!r} "
+                             f"(it has: {known})") from None
+        if spec.kind == "bool":
+            word = text.lower()
+            if word not in TRUE_WORDS + FALSE_WORDS:
+                raise ValueError(f"--param {item!r}: {name} is true or false (or 1 or 0)")
+            value: Any = word in TRUE_WORDS
+        else:
+            try:
+                value = spec.validate(text)
+            except ValueError as exc:
+                raise ValueError(f"--param {item!r}: {exc}") from None
+        found.setdefault(filter_name, {})[name] = value
+    return found
+
+
+def check_parameters_for(parameters: dict[str, dict[str, Any]], filters: list[str]) -> None:
+    """Raise ValueError when ``--param`` names a filter that is not being run."""
+    for name in parameters:
+        if name not in filters:
+            raise ValueError(f"--param {name}.NAME=...: the filter {name!r} is not among "
+                             f"those run ({', '.join(filters)}); add it with --filter")
 
 
 def add_recording_parsers(commands: argparse._SubParsersAction) -> None:
@@ -70,6 +133,7 @@ def add_recording_parsers(commands: argparse._SubParsersAction) -> None:
     replay.add_argument("--block", type=int, metavar="N",
                         help="process blocks of N samples instead of the recorded device "
                              "blocks: faster, but VQF then differs from live in the last bits")
+    add_param_argument(replay)
 
 
 def _error(message: str) -> None:
@@ -167,15 +231,31 @@ def load_recording_for_cli(source: str) -> Any:
 
 def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """The ``replay`` sub-command."""
-    from app.core.evaluation import DEFAULT_SKIP_S, error_statistics
+    from app.core.evaluation import (
+        DEFAULT_SKIP_S,
+        SCORE_COLUMN,
+        error_statistics,
+        recording_score_mask,
+        scoring_rows,
+    )
     from app.core.filters import DEFAULT_FILTER, FILTERS
     from app.core.recording.errors import RecordingError
-    from app.core.recording.export import resolve_calibration, run_filters, write_angles_csv
+    from app.core.recording.export import (
+        recorded_filter_parameters,
+        resolve_calibration,
+        run_filters,
+        write_angles_csv,
+    )
     from drivers.errors import DeviceUrlError
 
     out = sys.stdout if out is None else out
     if args.block is not None and args.block < 1:
         _error("--block must be at least 1")
+        return EXIT_USAGE
+    try:
+        cli_parameters = parse_filter_parameters(getattr(args, "params", None))
+    except ValueError as exc:
+        _error(str(exc))
         return EXIT_USAGE
     try:
         source_path = _recording_path(args.source)
@@ -190,18 +270,35 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     if unknown:
         _error(f"no filter {unknown[0]!r}; choose from {', '.join(FILTERS)} (or 'all')")
         return EXIT_USAGE
+    names = list(dict.fromkeys(names))
+    try:
+        check_parameters_for(cli_parameters, names)
+        score_mask = recording_score_mask(recording)
+    except ValueError as exc:
+        _error(str(exc))
+        return EXIT_USAGE
     target = Path(args.out)
     if target.exists() and target.resolve() == source_path.resolve():
         _error("--out would overwrite the recording itself")
         return EXIT_USAGE
     calibration = None if args.raw else resolve_calibration(recording, "recorded")
-    outputs = run_filters(recording, list(dict.fromkeys(names)), calibration=calibration,
+    # --param values change the recorded (else default) parameters; the rest stay.
+    recorded = recorded_filter_parameters(recording)
+    parameters = {name: {**recorded.get(name, {}), **cli_parameters.get(name, {})}
+                  for name in names}
+    outputs = run_filters(recording, names, calibration=calibration, parameters=parameters,
                           block=args.block)
     write_angles_csv(target, recording, outputs, calibration=calibration)
     applied = "no calibration" if calibration is None else f"calibration {calibration.name!r}"
     print(f"{target}: {len(recording)} rows, {recording.duration_s:.1f} s, {applied}",
           file=out)
     reference = recording.reference_quat
+    if reference is not None:
+        rows = scoring_rows(reference, recording.t_s, DEFAULT_SKIP_S, score_mask)
+        rule = (f"rows with {SCORE_COLUMN} == 1" if score_mask is not None
+                else f"after the first {DEFAULT_SKIP_S:g} s")
+        print(f"  inclination error scored {rule} with a reference: "
+              f"{int(rows.sum())} of {len(recording)} rows", file=out)
     width = max(6, *(len(o.name) for o in outputs))
     header = f"  {'filter':<{width}}  {'final roll':>10}  {'final pitch':>11}"
     if reference is not None:
@@ -211,7 +308,8 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
         line = (f"  {output.name:<{width}}  {output.roll_deg[-1]:10.3f}  "
                 f"{output.pitch_deg[-1]:11.3f}")
         if reference is not None:
-            stats = error_statistics(output.quat, reference, recording.t_s, DEFAULT_SKIP_S)
+            stats = error_statistics(output.quat, reference, recording.t_s, DEFAULT_SKIP_S,
+                                     score_mask)
             rmse, worst = stats["rmse_deg"], stats["max_deg"]
             line += (f"  {rmse:9.3f}  {worst:9.3f}" if math.isfinite(rmse)
                      else f"  {'-':>9}  {'-':>9}")

@@ -6,91 +6,81 @@ The attitude is held as a unit quaternion ``q`` (sensor to earth, earth z up) an
 estimate ``b`` (rad/s, sensor frame). The Kalman filter runs on the *error* of that state
 (Markley 2003, "Attitude error representations for Kalman filtering", JGCD 26(2); Sola 2017,
 "Quaternion kinematics for the error-state Kalman filter", arXiv:1711.02508, sec. 7):
-``q_true = exp(dtheta) * q`` with ``dtheta`` a small rotation vector in the *earth* frame (a
-"global" or left error), and ``b_true = b + db``. Of ``dtheta`` only the two horizontal
-components are kept, so the error state is 5-dimensional: ``x = (dtheta_x, dtheta_y, db_x,
-db_y, db_z)``.
-
-Why this form rather than ``[q (4), b (3)]`` or the 6-state ``[dtheta (3), db (3)]``:
-
-- a 4-component quaternion in an additive EKF has a covariance that is singular along ``q``
-  (the norm) and is renormalised by hand; the rotation-vector error has exactly the three (here
-  two) degrees of freedom the attitude has, so the covariance stays full-rank and well scaled;
-- with the error in the earth frame, the heading error ``dtheta_z`` is never measured by the
-  accelerometer and never feeds back into the tilt (``dtheta' = dtheta - R(q) db dt``: the
-  earth-frame error is constant when the bias is right). Dropping it is an exact
-  marginalisation for the tilt, and it removes the one state whose variance grows without bound
-  (at rest a 6-state filter's heading variance grows as (vertical bias uncertainty x t)^2: about
-  160 rad^2 after an hour with the default 0.2 dps, next to tilt variances of 1e-8, a condition
-  number of 1e10 that erodes the tilt block's precision). The bias component along
-  the vertical is unobservable while the sensor does not turn; its variance grows only by the
-  bias random walk and it is learnt as soon as the sensor tilts;
-- the correction is a rotation about a horizontal earth axis, as in the complementary filter,
-  so it never disturbs the heading.
+``q_true = exp(dtheta) * q`` with ``dtheta`` a small rotation vector in the *earth* frame, and
+``b_true = b + db``. Of ``dtheta`` only the two horizontal components are kept, so the error
+state is ``x = (dtheta_x, dtheta_y, db_x, db_y, db_z)``: the heading error is never measured by
+the accelerometer and never feeds back into the tilt, so dropping it is an exact
+marginalisation for the tilt and removes the one state whose variance grows without bound.
 
 Process model (per step ``dt``)::
 
-    q <- q * exp((w_measured - b) dt / 2)               (exact exponential, as gyro_step)
+    q <- q * exp((w_measured - b) dt / 2)               (exact exponential)
     F = [[I2, -dt R2], [0, I3]]     R2 = first two rows of R(q) (body -> earth)
-    Q = diag(Ng^2 dt / 2 * I2, Nb^2 dt * I3)
-    P <- F P F^T + Q
+    Q_tilt = (Ng^2 / 2 + (ks |w|)^2 lp_tau) dt,   Q_bias = Nb^2 dt
 
-``Ng`` is the gyro white-noise density (LSM6DSOX: 3.8 mdps/sqrt(Hz)); ``Ng^2 dt / 2`` is the
-variance of one step's angle noise when the per-sample rate noise is ``Ng sqrt(ODR / 2)`` (the
-datasheet's density over the ODR/2 bandwidth, the simulator's convention). ``Nb`` is a bias
-random walk (rate random walk).
+``Ng`` is the gyro white-noise density; ``ks`` the gyro's scale-factor and cross-axis
+uncertainty (a fraction): uncalibrated MEMS gyros are off by a few tenths of a percent, so
+during a fast turn the integrated angle is off in proportion to the angle turned. That error is
+systematic over the accelerometer's averaging window, hence the ``lp_tau`` in its variance.
+``Nb`` is the bias random walk.
 
-Measurement model: the gravity direction
-----------------------------------------
-The accelerometer is rotated into the earth frame with the current estimate,
-``f = R(q) a``, and low-passed there (two cascaded first-order stages with time constant
-``lp_tau``), as VQF does with a second-order Butterworth in its almost-inertial frame (Laidig &
-Seel 2023, "VQF: Highly accurate IMU orientation estimation with bias estimation and magnetic
-disturbance rejection", Information Fusion 91). The residual
-is the rotation that takes the filtered, *normalised* up direction ``v = f_lp / |f_lp|`` onto
-earth z, about a horizontal axis::
+Measurement: gravity averaged in an almost-inertial frame
+---------------------------------------------------------
+Real hand-held motion has its linear acceleration at 0.5-1.5 Hz and several m/s^2 (BROAD,
+Laidig et al. 2021): no rejection by ``|a|`` can see a horizontal acceleration (it barely
+changes ``|a|``), and no low-pass of a fraction of a second removes it. What removes it is
+physics: the hand does not go anywhere, so its acceleration averages out over seconds. As VQF
+does (Laidig & Seel 2023, Information Fusion 91), the specific force is rotated into the earth
+frame with the current estimate, ``f = R(q) a``, and low-passed there by a second-order
+Butterworth filter with time constant ``lp_tau`` (seconds; cut-off ``sqrt(2) / (2 pi lp_tau)``,
+a delay of ``lp_tau`` at low frequency). Every correction ``exp(d)`` of the estimate is applied to
+the filter's states too, so the filtered vector carries the *current* tilt error without lag:
+only linear acceleration, noise and recent gyro errors are averaged. The residual is the
+rotation that takes the filtered up direction ``v = f_lp / |f_lp|`` onto earth z::
 
-    z = atan2(|v_xy|, v_z) * (v_y, -v_x) / |v_xy|       (= dtheta_xy to first order),  H = [I2 0]
+    z = atan2(|v_xy|, v_z) * (v_y, -v_x) / |v_xy|
 
-Two things make this work where a per-sample "normalised accelerometer vs predicted gravity"
-residual fails:
+**The low-pass in the measurement model.** A gyro-bias error turns the estimate at the rate
+``-R2 db``; the filtered vector sees that turn late, so the residual is ``z = dtheta + M db``
+with ``M = D - LP(D)``, ``D`` the running sum of ``R2 dt`` and ``LP`` the same Butterworth
+filter: ``H = [I2, M]``. Without ``M`` the bias states would be corrected from residuals a
+second and more old and the loop oscillates; with it the bias is learnt from the averaged
+gravity as fast as the averaging allows.
 
-1. Averaging before normalising. ``a / |a|`` is not linear in the linear acceleration, so
-   zero-mean vibration does not average out after normalisation: in the simulator's vibration
-   scenario (1 g at 30 Hz, mostly vertical) a per-sample residual settles about 6 degrees off.
-   Filtered in the earth frame, the vibration averages out first.
-2. Filtering in the earth frame. Each correction ``exp(d)`` of the estimate is applied to the
-   filter states too (they were rotated into the earth frame with the old estimate), so the
-   filtered vector carries the *current* tilt error without lag; only the linear acceleration
-   and noise are low-passed.
+**Adaptive measurement noise.** The residual's variance per sample is::
+
+    sigma^2 = (Na^2 + s_h / g^2 * lp_tau / (1 + (2 pi f_m lp_tau / sqrt 2)^4)) / (2 dt)
+
+``Na`` is the floor (sensor noise and tremor after averaging). The second term is the
+horizontal linear acceleration that leaks through the low-pass: ``s_h`` is the mean square of
+the horizontal earth-frame specific force over the last second (the motion's strength), and the
+fraction is the Butterworth filter's power gain at the typical frequency ``f_m`` of hand motion
+(1 Hz; real hand-held translation peaks at 0.7-1.3 Hz) times its correlation time ``lp_tau``.
+So while the sensor is being carried the accelerometer is trusted less in proportion to how
+hard it is carried, and the gyro holds the attitude; while it only turns it is trusted fully.
+
+Rest detection for the gyro bias
+--------------------------------
+As VQF: the sensor is at rest when, for ``rest_time`` seconds, the gyro stays within
+``rest_gyro`` of its 0.5 s low-pass, the accelerometer within ``rest_accel`` of its own, and the
+low-passed rate is itself below ``rest_gyro`` on every axis. At rest the true rate is zero, so
+every gyro sample measures the bias directly: ``z = w - b``, ``H = [0, I3]``, noise
+``Ng^2 / (2 dt)`` per sample. The bias (and through its covariance the tilt) is learnt in a few
+seconds of rest.
 
 After a restart (first sample, gap, bad step) the tilt is taken from the running mean of the
 accelerometer (earth frame) for the first ``lp_tau`` seconds, gain 1, as VQF initialises its
 low-pass; then the Kalman update takes over with tilt variance ``tilt_initial^2`` and the bias
 and its covariance kept.
 
-Adaptive measurement noise (linear-acceleration rejection)
------------------------------------------------------------
-The residual's noise per sample is::
+Tried and left out (BROAD's twelve tuning trials): chi-square gating of the innovation (soft,
+inflating ``S`` until the innovation is plausible at 13.8 = chi2(2, 0.999)) made the mean worse
+(0.86 against 0.82 degrees): the low-passed residual is strongly autocorrelated, so large
+innovations are slow, real tilt changes the filter must follow, not outliers. The former
+rejection by the low-passed ``|a|`` did not see horizontal acceleration at all.
 
-    sigma^2 = Na^2 / (2 dt) * (1 + ((|f_lp| - g) / (g * tolerance))^2)
-
-i.e. ``sigma0^2 + k (|a| - g)^2`` with ``sigma0^2 = Na^2 / (2 dt)`` and ``k = sigma0^2 /
-(g tolerance)^2``, applied to the *filtered* magnitude: while the sensor is being accelerated
-the accelerometer's weight drops (by half at a deviation of one ``tolerance``) and the gyro
-carries the attitude. Using the filtered magnitude matters: the per-sample magnitude would weigh
-the samples of a vibration cycle where ``|a|`` happens to equal g, and those have a large
-horizontal component (about 2 d_z d_h g for a vibration along d): a per-sample law settles 20
-degrees off in the vibration scenario. ``Na`` is deliberately far above the datasheet's
-70 ug/sqrt(Hz): it also stands for the hand tremor and small accelerations of real use, and it
-sets the time constant at rest: with the defaults a tilt seen by the accelerometer alone is
-followed with a time constant of about 3 s (30 s without the bias states, ``Na / Ng``).
-
-Accuracy (simulated LSM6DSOX at 208 Hz, static errors compensated, seeds 1-3, 120 s each,
-inclination RMSE after 10 s; VQF's online filter in brackets): at rest 0.008-0.012 (0.007-0.012)
-degree, slow tilting 0.024-0.026 (0.023-0.029), hand-held wobble 0.06-0.08 (0.07-0.11),
-vibration 0.02 (0.02-0.11), translation 0.12 (0.30-0.32), tour of the six faces 0.10-0.11
-(0.10-0.11). Over the whole run, start included, within 1.1x of VQF on every scenario.
+Accuracy: ``benchmarks/filter_accuracy.py`` (BROAD's twelve trials, the simulator's scenarios,
+and the sensitivity of the mean to each parameter).
 
 Noted limits: the heading is integrated gyro only (no magnetometer); the tilt is referred to the
 accelerometer, so any uncompensated accelerometer bias tilts it (20 mg = 1.1 degrees).
@@ -110,6 +100,18 @@ from app.core.samples import STANDARD_GRAVITY_M_S2, SampleBlock
 
 N_STATES = 5
 """Error state: horizontal earth-frame tilt error (2), gyro-bias error (3)."""
+
+REST_FILTER_S = 0.5
+"""Time constant of the low-passes the rest detector compares the raw signals with (VQF's)."""
+MOTION_WINDOW_S = 1.0
+"""Time constant of the running mean square of the horizontal specific force (motion strength)."""
+
+# Layout of the filter's auxiliary state vector (``_aux``).
+_Y, _V = 0, 3  # Butterworth low-pass of f: output (3) and its rate (3)
+_D, _LD, _LV = 6, 12, 18  # running sum of R2 dt (2x3), its low-pass (2x3) and rate (2x3)
+_GL, _AL = 24, 27  # rest detector: low-passed gyro (3) and accelerometer (3)
+_COUNT, _SINCE, _REST, _MOTION = 30, 31, 32, 33
+N_AUX = 34
 
 
 @njit(cache=True)
@@ -138,89 +140,145 @@ def tilt_residual(vx, vy, vz):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _ekf_kernel(
-    accel, gyro, dt, quat, bias, cov, lowpass, gyro_var_density, bias_var_density,
-    accel_var_density, tolerance, lp_tau, tilt0_var, estimate_bias, gravity, out,
-):  # pragma: no cover - compiled
-    """Run the filter over a block; ``quat``, ``bias``, ``cov`` and ``lowpass`` are updated.
-
-    ``lowpass`` = (y1 (3), y2 (3), samples since restart, seconds since restart).
-    Densities are squared: rad^2/s (gyro), rad^2/s^3 (bias walk), (fraction of g)^2 s (accel).
-    """
+def _correct(quat, aux, d0, d1):  # pragma: no cover - compiled
+    """Apply the earth-frame tilt correction exp((d0, d1, 0)) to q and to the low-pass states."""
+    angle = math.sqrt(d0 * d0 + d1 * d1)
+    if angle <= 0.0:
+        return
+    half = 0.5 * angle
+    k = math.sin(half) / angle
+    ew = math.cos(half)
+    ex = d0 * k
+    ey = d1 * k
     qw, qx, qy, qz = quat[0], quat[1], quat[2], quat[3]
-    bx, by, bz = bias[0], bias[1], bias[2]
-    # Covariance, upper triangle: tilt block p, tilt-bias block c0./c1., bias block b..
-    p00, p01, p11 = cov[0, 0], cov[0, 1], cov[1, 1]
-    c00, c01, c02 = cov[0, 2], cov[0, 3], cov[0, 4]
-    c10, c11, c12 = cov[1, 2], cov[1, 3], cov[1, 4]
-    b00, b01, b02 = cov[2, 2], cov[2, 3], cov[2, 4]
-    b11, b12, b22 = cov[3, 3], cov[3, 4], cov[4, 4]
-    y1x, y1y, y1z = lowpass[0], lowpass[1], lowpass[2]
-    y2x, y2y, y2z = lowpass[3], lowpass[4], lowpass[5]
-    count, since = lowpass[6], lowpass[7]
+    quat[0] = ew * qw - ex * qx - ey * qy
+    quat[1] = ew * qx + ex * qw + ey * qz
+    quat[2] = ew * qy - ex * qz + ey * qw
+    quat[3] = ew * qz + ex * qy - ey * qx
+    # The filtered vectors were rotated with the old estimate: rotate them too.
+    for j in (_Y, _V):
+        aux[j], aux[j + 1], aux[j + 2] = _rotate_horizontal(
+            ew, ex, ey, aux[j], aux[j + 1], aux[j + 2]
+        )
+
+
+@njit(cache=True)
+def _ekf_kernel(
+    accel, gyro, dt, quat, bias, cov, aux, gyro_var_density, scale_var, bias_var_density,
+    accel_var_density, lp_tau, motion_gain, tilt0_var, estimate_bias, rest_gyro2, rest_accel2,
+    rest_time, rest_clip, gravity, out,
+):  # pragma: no cover - compiled
+    """Run the filter over a block; ``quat``, ``bias``, ``cov`` and ``aux`` are updated.
+
+    Densities are squared: rad^2/s (gyro), rad^2/s^3 (bias walk), (fraction of g)^2 s (accel);
+    ``scale_var`` is the squared gyro scale uncertainty, ``motion_gain`` the low-pass leak of
+    the motion's power (s), ``rest_*2`` squared thresholds (rad^2/s^2, m^2/s^4).
+    """
+    P = cov
+    G = np.zeros((2, 3))
+    GPbb = np.zeros((2, 3))
+    H = np.zeros((2, 5))
+    PHt = np.zeros((5, 2))
+    K = np.zeros((5, 2))
+    row = np.zeros(5)
+    wc = math.sqrt(2.0) / lp_tau if lp_tau > 0.0 else 0.0
     if not estimate_bias:
-        c00 = c01 = c02 = c10 = c11 = c12 = 0.0
-        b00 = b01 = b02 = b11 = b12 = b22 = 0.0
-    inv_tol2 = 0.0 if tolerance <= 0.0 else 1.0 / (tolerance * tolerance)
+        P[:2, 2:] = 0.0
+        P[2:, :] = 0.0
     for i in range(accel.shape[0]):
         step = dt[i]
+        wx, wy, wz = gyro[i, 0], gyro[i, 1], gyro[i, 2]
+        if not wx * wx + wy * wy + wz * wz < math.inf:  # NaN/inf: trust the bias only
+            wx, wy, wz = bias[0], bias[1], bias[2]
+        ax, ay, az = accel[i, 0], accel[i, 1], accel[i, 2]
         if step > 0.0:
             # ---- predict ---------------------------------------------------------------
-            wx, wy, wz = gyro[i, 0], gyro[i, 1], gyro[i, 2]
-            if not wx * wx + wy * wy + wz * wz < math.inf:  # NaN/inf: trust the bias only
-                wx = wy = wz = 0.0
-            qw, qx, qy, qz = gyro_step(qw, qx, qy, qz, wx - bx, wy - by, wz - bz, step)
+            qw, qx, qy, qz = gyro_step(quat[0], quat[1], quat[2], quat[3],
+                                       wx - bias[0], wy - bias[1], wz - bias[2], step)
+            quat[0], quat[1], quat[2], quat[3] = qw, qx, qy, qz
+            # G = -dt R2: how a body-frame bias error turns the earth-frame tilt.
+            G[0, 0] = -step * (1.0 - 2.0 * (qy * qy + qz * qz))
+            G[0, 1] = -step * 2.0 * (qx * qy - qw * qz)
+            G[0, 2] = -step * 2.0 * (qx * qz + qw * qy)
+            G[1, 0] = -step * 2.0 * (qx * qy + qw * qz)
+            G[1, 1] = -step * (1.0 - 2.0 * (qx * qx + qz * qz))
+            G[1, 2] = -step * 2.0 * (qy * qz - qw * qx)
             if estimate_bias:
-                # G = -dt R2: how a body-frame bias error turns the earth-frame tilt.
-                g00 = -step * (1.0 - 2.0 * (qy * qy + qz * qz))
-                g01 = -step * 2.0 * (qx * qy - qw * qz)
-                g02 = -step * 2.0 * (qx * qz + qw * qy)
-                g10 = -step * 2.0 * (qx * qy + qw * qz)
-                g11 = -step * (1.0 - 2.0 * (qx * qx + qz * qz))
-                g12 = -step * 2.0 * (qy * qz - qw * qx)
-                # m = Pbb G^T (columns m0., m1.)
-                m00 = b00 * g00 + b01 * g01 + b02 * g02
-                m01 = b01 * g00 + b11 * g01 + b12 * g02
-                m02 = b02 * g00 + b12 * g01 + b22 * g02
-                m10 = b00 * g10 + b01 * g11 + b02 * g12
-                m11 = b01 * g10 + b11 * g11 + b12 * g12
-                m12 = b02 * g10 + b12 * g11 + b22 * g12
                 # Ptt += G Pbt + Ptb G^T + G Pbb G^T;  Ptb += G Pbb;  Pbb += Qb
-                p00 += 2.0 * (g00 * c00 + g01 * c01 + g02 * c02) + (
-                    g00 * m00 + g01 * m01 + g02 * m02
-                )
-                p01 += (
-                    (g00 * c10 + g01 * c11 + g02 * c12)
-                    + (g10 * c00 + g11 * c01 + g12 * c02)
-                    + (g00 * m10 + g01 * m11 + g02 * m12)
-                )
-                p11 += 2.0 * (g10 * c10 + g11 * c11 + g12 * c12) + (
-                    g10 * m10 + g11 * m11 + g12 * m12
-                )
-                c00 += m00
-                c01 += m01
-                c02 += m02
-                c10 += m10
-                c11 += m11
-                c12 += m12
+                for r in range(2):
+                    for c in range(3):
+                        GPbb[r, c] = (G[r, 0] * P[2, 2 + c] + G[r, 1] * P[3, 2 + c]
+                                      + G[r, 2] * P[4, 2 + c])
+                for r in range(2):
+                    for c in range(r, 2):
+                        s = 0.0
+                        for k in range(3):
+                            s += G[r, k] * P[2 + k, c] + P[r, 2 + k] * G[c, k]
+                            s += GPbb[r, k] * G[c, k]
+                        P[r, c] += s
+                    for c in range(3):
+                        P[r, 2 + c] += GPbb[r, c]
                 q_bias = bias_var_density * step
-                b00 += q_bias
-                b11 += q_bias
-                b22 += q_bias
-            q_tilt = 0.5 * gyro_var_density * step
-            p00 += q_tilt
-            p11 += q_tilt
+                P[2, 2] += q_bias
+                P[3, 3] += q_bias
+                P[4, 4] += q_bias
+            q_tilt = (0.5 * gyro_var_density
+                      + scale_var * (wx * wx + wy * wy + wz * wz) * lp_tau) * step
+            P[0, 0] += q_tilt
+            P[1, 1] += q_tilt
+            P[1, 0] = P[0, 1]
+            for r in range(2):
+                for c in range(3):
+                    P[2 + c, r] = P[r, 2 + c]
+                    aux[_D + 3 * r + c] -= G[r, c]  # D += R2 dt
         else:
             # ---- restart: tilt from the accelerometer, bias and its covariance kept -------
-            p00 = p11 = tilt0_var
-            p01 = 0.0
-            c00 = c01 = c02 = c10 = c11 = c12 = 0.0
-            count = 0.0
-            since = 0.0
-        since += step
-        ax, ay, az = accel[i, 0], accel[i, 1], accel[i, 2]
+            P[0, 0] = P[1, 1] = tilt0_var
+            P[0, 1] = P[1, 0] = 0.0
+            P[:2, 2:] = 0.0
+            P[2:, :2] = 0.0
+            aux[_COUNT] = 0.0
+            aux[_SINCE] = 0.0
+            aux[_REST] = 0.0
+            aux[_GL], aux[_GL + 1], aux[_GL + 2] = wx, wy, wz
+            aux[_AL], aux[_AL + 1], aux[_AL + 2] = ax, ay, az
+        aux[_SINCE] += step
+        # ---- rest: the gyro measures its own bias -------------------------------------
+        if estimate_bias and step > 0.0 and rest_time > 0.0:
+            alpha = step / (REST_FILTER_S + step)
+            aux[_GL] += alpha * (wx - aux[_GL])
+            aux[_GL + 1] += alpha * (wy - aux[_GL + 1])
+            aux[_GL + 2] += alpha * (wz - aux[_GL + 2])
+            aux[_AL] += alpha * (ax - aux[_AL])
+            aux[_AL + 1] += alpha * (ay - aux[_AL + 1])
+            aux[_AL + 2] += alpha * (az - aux[_AL + 2])
+            gyro_dev = (wx - aux[_GL]) ** 2 + (wy - aux[_GL + 1]) ** 2 + (wz - aux[_GL + 2]) ** 2
+            accel_dev = (ax - aux[_AL]) ** 2 + (ay - aux[_AL + 1]) ** 2 + (az - aux[_AL + 2]) ** 2
+            still = (gyro_dev < rest_gyro2 and accel_dev < rest_accel2
+                     and abs(aux[_GL]) < rest_clip and abs(aux[_GL + 1]) < rest_clip
+                     and abs(aux[_GL + 2]) < rest_clip)
+            aux[_REST] = aux[_REST] + step if still else 0.0
+            if aux[_REST] >= rest_time:
+                r = 0.5 * gyro_var_density / step
+                for axis in range(3):
+                    j = 2 + axis
+                    rate = wx if axis == 0 else (wy if axis == 1 else wz)
+                    innovation = rate - bias[axis]
+                    s = P[j, j] + r
+                    for k in range(5):
+                        row[k] = P[j, k]
+                    for k in range(3):
+                        bias[k] += row[2 + k] / s * innovation
+                    for a in range(5):
+                        for b in range(5):
+                            P[a, b] -= row[a] * row[b] / s
+                    _correct(quat, aux, row[0] / s * innovation, row[1] / s * innovation)
+        # ---- update: the averaged gravity direction -----------------------------------
         norm2 = ax * ax + ay * ay + az * az
-        if norm2 > 0.0 and norm2 < math.inf:
+        if not (norm2 > 0.0 and norm2 < math.inf):
+            pass
+        else:
+            qw, qx, qy, qz = quat[0], quat[1], quat[2], quat[3]
             # f = R(q) a, the specific force in the earth frame (m/s^2).
             tx = 2.0 * (qy * az - qz * ay)
             ty = 2.0 * (qz * ax - qx * az)
@@ -228,111 +286,101 @@ def _ekf_kernel(
             fx = ax + qw * tx + qy * tz - qz * ty
             fy = ay + qw * ty + qz * tx - qx * tz
             fz = az + qw * tz + qx * ty - qy * tx
-            warming = step == 0.0 or since < lp_tau
+            horizontal = (fx * fx + fy * fy) / (gravity * gravity)
+            if step > 0.0:
+                aux[_MOTION] += step / (MOTION_WINDOW_S + step) * (horizontal - aux[_MOTION])
+            warming = step == 0.0 or aux[_SINCE] < lp_tau
             if lp_tau > 0.0:
-                count += 1.0
-                # A running mean until the exponential forgets faster (start-up).
-                alpha = max(step / (lp_tau + step), 1.0 / count)
-                y1x += alpha * (fx - y1x)
-                y1y += alpha * (fy - y1y)
-                y1z += alpha * (fz - y1z)
-                if warming:
-                    y2x, y2y, y2z = y1x, y1y, y1z
+                if warming or aux[_COUNT] == 0.0:
+                    # A running mean until the low-pass takes over (start-up).
+                    aux[_COUNT] += 1.0
+                    alpha = 1.0 / aux[_COUNT]
+                    aux[_Y] += alpha * (fx - aux[_Y])
+                    aux[_Y + 1] += alpha * (fy - aux[_Y + 1])
+                    aux[_Y + 2] += alpha * (fz - aux[_Y + 2])
+                    for k in range(3):
+                        aux[_V + k] = 0.0
+                    for k in range(6):
+                        aux[_LD + k] = aux[_D + k]
+                        aux[_LV + k] = 0.0
                 else:
-                    y2x += alpha * (y1x - y2x)
-                    y2y += alpha * (y1y - y2y)
-                    y2z += alpha * (y1z - y2z)
-                vx, vy, vz = y2x, y2y, y2z
+                    # Second-order Butterworth, backward Euler (stable for any step).
+                    a2 = step * wc * wc
+                    den = 1.0 + step * math.sqrt(2.0) * wc + step * a2
+                    u0 = fx - aux[_Y]
+                    u1 = fy - aux[_Y + 1]
+                    u2 = fz - aux[_Y + 2]
+                    aux[_V] = (aux[_V] + a2 * u0) / den
+                    aux[_V + 1] = (aux[_V + 1] + a2 * u1) / den
+                    aux[_V + 2] = (aux[_V + 2] + a2 * u2) / den
+                    aux[_Y] += step * aux[_V]
+                    aux[_Y + 1] += step * aux[_V + 1]
+                    aux[_Y + 2] += step * aux[_V + 2]
+                    for k in range(6):
+                        aux[_LV + k] = (aux[_LV + k] + a2 * (aux[_D + k] - aux[_LD + k])) / den
+                        aux[_LD + k] += step * aux[_LV + k]
+                vx, vy, vz = aux[_Y], aux[_Y + 1], aux[_Y + 2]
             else:
                 vx, vy, vz = fx, fy, fz
             z0, z1 = tilt_residual(vx, vy, vz)
             if warming:
-                d0 = z0
-                d1 = z1
+                _correct(quat, aux, z0, z1)
             else:
-                # ---- Kalman update, H = [I2 0] ------------------------------------------
-                excess = math.sqrt(vx * vx + vy * vy + vz * vz) / gravity - 1.0
-                r = 0.5 * accel_var_density / step * (1.0 + excess * excess * inv_tol2)
-                s00 = p00 + r
-                s11 = p11 + r
-                det = s00 * s11 - p01 * p01
+                # ---- Kalman update, H = [I2, M], M = D - LP(D) ------------------------------
+                for r in range(2):
+                    H[r, 0] = 1.0 - r
+                    H[r, 1] = float(r)
+                    for c in range(3):
+                        H[r, 2 + c] = (aux[_D + 3 * r + c] - aux[_LD + 3 * r + c]
+                                       if estimate_bias else 0.0)
+                for a in range(5):
+                    for r in range(2):
+                        PHt[a, r] = (P[a, 0] * H[r, 0] + P[a, 1] * H[r, 1] + P[a, 2] * H[r, 2]
+                                     + P[a, 3] * H[r, 3] + P[a, 4] * H[r, 4])
+                noise = 0.5 * (accel_var_density + motion_gain * aux[_MOTION]) / step
+                s00 = noise
+                s01 = 0.0
+                s11 = noise
+                for k in range(5):
+                    s00 += H[0, k] * PHt[k, 0]
+                    s01 += H[0, k] * PHt[k, 1]
+                    s11 += H[1, k] * PHt[k, 1]
+                det = s00 * s11 - s01 * s01
                 i00 = s11 / det
-                i01 = -p01 / det
+                i01 = -s01 / det
                 i11 = s00 / det
-                k00 = p00 * i00 + p01 * i01
-                k01 = p00 * i01 + p01 * i11
-                k10 = p01 * i00 + p11 * i01
-                k11 = p01 * i01 + p11 * i11
-                d0 = k00 * z0 + k01 * z1
-                d1 = k10 * z0 + k11 * z1
+                for a in range(5):
+                    K[a, 0] = PHt[a, 0] * i00 + PHt[a, 1] * i01
+                    K[a, 1] = PHt[a, 0] * i01 + PHt[a, 1] * i11
                 if estimate_bias:
-                    kb00 = c00 * i00 + c10 * i01
-                    kb01 = c00 * i01 + c10 * i11
-                    kb10 = c01 * i00 + c11 * i01
-                    kb11 = c01 * i01 + c11 * i11
-                    kb20 = c02 * i00 + c12 * i01
-                    kb21 = c02 * i01 + c12 * i11
-                    # The bias error is in the sensor frame like b: b_true = b + db.
-                    bx += kb00 * z0 + kb01 * z1
-                    by += kb10 * z0 + kb11 * z1
-                    bz += kb20 * z0 + kb21 * z1
-                    # P <- P - K H P (rows of H P are the first two rows of P).
-                    b00 -= kb00 * c00 + kb01 * c10
-                    b01 -= kb00 * c01 + kb01 * c11
-                    b02 -= kb00 * c02 + kb01 * c12
-                    b11 -= kb10 * c01 + kb11 * c11
-                    b12 -= kb10 * c02 + kb11 * c12
-                    b22 -= kb20 * c02 + kb21 * c12
-                    n00 = c00 - (k00 * c00 + k01 * c10)
-                    n01 = c01 - (k00 * c01 + k01 * c11)
-                    n02 = c02 - (k00 * c02 + k01 * c12)
-                    c10 = c10 - (k10 * c00 + k11 * c10)
-                    c11 = c11 - (k10 * c01 + k11 * c11)
-                    c12 = c12 - (k10 * c02 + k11 * c12)
-                    c00, c01, c02 = n00, n01, n02
-                n00 = p00 - (k00 * p00 + k01 * p01)
-                n01 = p01 - (k00 * p01 + k01 * p11)
-                p11 = p11 - (k10 * p01 + k11 * p11)
-                p00, p01 = n00, n01
-            # ---- inject the tilt correction: q <- exp(d) q, d = (d0, d1, 0) earth frame ----
-            angle = math.sqrt(d0 * d0 + d1 * d1)
-            if angle > 0.0:
-                half = 0.5 * angle
-                k = math.sin(half) / angle
-                ew = math.cos(half)
-                ex = d0 * k
-                ey = d1 * k
-                qw, qx, qy, qz = (
-                    ew * qw - ex * qx - ey * qy,
-                    ew * qx + ex * qw + ey * qz,
-                    ew * qy - ex * qz + ey * qw,
-                    ew * qz + ex * qy - ey * qx,
-                )
-                # The filtered vectors were rotated with the old estimate: rotate them too.
-                y1x, y1y, y1z = _rotate_horizontal(ew, ex, ey, y1x, y1y, y1z)
-                y2x, y2y, y2z = _rotate_horizontal(ew, ex, ey, y2x, y2y, y2z)
-        qw, qx, qy, qz = unit_positive(qw, qx, qy, qz)
+                    for k in range(3):
+                        bias[k] += K[2 + k, 0] * z0 + K[2 + k, 1] * z1
+                # P <- P - K H P = P - K (P H^T)^T, kept symmetric.
+                for a in range(5):
+                    for b in range(a, 5):
+                        value = P[a, b] - (K[a, 0] * PHt[b, 0] + K[a, 1] * PHt[b, 1])
+                        P[a, b] = value
+                        P[b, a] = value
+                _correct(quat, aux, K[0, 0] * z0 + K[0, 1] * z1, K[1, 0] * z0 + K[1, 1] * z1)
+        qw, qx, qy, qz = unit_positive(quat[0], quat[1], quat[2], quat[3])
+        quat[0], quat[1], quat[2], quat[3] = qw, qx, qy, qz
         out[i, 0] = qw
         out[i, 1] = qx
         out[i, 2] = qy
         out[i, 3] = qz
-    quat[0], quat[1], quat[2], quat[3] = qw, qx, qy, qz
-    bias[0], bias[1], bias[2] = bx, by, bz
-    cov[0, 0], cov[0, 1], cov[1, 1] = p00, p01, p11
-    cov[0, 2], cov[0, 3], cov[0, 4] = c00, c01, c02
-    cov[1, 2], cov[1, 3], cov[1, 4] = c10, c11, c12
-    cov[2, 2], cov[2, 3], cov[2, 4] = b00, b01, b02
-    cov[3, 3], cov[3, 4], cov[4, 4] = b11, b12, b22
-    for row in range(N_STATES):
-        for col in range(row):
-            cov[row, col] = cov[col, row]
-    lowpass[0], lowpass[1], lowpass[2] = y1x, y1y, y1z
-    lowpass[3], lowpass[4], lowpass[5] = y2x, y2y, y2z
-    lowpass[6], lowpass[7] = count, since
+
+
+def butterworth_power_gain(tau_s: float, frequency_hz: float) -> float:
+    """Power gain of the second-order Butterworth low-pass (time constant ``tau_s``) at a
+    frequency: ``1 / (1 + (2 pi f tau / sqrt 2)^4)``; 1 without a low-pass."""
+    if tau_s <= 0.0:
+        return 1.0
+    ratio = 2.0 * math.pi * frequency_hz * tau_s / math.sqrt(2.0)
+    return 1.0 / (1.0 + ratio**4)
 
 
 class QuaternionEKF(OrientationFilter):
-    """Error-state quaternion EKF with gyro-bias estimation and acceleration rejection.
+    """Error-state quaternion EKF with gyro-bias estimation, for real hand-held motion.
 
     See the module docstring for the model. The state survives between blocks and across
     parameter changes; a restart (gap) re-takes the tilt from the accelerometer and keeps the
@@ -342,50 +390,68 @@ class QuaternionEKF(OrientationFilter):
     name = "ekf"
     title = "Quaternion EKF"
     description = (
-        "Error-state Kalman filter: gyro propagation with bias estimation, corrected by the "
-        "low-passed gravity direction; the accelerometer's weight drops under acceleration."
+        "Error-state Kalman filter: gyro propagation with bias estimation (in motion and, "
+        "faster, at rest), corrected by gravity averaged over seconds in an almost-inertial "
+        "frame; the accelerometer's weight drops in proportion to how hard the sensor is moved."
     )
     parameters = (
         ParameterSpec(
             "gyro_noise", "Gyro noise density", "mdps/√Hz", 3.8, 0.1, 1000.0,
-            "White rate noise of the gyroscope (LSM6DSOX datasheet: 3.8 mdps/√Hz, "
-            "6.6e-5 rad/s/√Hz). Larger: trust the gyro less, follow the accelerometer faster.",
+            "White rate noise of the gyroscope (LSM6DSOX datasheet: 3.8 mdps/√Hz). Also the "
+            "noise of the bias measured at rest.",
             log_scale=True,
+        ),
+        ParameterSpec(
+            "gyro_scale_error", "Gyro scale uncertainty", "%", 0.3, 0.0, 10.0,
+            "Scale-factor and cross-axis uncertainty of the gyroscope: during a turn the "
+            "integrated angle is off by this fraction of the angle turned, so the filter leans "
+            "on the accelerometer more while the sensor turns fast. 0: a perfect gyro.",
         ),
         ParameterSpec(
             "bias_drift", "Gyro bias drift", "mdps/√s", 3.0, 0.0, 1000.0,
             "Random walk of the gyro bias: how fast the filter lets its bias estimate move. "
             "The default follows self-heating (0.01 dps/°C over a few °C in minutes), well "
-            "above the chip's few °/h bias instability. 0: a constant bias (the estimate "
-            "settles and then stops moving).",
+            "above the chip's few °/h bias instability. 0: a constant bias.",
             log_scale=True,
         ),
         ParameterSpec(
-            "bias_initial", "Initial bias uncertainty", "dps", 0.2, 0.0, 10.0,
-            "1-sigma gyro bias expected at start (after calibration; an uncalibrated "
-            "LSM6DSOX has up to ±1 dps). Used at reset.",
+            "bias_initial", "Initial bias uncertainty", "dps", 0.5, 0.0, 10.0,
+            "1-sigma gyro bias expected at start (an uncalibrated LSM6DSOX has up to ±1 dps). "
+            "Used at reset.",
             log_scale=True,
         ),
         ParameterSpec(
-            "accel_noise", "Accelerometer noise density", "µg/√Hz", 2000.0, 10.0, 1e6,
-            "Measurement noise of the gravity direction at rest. Far above the datasheet's "
-            "70 µg/√Hz on purpose: it also covers tremor and small motions, and sets the time "
-            "constant at rest (about 3 s with the defaults). Larger: smoother, slower.",
+            "accel_noise", "Gravity noise floor", "µg/√Hz", 100.0, 1.0, 1e6,
+            "Noise density of the averaged gravity direction when the sensor is not carried "
+            "(sensor noise and tremor left after the low-pass). Larger: smoother, slower.",
             log_scale=True,
         ),
         ParameterSpec(
-            "accel_tolerance", "Acceleration tolerance", "mg", 15.0, 0.0, 1e4,
-            "Deviation of the low-passed |a| from 1 g at which the accelerometer's weight "
-            "halves: sigma^2 = sigma0^2 (1 + ((|a| - g) / tolerance)^2). Smaller rejects "
-            "linear acceleration harder. 0 switches the adaptation off.",
+            "lp_tau", "Gravity averaging time", "s", 2.0, 0.0, 30.0,
+            "Time constant of the second-order low-pass applied to the accelerometer in the "
+            "earth frame: hand motion averages out over it (a hand does not go anywhere). "
+            "Also the start-up averaging time after a restart. 0: each sample as it is.",
             log_scale=True,
         ),
         ParameterSpec(
-            "lp_tau", "Accelerometer low-pass", "s", 0.2, 0.0, 10.0,
-            "Time constant of the two low-pass stages applied to the accelerometer in the "
-            "earth frame before normalising; removes vibration. Also the start-up averaging "
-            "time after a restart. 0: use each sample as it is (vibration then biases the tilt).",
-            log_scale=True,
+            "motion_frequency", "Typical motion frequency", "Hz", 1.0, 0.0, 100.0,
+            "Frequency of the linear acceleration the sensor is carried with (hand-held: "
+            "0.7-1.3 Hz). Sets how much of the motion's strength leaks through the low-pass, "
+            "and so how much the accelerometer is trusted less while the sensor is moved. "
+            "0: no adaptation (the accelerometer is always trusted alike).",
+        ),
+        ParameterSpec(
+            "rest_gyro", "Rest: gyro threshold", "dps", 2.0, 0.0, 100.0,
+            "The sensor is at rest while the gyro stays within this of its 0.5 s average "
+            "(and that average below it); at rest every gyro sample measures the bias.",
+        ),
+        ParameterSpec(
+            "rest_accel", "Rest: accelerometer threshold", "mg", 50.0, 0.0, 1000.0,
+            "At rest the accelerometer stays within this of its 0.5 s average.",
+        ),
+        ParameterSpec(
+            "rest_time", "Rest: minimum time", "s", 1.5, 0.0, 60.0,
+            "How long both must hold before the bias is taken from the gyro. 0: off.",
         ),
         ParameterSpec(
             "tilt_initial", "Initial tilt uncertainty", "deg", 30.0, 0.01, 180.0,
@@ -404,14 +470,14 @@ class QuaternionEKF(OrientationFilter):
     ) -> None:
         super().reset(initial_quat, last_time_s)
         self._bias = np.zeros(3)
-        self._lowpass = np.zeros(8)
+        self._aux = np.zeros(N_AUX)
         tilt_var = math.radians(float(self._values["tilt_initial"])) ** 2
         self._cov = np.diag([tilt_var, tilt_var, 0.0, 0.0, 0.0])
         self._reset_bias_covariance()
         if initial_quat is not None:
             # Taking over mid-stream: no start-up averaging; the given attitude is trusted like
             # a settled estimate (1 degree), not like a fresh start.
-            self._lowpass[7] = np.inf
+            self._aux[_SINCE] = np.inf
             self._cov[:2, :2] = np.eye(2) * min(tilt_var, math.radians(1.0) ** 2)
 
     def _reset_bias_covariance(self) -> None:
@@ -437,27 +503,50 @@ class QuaternionEKF(OrientationFilter):
         """Error-state covariance (5, 5): tilt (rad, earth x and y) then gyro bias (rad/s)."""
         return self._cov.copy()
 
-    def _process(self, block: SampleBlock) -> np.ndarray:
+    @property
+    def at_rest(self) -> bool:
+        """True while the rest detector holds (the bias is being measured directly)."""
+        return bool(self._aux[_REST] >= float(self._values["rest_time"]) > 0.0)
+
+    def kernel_arguments(self) -> tuple:
+        """The parameter arguments of the compiled kernel, in SI units (for the smoother)."""
         v = self._values
+        tau = float(v["lp_tau"])
+        frequency = float(v["motion_frequency"])
+        motion_gain = tau * butterworth_power_gain(tau, frequency) if frequency > 0.0 else 0.0
+        if tau <= 0.0 and frequency > 0.0:
+            motion_gain = MOTION_WINDOW_S  # no low-pass: the whole motion reaches the update
+        rest_gyro = math.radians(float(v["rest_gyro"]))
+        rest_accel = float(v["rest_accel"]) * 1e-3 * STANDARD_GRAVITY_M_S2
+        return (
+            math.radians(float(v["gyro_noise"]) * 1e-3) ** 2,
+            (float(v["gyro_scale_error"]) * 1e-2) ** 2,
+            math.radians(float(v["bias_drift"]) * 1e-3) ** 2,
+            (float(v["accel_noise"]) * 1e-6) ** 2,
+            tau,
+            motion_gain,
+            math.radians(float(v["tilt_initial"])) ** 2,
+            bool(v["estimate_bias"]),
+            rest_gyro * rest_gyro,
+            rest_accel * rest_accel,
+            float(v["rest_time"]),
+            rest_gyro,
+            STANDARD_GRAVITY_M_S2,
+        )
+
+    def _process(self, block: SampleBlock) -> np.ndarray:
         out = np.empty((len(block), 4))
         quat = np.array(self._quat, dtype=np.float64)
         bias = self._bias.copy()
         cov = self._cov.copy()
-        lowpass = self._lowpass.copy()
+        aux = self._aux.copy()
         _ekf_kernel(
             np.ascontiguousarray(block.accel_m_s2, dtype=np.float64),
             np.ascontiguousarray(block.gyro_rad_s, dtype=np.float64),
             self.time_steps(block),
-            quat, bias, cov, lowpass,
-            math.radians(float(v["gyro_noise"]) * 1e-3) ** 2,
-            math.radians(float(v["bias_drift"]) * 1e-3) ** 2,
-            (float(v["accel_noise"]) * 1e-6) ** 2,
-            float(v["accel_tolerance"]) * 1e-3,
-            float(v["lp_tau"]),
-            math.radians(float(v["tilt_initial"])) ** 2,
-            bool(v["estimate_bias"]),
-            STANDARD_GRAVITY_M_S2,
+            quat, bias, cov, aux,
+            *self.kernel_arguments(),
             out,
         )
-        self._bias, self._cov, self._lowpass = bias, cov, lowpass
+        self._bias, self._cov, self._aux = bias, cov, aux
         return out
