@@ -304,6 +304,37 @@ def test_replay_gives_an_offline_filter_the_whole_recording(tmp_path, monkeypatc
     assert np.array_equal(outputs[1].quat, np.tile([1.0, 0.0, 0.0, 0.0], (1000, 1)))
 
 
+# -- reference-only filters ------------------------------------------------------------------
+def test_the_thesis_kalman_filter_is_marked_a_reference(capsys):
+    assert FILTERS["kalman-thesis"].reference_only
+    assert [n for n, cls in FILTERS.items() if cls.reference_only] == ["kalman-thesis"]
+    assert main(["evaluate", "sim://static?odr=52", "--seconds", "3", "--repeats", "1",
+                 "--filter", "kalman-thesis", "accel"]) == 0
+    assert "kalman-thesis: Kalman (thesis), kept as a reference implementation, not for " \
+        "measurement" in capsys.readouterr().out
+
+
+def test_the_filter_list_labels_a_reference_only_filter(qtbot):
+    from PySide6.QtCore import Qt
+
+    from app.gui.filter_panel import FilterPanel
+
+    panel = FilterPanel()
+    qtbot.addWidget(panel)
+    for name, cls in FILTERS.items():
+        index = panel.combo.findData(name)
+        text = panel.combo.itemText(index)
+        tooltip = panel.combo.itemData(index, Qt.ItemDataRole.ToolTipRole)
+        item = next(panel.compare_list.item(r) for r in range(panel.compare_list.count())
+                    if panel.compare_list.item(r).data(Qt.ItemDataRole.UserRole) == name)
+        marked = "not for measurement"
+        assert (marked in text) == cls.reference_only, name
+        assert (marked in tooltip) == cls.reference_only, name
+        assert (marked in item.text()) == cls.reference_only, name
+        assert item.checkState() == Qt.CheckState.Unchecked
+    assert panel.compared_filters() == []
+
+
 # -- the BROAD trials ------------------------------------------------------------------------
 def _hand_rmse(path: Path, name: str) -> tuple[float, float, int]:
     """RMSE over movement == 1 rows with a reference, and over the skip rule, by hand."""

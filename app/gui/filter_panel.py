@@ -1,7 +1,9 @@
 """The filter panel: choose the orientation filter and edit its parameters.
 
 Controls are built from each filter's :class:`~app.core.filters.ParameterSpec` schema, so a
-new filter needs no GUI code.
+new filter needs no GUI code. A filter kept only as a reference implementation
+(``reference_only``, the thesis's Kalman filter) says so in its list text and tooltip, and is
+never ticked for comparison unless the user ticks it.
 """
 
 from __future__ import annotations
@@ -29,7 +31,26 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.core.filters import FILTERS, ParameterSpec
+from app.core.filters import FILTERS, OrientationFilter, ParameterSpec
+
+REFERENCE_ONLY_LABEL = "reference, not for measurement"
+REFERENCE_ONLY_NOTE = (
+    "Kept as a faithful reference implementation of the founding thesis's filter, to compare "
+    "with; not for measurement."
+)
+
+
+def filter_label(cls: type[OrientationFilter]) -> str:
+    """The text a filter is listed under: its title, marked when it is a reference only."""
+    title = cls.title or cls.name
+    return f"{title} ({REFERENCE_ONLY_LABEL})" if cls.reference_only else title
+
+
+def filter_tooltip(cls: type[OrientationFilter]) -> str:
+    """The filter's description, with the reference-only note where it applies."""
+    if cls.reference_only:
+        return f"{cls.description}\n\n{REFERENCE_ONLY_NOTE}".strip()
+    return cls.description
 
 
 class ScientificSpinBox(QDoubleSpinBox):
@@ -80,10 +101,14 @@ class FilterPanel(QWidget):
         super().__init__(parent)
         layout = QVBoxLayout(self)
         self.combo = QComboBox()
+        # The longest text (a reference-only filter's) must not widen the whole dock.
+        self.combo.setSizeAdjustPolicy(
+            QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
+        self.combo.setMinimumContentsLength(24)
         for name, cls in FILTERS.items():
-            self.combo.addItem(cls.title, name)
+            self.combo.addItem(filter_label(cls), name)
             tooltip = Qt.ItemDataRole.ToolTipRole
-            self.combo.setItemData(self.combo.count() - 1, cls.description, tooltip)
+            self.combo.setItemData(self.combo.count() - 1, filter_tooltip(cls), tooltip)
         self.combo.activated.connect(self._on_activated)
         layout.addWidget(self.combo)
         self.description = QLabel()
@@ -102,11 +127,11 @@ class FilterPanel(QWidget):
             "Run these filters on the same data; their roll and pitch are overlaid on the plot"
         )
         for name, cls in FILTERS.items():
-            item = QListWidgetItem(cls.title)
+            item = QListWidgetItem(filter_label(cls))
             item.setData(Qt.ItemDataRole.UserRole, name)
             item.setFlags(item.flags() | Qt.ItemFlag.ItemIsUserCheckable)
             item.setCheckState(Qt.CheckState.Unchecked)
-            item.setToolTip(cls.description)
+            item.setToolTip(filter_tooltip(cls))
             self.compare_list.addItem(item)
         self.compare_list.setMaximumHeight(22 * max(3, len(FILTERS)) + 6)
         self.compare_list.itemChanged.connect(self._on_compare_changed)
@@ -145,7 +170,7 @@ class FilterPanel(QWidget):
             flags = item.flags()
             item.setFlags(flags & ~Qt.ItemFlag.ItemIsEnabled if is_main
                           else flags | Qt.ItemFlag.ItemIsEnabled)
-        self.description.setText(cls.description)
+        self.description.setText(filter_tooltip(cls))
         if name != self._current:
             self._current = name
             self._build_form(cls.parameters)

@@ -179,6 +179,7 @@ class ThesisKalman(OrientationFilter):
 
     name = "kalman-thesis"
     title = "Kalman (thesis)"
+    reference_only = True
     description = (
         "The thesis's linear Kalman filter on roll, pitch and yaw with gyro-bias states "
         "(Q = q I, R = r I, P0 = p I): faithful, so only valid for moderate tilts."
