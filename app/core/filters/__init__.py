@@ -12,16 +12,19 @@ from app.core.filters.gyro_integration import GyroIntegration
 from app.core.filters.kalman_thesis import ThesisKalman
 from app.core.filters.madgwick import MadgwickFilter
 from app.core.filters.mahony import MahonyFilter
+from app.core.filters.offline import EKFSmoother, OfflineVQF
 from app.core.filters.vqf_filter import VQFFilter
 
 FILTERS: dict[str, type[OrientationFilter]] = {
     cls.name: cls
     for cls in (
         QuaternionEKF, VQFFilter, ComplementaryFilter, MadgwickFilter, MahonyFilter,
-        ThesisKalman, AccelerometerTilt, GyroIntegration,
+        ThesisKalman, AccelerometerTilt, GyroIntegration, EKFSmoother, OfflineVQF,
     )
 }
 DEFAULT_FILTER = QuaternionEKF.name
+ONLINE_FILTERS: tuple[str, ...] = tuple(name for name, cls in FILTERS.items() if not cls.offline)
+"""The filters that can run on a live stream (offline smoothers need the whole recording)."""
 
 
 def create_filter(name: str, **values: Any) -> OrientationFilter:
@@ -35,6 +38,6 @@ def create_filter(name: str, **values: Any) -> OrientationFilter:
 
 
 __all__ = [
-    "DEFAULT_FILTER", "FILTERS", "OrientationBlock", "OrientationFilter", "ParameterSpec",
-    "create_filter",
+    "DEFAULT_FILTER", "FILTERS", "ONLINE_FILTERS", "OrientationBlock", "OrientationFilter",
+    "ParameterSpec", "create_filter",
 ]

@@ -166,14 +166,17 @@ def _correct(quat, aux, d0, d1):  # pragma: no cover - compiled
 def _ekf_kernel(
     accel, gyro, dt, quat, bias, cov, aux, gyro_var_density, scale_var, bias_var_density,
     accel_var_density, lp_tau, motion_gain, tilt0_var, estimate_bias, rest_gyro2, rest_accel2,
-    rest_time, rest_clip, gravity, out,
+    rest_time, rest_clip, gravity, out, out_var,
 ):  # pragma: no cover - compiled
     """Run the filter over a block; ``quat``, ``bias``, ``cov`` and ``aux`` are updated.
 
     Densities are squared: rad^2/s (gyro), rad^2/s^3 (bias walk), (fraction of g)^2 s (accel);
     ``scale_var`` is the squared gyro scale uncertainty, ``motion_gain`` the low-pass leak of
-    the motion's power (s), ``rest_*2`` squared thresholds (rad^2/s^2, m^2/s^4).
+    the motion's power (s), ``rest_*2`` squared thresholds (rad^2/s^2, m^2/s^4). When
+    ``out_var`` has a row per sample it receives the tilt-error variance (rad^2, the mean of
+    the two horizontal axes) after each sample; an empty ``out_var`` skips that.
     """
+    keep_var = out_var.shape[0] == accel.shape[0]
     P = cov
     G = np.zeros((2, 3))
     GPbb = np.zeros((2, 3))
@@ -368,6 +371,8 @@ def _ekf_kernel(
         out[i, 1] = qx
         out[i, 2] = qy
         out[i, 3] = qz
+        if keep_var:
+            out_var[i] = 0.5 * (P[0, 0] + P[1, 1])
 
 
 def butterworth_power_gain(tau_s: float, frequency_hz: float) -> float:
@@ -535,6 +540,11 @@ class QuaternionEKF(OrientationFilter):
         )
 
     def _process(self, block: SampleBlock) -> np.ndarray:
+        return self.run_with_variance(block, np.empty(0))
+
+    def run_with_variance(self, block: SampleBlock, tilt_var: np.ndarray) -> np.ndarray:
+        """Quaternions for ``block`` (state carried on); ``tilt_var`` (N,) or empty receives
+        the tilt-error variance per sample (rad^2)."""
         out = np.empty((len(block), 4))
         quat = np.array(self._quat, dtype=np.float64)
         bias = self._bias.copy()
@@ -546,7 +556,7 @@ class QuaternionEKF(OrientationFilter):
             self.time_steps(block),
             quat, bias, cov, aux,
             *self.kernel_arguments(),
-            out,
+            out, tilt_var,
         )
         self._bias, self._cov, self._aux = bias, cov, aux
         return out
