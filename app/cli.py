@@ -288,8 +288,8 @@ class _Matrix:
 
     def header(self) -> None:
         print("Inclination error RMSE (degrees) per source and filter", file=self.out)
-        cells = "".join(f"  {name:>{w}} " for name, w in zip(self.filters, self.widths,
-                                                                strict=True))
+        cells = "".join(f" {name:>{w}} " for name, w in zip(self.filters, self.widths,
+                                                               strict=True))
         print(f"{'source':<{self.label_width}}  {'scored':>7}{cells}".rstrip(), file=self.out)
 
     def row(self, label: str, result: SourceResult) -> None:
@@ -302,7 +302,7 @@ class _Matrix:
                 mark = "!"
                 why = score.flag if not score.message else f"{score.flag}: {score.message}"
                 self.flagged.append(f"{name} on {label}: {why}")
-            cells.append(f"  {_number(value, '.3f'):>{width}}{mark}")
+            cells.append(f" {_number(value, '.3f'):>{width}}{mark}")
         print(f"{label:<{self.label_width}}  {result.scored_samples:>7}{''.join(cells)}"
               .rstrip(), file=self.out)
         self.out.flush()
@@ -311,7 +311,7 @@ class _Matrix:
         for key, title in (("mean_rmse_deg", f"mean of {sources}"),
                            ("worst_rmse_deg", "worst")):
             cells = "".join(
-                f"  {_number(float(summary[name][key]), '.3f'):>{w}} "
+                f" {_number(float(summary[name][key]), '.3f'):>{w}} "
                 for name, w in zip(self.filters, self.widths, strict=True))
             print(f"{title:<{self.label_width}}  {'':>7}{cells}".rstrip(), file=self.out)
         for line in self.flagged:
