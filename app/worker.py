@@ -26,6 +26,7 @@ from app.core.calibration_procedures import (
     TareReference,
     make_profile,
 )
+from app.core.filters import known_parameters
 from app.core.pipeline import Pipeline
 from app.core.recording import RecordingError, RecordingWriter, recording_metadata
 from app.core.recording.recorder import reference_source_of
@@ -192,7 +193,12 @@ class DeviceWorker(QObject):
         if not name:
             return
         try:
-            new_filter = self.pipeline.set_filter(name, **recording.filter_parameters)
+            values, dropped = known_parameters(name, recording.filter_parameters)
+            if dropped:
+                self.deviceMessage.emit(2, f"The recording's {name} parameters "
+                                        f"{', '.join(dropped)} are from an older version and "
+                                        "are ignored")
+            new_filter = self.pipeline.set_filter(name, **values)
         except (KeyError, ValueError) as exc:
             self.error.emit(f"The recording's filter cannot be restored ({exc}); "
                             f"replaying with {self.pipeline.filter.title}")

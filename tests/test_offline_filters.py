@@ -92,3 +92,16 @@ def test_offline_filters_restart_at_a_gap_without_nan(slow_rotation):
         assert np.all(np.isfinite(quat))
         errors = inclination_error_deg(quat[12000:], part.reference_quat[12000:])
         assert np.sqrt(np.nanmean(errors**2)) < 3.0
+
+
+def test_parameters_of_an_older_version_are_left_out_of_a_replay(tmp_path):
+    from app.core.filters import known_parameters
+    from app.core.recording.export import recorded_filter_parameters
+
+    class Old:
+        metadata = {"filter": {"name": "ekf", "parameters": {"lp_tau": 1.0,
+                                                             "accel_tolerance": 15.0}}}
+
+    assert recorded_filter_parameters(Old()) == {"ekf": {"lp_tau": 1.0}}
+    assert known_parameters("ekf", {"lp_tau": 1.0, "accel_tolerance": 15.0}) == (
+        {"lp_tau": 1.0}, ["accel_tolerance"])

@@ -27,6 +27,15 @@ ONLINE_FILTERS: tuple[str, ...] = tuple(name for name, cls in FILTERS.items() if
 """The filters that can run on a live stream (offline smoothers need the whole recording)."""
 
 
+def known_parameters(name: str, values: dict[str, Any]) -> tuple[dict[str, Any], list[str]]:
+    """Split recorded parameter ``values`` of filter ``name`` into those it still has and the
+    names of those it no longer has (a recording made by an older version)."""
+    cls = FILTERS[name]
+    names = {spec.name for spec in cls.parameters}
+    return ({k: v for k, v in values.items() if k in names},
+            sorted(k for k in values if k not in names))
+
+
 def create_filter(name: str, **values: Any) -> OrientationFilter:
     """A new filter by registry name, with parameter values applied."""
     try:
@@ -39,5 +48,5 @@ def create_filter(name: str, **values: Any) -> OrientationFilter:
 
 __all__ = [
     "DEFAULT_FILTER", "FILTERS", "ONLINE_FILTERS", "OrientationBlock", "OrientationFilter",
-    "ParameterSpec", "create_filter",
+    "ParameterSpec", "create_filter", "known_parameters",
 ]

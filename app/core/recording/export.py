@@ -24,7 +24,7 @@ from typing import Any, Literal
 import numpy as np
 
 from app.core.calibration import SensorCalibration
-from app.core.filters import create_filter
+from app.core.filters import FILTERS, create_filter, known_parameters
 from app.core.orientation import angles_from_quaternion, inclination_error_deg
 from app.core.recording.format import (
     KEY_COMPARISONS,
@@ -68,7 +68,10 @@ def recorded_filter_parameters(recording: Recording) -> dict[str, dict[str, Any]
     for entry in reversed(entries):  # the main filter wins
         if isinstance(entry, dict) and isinstance(entry.get("name"), str):
             params = entry.get("parameters")
-            found[entry["name"]] = dict(params) if isinstance(params, dict) else {}
+            params = dict(params) if isinstance(params, dict) else {}
+            if entry["name"] in FILTERS:  # parameters an older version had are left out
+                params = known_parameters(entry["name"], params)[0]
+            found[entry["name"]] = params
     return found
 
 
