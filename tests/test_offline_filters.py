@@ -105,3 +105,12 @@ def test_parameters_of_an_older_version_are_left_out_of_a_replay(tmp_path):
     assert recorded_filter_parameters(Old()) == {"ekf": {"lp_tau": 1.0}}
     assert known_parameters("ekf", {"lp_tau": 1.0, "accel_tolerance": 15.0}) == (
         {"lp_tau": 1.0}, ["accel_tolerance"])
+
+
+def test_a_switch_reads_the_words_true_and_false():
+    from app.core.filters.ekf import QuaternionEKF as EKF
+
+    assert EKF(estimate_bias="false").get_parameter("estimate_bias") is False
+    assert EKF(estimate_bias="On").get_parameter("estimate_bias") is True
+    with pytest.raises(ValueError, match="not true or false"):
+        EKF(estimate_bias="maybe")

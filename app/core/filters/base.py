@@ -44,6 +44,13 @@ class ParameterSpec:
     def validate(self, value: Any) -> float | int | bool:
         """Return ``value`` converted to this parameter's type; raise ValueError when invalid."""
         if self.kind == "bool":
+            if isinstance(value, str):  # "false" from a settings file or a command line
+                word = value.strip().lower()
+                if word in ("1", "true", "yes", "on"):
+                    return True
+                if word in ("0", "false", "no", "off", ""):
+                    return False
+                raise ValueError(f"{self.label}: {value!r} is not true or false")
             return bool(value)
         try:
             number = float(value)
