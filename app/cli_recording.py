@@ -157,6 +157,12 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     if unknown:
         _error(f"no filter {unknown[0]!r}; choose from {', '.join(FILTERS)}")
         return EXIT_USAGE
+    offline = [n for n in [*names, *comparisons] if FILTERS[n].offline]
+    if offline:
+        _error(f"{offline[0]!r} is an offline filter (it needs the whole recording) and cannot "
+               f"run while recording; record with a live filter, then run it with "
+               f"'inclinometer replay OUT.csv --filter {offline[0]} --out ANGLES.csv'")
+        return EXIT_USAGE
     try:
         duration = None if args.duration is None else parse_duration(args.duration)
     except ValueError:

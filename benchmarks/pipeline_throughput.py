@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from app.core.calibration import SensorCalibration
-from app.core.filters import FILTERS
+from app.core.filters import ONLINE_FILTERS
 from app.core.pipeline import Pipeline
 from drivers.registry import open_device
 
@@ -60,7 +60,7 @@ def main() -> None:
     print(f"{'filter':<16}{'block':>8}{'samples/s':>14}{'x 6667 Hz':>12}")
     for block in (64, 512, 4096):
         blocks = generate_blocks(args.seconds, block)
-        for name in FILTERS:
+        for name in ONLINE_FILTERS:
             rate = measure(blocks, name)
             print(f"{name:<16}{block:>8}{rate:>14,.0f}{rate / 6667:>12.0f}")
 

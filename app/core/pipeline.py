@@ -15,7 +15,7 @@ import numpy as np
 
 from app.core.calibration import IDENTITY_CALIBRATION, SensorCalibration
 from app.core.calibration_procedures.level_reference import TareReference
-from app.core.filters import DEFAULT_FILTER, OrientationFilter, create_filter
+from app.core.filters import DEFAULT_FILTER, FILTERS, OrientationFilter, create_filter
 from app.core.orientation import angles_from_quaternion, inclination_error_deg
 from app.core.ring_buffer import RingBuffer
 from app.core.samples import RawBlock, SampleBlock, convert_raw_block
@@ -37,6 +37,21 @@ ORIENTATION_COLUMNS = {
 
 REFERENCE_COLUMNS = ("ref_roll", "ref_pitch", "ref_tilt", "incl_error")
 COMPARISON_COLUMNS = {"t": 1, "roll": 1, "pitch": 1, "tilt": 1, "incl_error": 1}
+
+
+def require_online(name: str) -> None:
+    """Raise ValueError when ``name`` is an offline filter (a smoother): it needs the whole
+    recording in one ``process`` call and must never be fed a live stream block by block.
+
+    Unknown names pass (``create_filter`` reports them with the list of known ones).
+    """
+    cls = FILTERS.get(name)
+    if cls is not None and cls.offline:
+        raise ValueError(
+            f"{cls.title or name} ({name!r}) is an offline filter: it needs the whole recording "
+            f"at once and cannot run on a live stream; run it over a recording instead "
+            f"(inclinometer replay IN.csv --filter {name} --out ANGLES.csv)"
+        )
 
 
 def capacity_for(odr_hz: float, window_s: float = MAX_WINDOW_S) -> int:
@@ -68,6 +83,7 @@ class Pipeline:
     def __init__(self, odr_hz: float = 104.0, filter_name: str = DEFAULT_FILTER) -> None:
         self.calibration: SensorCalibration = IDENTITY_CALIBRATION
         self.level_reference: TareReference | None = None
+        require_online(filter_name)
         self.filter: OrientationFilter = create_filter(filter_name)
         self.counters = PipelineCounters()
         self.samples = RingBuffer(1024, SAMPLE_COLUMNS)
@@ -94,7 +110,11 @@ class Pipeline:
 
     # -- configuration ----------------------------------------------------------------------
     def set_filter(self, name: str, **values: Any) -> OrientationFilter:
-        """Switch filters mid-stream; the new one starts from the current orientation."""
+        """Switch filters mid-stream; the new one starts from the current orientation.
+
+        Raises ValueError for an offline filter (see :func:`require_online`).
+        """
+        require_online(name)
         new_filter = create_filter(name, **values)
         new_filter.warm_up()
         if self.counters.samples:
@@ -109,8 +129,11 @@ class Pipeline:
         """Run these filters side by side with the main one (by registry name).
 
         Filters already running keep their state; new ones start on their own from the next
-        sample. Returns the names now running.
+        sample. Returns the names now running. Raises ValueError, changing nothing, when any
+        name is an offline filter (see :func:`require_online`).
         """
+        for name in names:
+            require_online(name)
         running = {}
         buffers = {}
         for name in dict.fromkeys(names):

@@ -3,7 +3,9 @@
 Controls are built from each filter's :class:`~app.core.filters.ParameterSpec` schema, so a
 new filter needs no GUI code. A filter kept only as a reference implementation
 (``reference_only``, the thesis's Kalman filter) says so in its list text and tooltip, and is
-never ticked for comparison unless the user ticks it.
+never ticked for comparison unless the user ticks it. An offline filter (``offline``: a
+smoother, which needs the whole recording in one pass) is listed greyed out, marked
+"(offline)", and can be neither chosen nor ticked: it cannot run on a live stream.
 """
 
 from __future__ import annotations
@@ -31,23 +33,38 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.core.filters import FILTERS, OrientationFilter, ParameterSpec
+from app.core.filters import FILTERS, ONLINE_FILTERS, OrientationFilter, ParameterSpec
 
 REFERENCE_ONLY_LABEL = "reference, not for measurement"
 REFERENCE_ONLY_NOTE = (
     "Kept as a faithful reference implementation of the founding thesis's filter, to compare "
     "with; not for measurement."
 )
+OFFLINE_LABEL = "offline"
+
+
+def offline_note(name: str) -> str:
+    """Why an offline filter cannot be chosen here, and where to use it instead."""
+    return (
+        "offline: needs the whole recording — use "
+        f"`inclinometer replay IN.csv --filter {name} --out ANGLES.csv` "
+        f"or `inclinometer evaluate IN.csv --filter {name}`"
+    )
 
 
 def filter_label(cls: type[OrientationFilter]) -> str:
     """The text a filter is listed under: its title, marked when it is a reference only."""
     title = cls.title or cls.name
+    if cls.offline:
+        mark = f"({OFFLINE_LABEL})"
+        return title if title.endswith(mark) else f"{title} {mark}"
     return f"{title} ({REFERENCE_ONLY_LABEL})" if cls.reference_only else title
 
 
 def filter_tooltip(cls: type[OrientationFilter]) -> str:
-    """The filter's description, with the reference-only note where it applies."""
+    """The filter's description, with the reference-only or offline note where it applies."""
+    if cls.offline:
+        return f"{offline_note(cls.name)}\n\n{cls.description}".strip()
     if cls.reference_only:
         return f"{cls.description}\n\n{REFERENCE_ONLY_NOTE}".strip()
     return cls.description
@@ -106,9 +123,15 @@ class FilterPanel(QWidget):
             QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
         self.combo.setMinimumContentsLength(24)
         for name, cls in FILTERS.items():
+            if cls.offline and self.combo.count() and self.combo.itemData(
+                    self.combo.count() - 1) in ONLINE_FILTERS:
+                self.combo.insertSeparator(self.combo.count())
             self.combo.addItem(filter_label(cls), name)
             tooltip = Qt.ItemDataRole.ToolTipRole
             self.combo.setItemData(self.combo.count() - 1, filter_tooltip(cls), tooltip)
+            if cls.offline:  # listed, greyed out: it cannot run on a live stream
+                item = self.combo.model().item(self.combo.count() - 1)
+                item.setEnabled(False)
         self.combo.activated.connect(self._on_activated)
         layout.addWidget(self.combo)
         self.description = QLabel()
@@ -129,8 +152,12 @@ class FilterPanel(QWidget):
         for name, cls in FILTERS.items():
             item = QListWidgetItem(filter_label(cls))
             item.setData(Qt.ItemDataRole.UserRole, name)
-            item.setFlags(item.flags() | Qt.ItemFlag.ItemIsUserCheckable)
-            item.setCheckState(Qt.CheckState.Unchecked)
+            if cls.offline:
+                item.setFlags(item.flags() & ~Qt.ItemFlag.ItemIsEnabled
+                              & ~Qt.ItemFlag.ItemIsUserCheckable)
+            else:
+                item.setFlags(item.flags() | Qt.ItemFlag.ItemIsUserCheckable)
+                item.setCheckState(Qt.CheckState.Unchecked)
             item.setToolTip(filter_tooltip(cls))
             self.compare_list.addItem(item)
         self.compare_list.setMaximumHeight(22 * max(3, len(FILTERS)) + 6)
@@ -164,12 +191,17 @@ class FilterPanel(QWidget):
         """Show ``name`` as the running filter with these parameter values."""
         cls = FILTERS[name]
         self.combo.setCurrentIndex(self.combo.findData(name))
+        # setFlags emits itemChanged: without the block, the still-unticked list would be sent
+        # as the comparison set and undo comparisons requested but not yet reported back.
+        self.compare_list.blockSignals(True)
         for row in range(self.compare_list.count()):
             item = self.compare_list.item(row)
-            is_main = item.data(Qt.ItemDataRole.UserRole) == name
+            item_name = item.data(Qt.ItemDataRole.UserRole)
+            disabled = item_name == name or item_name not in ONLINE_FILTERS
             flags = item.flags()
-            item.setFlags(flags & ~Qt.ItemFlag.ItemIsEnabled if is_main
+            item.setFlags(flags & ~Qt.ItemFlag.ItemIsEnabled if disabled
                           else flags | Qt.ItemFlag.ItemIsEnabled)
+        self.compare_list.blockSignals(False)
         self.description.setText(filter_tooltip(cls))
         if name != self._current:
             self._current = name
@@ -191,7 +223,8 @@ class FilterPanel(QWidget):
         for row in range(self.compare_list.count()):
             item = self.compare_list.item(row)
             name = item.data(Qt.ItemDataRole.UserRole)
-            if item.checkState() == Qt.CheckState.Checked and name != self._current:
+            if (item.checkState() == Qt.CheckState.Checked and name != self._current
+                    and name in ONLINE_FILTERS):
                 names.append(name)
         return names
 
@@ -200,7 +233,10 @@ class FilterPanel(QWidget):
         self.compare_list.blockSignals(True)
         for row in range(self.compare_list.count()):
             item = self.compare_list.item(row)
-            checked = item.data(Qt.ItemDataRole.UserRole) in names
+            item_name = item.data(Qt.ItemDataRole.UserRole)
+            if item_name not in ONLINE_FILTERS:
+                continue  # never ticked (and without a check box)
+            checked = item_name in names
             item.setCheckState(Qt.CheckState.Checked if checked else Qt.CheckState.Unchecked)
         self.compare_list.blockSignals(False)
 
@@ -221,6 +257,10 @@ class FilterPanel(QWidget):
 
     def _on_activated(self, index: int) -> None:
         name = self.combo.itemData(index)
+        if name not in ONLINE_FILTERS:  # a separator or an offline filter: never live
+            if self._current:
+                self.combo.setCurrentIndex(self.combo.findData(self._current))
+            return
         if name != self._current:
             self.filterRequested.emit(name)
 

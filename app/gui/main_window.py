@@ -31,7 +31,7 @@ from PySide6.QtWidgets import (
 from app import __version__
 from app.core.calibration_procedures import CalibrationProfile, ProfileError
 from app.core.calibration_procedures.profiles import read_profile_file
-from app.core.filters import DEFAULT_FILTER, FILTERS
+from app.core.filters import DEFAULT_FILTER, FILTERS, ONLINE_FILTERS
 from app.core.recording import sample_recordings
 from app.core.self_test import SelfTestReport
 from app.gui import theme
@@ -228,11 +228,11 @@ class MainWindow(QMainWindow):
         self._restore_settings()
         self.refresh_devices()
         chosen_filter = filter_name or str(self.settings.value("filter", DEFAULT_FILTER))
-        if chosen_filter not in FILTERS:
+        if chosen_filter not in ONLINE_FILTERS:  # unknown, or offline (never live)
             chosen_filter = DEFAULT_FILTER
         session.requestFilter.emit(chosen_filter)
         saved = str(self.settings.value("comparisons", "")).split(",")
-        compared = [name for name in saved if name in FILTERS]
+        compared = [name for name in saved if name in ONLINE_FILTERS]
         if compared:
             session.requestComparisons.emit(compared)
         url = device_url or str(self.settings.value("device_url", DEFAULT_DEVICE_URL))
