@@ -429,11 +429,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "check-board":
         return check_command(args)
     if args.filter is not None:
-        from app.core.filters import FILTERS
+        from app.core.filters import FILTERS, ONLINE_FILTERS
 
+        if args.filter in FILTERS and args.filter not in ONLINE_FILTERS:
+            print(f"inclinometer: {args.filter!r} is an offline filter (it needs the whole "
+                  f"recording); use: inclinometer replay IN.csv --filter {args.filter} "
+                  "--out ANGLES.csv", file=sys.stderr)
+            return 2
         if args.filter not in FILTERS:
-            print(f"inclinometer: no filter {args.filter!r}; choose from {', '.join(FILTERS)}",
-                  file=sys.stderr)
+            print(f"inclinometer: no filter {args.filter!r}; choose from "
+                  f"{', '.join(ONLINE_FILTERS)}", file=sys.stderr)
             return 2
     if args.device is not None:
         from drivers.errors import DeviceUrlError

@@ -99,8 +99,9 @@ def test_parameters_of_an_older_version_are_left_out_of_a_replay(tmp_path):
     from app.core.recording.export import recorded_filter_parameters
 
     class Old:
-        metadata = {"filter": {"name": "ekf", "parameters": {"lp_tau": 1.0,
-                                                             "accel_tolerance": 15.0}}}
+        def __init__(self) -> None:
+            self.metadata = {"filter": {"name": "ekf", "parameters": {
+                "lp_tau": 1.0, "accel_tolerance": 15.0}}}
 
     assert recorded_filter_parameters(Old()) == {"ekf": {"lp_tau": 1.0}}
     assert known_parameters("ekf", {"lp_tau": 1.0, "accel_tolerance": 15.0}) == (
