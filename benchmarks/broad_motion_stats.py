@@ -4,7 +4,8 @@ Per trial, over its movement phase (``movement == 1``; see :mod:`app.core.motion
 every definition): ``|a|-g`` RMS and peak (m/s^2 and g); the earth-frame linear acceleration's
 RMS and spectrum (dominant and median frequency, bands holding the middle 50 % and 90 % of the
 power); the rate's RMS, peak and dominant frequency (dps, Hz); the tilt (5th percentile,
-median, 95th percentile and largest, degrees); and, over the span from the first to the last
+median, 95th percentile and largest, degrees), the rotation from the mean orientation (RMS
+about its x, y, z, degrees); and, over the span from the first to the last
 moving sample, the fraction of time at rest and the rest breaks.
 
 ``--sim URL`` computes the same figures for a simulator stream (its true orientation is the
@@ -12,7 +13,10 @@ reference; the unit's static errors are compensated as in ``inclinometer evaluat
 moving samples are then those not at rest.
 
     .venv/bin/python benchmarks/broad_motion_stats.py [TRIAL.csv ...]
-    .venv/bin/python benchmarks/broad_motion_stats.py --sim "sim://wobble?odr=208" --seconds 120
+    .venv/bin/python benchmarks/broad_motion_stats.py --seconds 130 \
+        --sim "sim://translation?odr=208&level=0" --sim "sim://translation?odr=208" \
+        --sim "sim://translation?odr=208&level=1" --sim "sim://handheld?odr=208&level=0" \
+        --sim "sim://handheld?odr=208" --sim "sim://handheld?odr=208&level=1"
 """
 
 from __future__ import annotations
@@ -54,6 +58,7 @@ COLUMNS = (
     ("gyro peak", "dps"),
     ("gyro dom", "Hz"),
     ("tilt p5/p50/p95 max", "deg"),
+    ("rot rms x/y/z", "deg"),
     ("rest", "% (breaks x s)"),
 )
 
@@ -72,6 +77,7 @@ def row(s: MotionStats) -> list[str]:
         f"{s.gyro_peak_dps:.0f}",
         f"{gyr.dominant_hz:.2f}",
         "/".join(f"{v:.0f}" for v in s.tilt_deg) + f" {s.tilt_max_deg:.0f}",
+        "/".join(f"{v:.0f}" for v in s.rotation_rms_deg),
         f"{100 * s.rest_fraction:.0f} ({s.rest_breaks} x {s.rest_break_mean_s:.0f})",
     ]
 

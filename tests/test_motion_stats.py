@@ -79,6 +79,19 @@ def test_linear_acceleration_and_tilt_from_the_reference():
     assert math.isnan(tilt[2])
 
 
+def test_rotation_about_the_mean_orientation():
+    t = np.arange(0, 60, 1 / RATE)
+    n = len(t)
+    base = quaternion_from_roll_pitch(20.0, -30.0, 50.0)
+    swing = np.radians(10.0) * np.sin(2 * np.pi * 0.5 * t)
+    q = quat.multiply(base, quat.from_rotation_vector(np.column_stack(
+        [np.zeros(n), swing, np.zeros(n)])))
+    q[::2] *= -1.0  # the sign of a quaternion does not matter
+    s = motion_stats(t, quat.rotate_inverse(q, np.tile([0.0, 0.0, G], (n, 1))),
+                     np.zeros((n, 3)), q, movement=np.ones(n, bool))
+    assert s.rotation_rms_deg == pytest.approx((0.0, 10.0 / math.sqrt(2), 0.0), abs=1e-3)
+
+
 def test_runs_and_rest():
     assert runs(np.array([0, 1, 1, 0, 1], bool)).tolist() == [[1, 3], [4, 5]]
     assert runs(np.zeros(3, bool)).shape == (0, 2)

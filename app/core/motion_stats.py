@@ -16,6 +16,8 @@ Definitions (all over the *moving* samples unless said otherwise):
   frequency (largest bin above 0 Hz), the median frequency (half the power below), and the
   bands holding the middle 50 % (25th-75th percentile of the power) and 90 % (5th-95th).
 - tilt: angle of the sensor's z axis from vertical, from the true orientation.
+- rotation: the true orientation relative to its mean (the normalised sum of the quaternions,
+  signs aligned), as a rotation vector in the mean pose's axes; RMS per axis.
 - rest: a sample is still when, within +-0.25 s, the rate stays below 10 dps and ``|a|-g``
   within 0.5 m/s^2; rest is a still stretch of at least 2 s. The rest fraction and the rest
   breaks are counted over the *span*: from the first to the last moving sample (a recording's
@@ -70,6 +72,8 @@ class MotionStats:
     tilt_deg: tuple[float, float, float]
     """5th percentile, median and 95th percentile of the tilt, degrees."""
     tilt_max_deg: float
+    rotation_rms_deg: tuple[float, float, float]
+    """RMS rotation from the mean orientation about its x, y, z axes, degrees."""
     rest_fraction: float
     rest_breaks: int
     rest_break_mean_s: float
@@ -108,6 +112,16 @@ def tilt_deg(quat_s2e: np.ndarray) -> np.ndarray:
     norm2 = np.sum(q * q, axis=-1)
     cos_tilt = 1.0 - 2.0 * (q[..., 1] ** 2 + q[..., 2] ** 2) / norm2
     return np.degrees(np.arccos(np.clip(cos_tilt, -1.0, 1.0)))
+
+
+def rotation_from_mean_deg(quat_s2e: np.ndarray) -> np.ndarray:
+    """(N, 3) rotation vectors (degrees) of known orientations from their mean orientation."""
+    q = quat.normalize(np.asarray(quat_s2e, dtype=np.float64))
+    if len(q) == 0:
+        return np.empty((0, 3))
+    q = q * np.where(q @ q[0] < 0.0, -1.0, 1.0)[:, None]
+    mean = quat.normalize(np.sum(q, axis=0))
+    return np.degrees(quat.to_rotation_vector(quat.multiply(quat.conjugate(mean), q)))
 
 
 def runs(mask: np.ndarray) -> np.ndarray:
@@ -237,6 +251,7 @@ def motion_stats(
     rate_dps = np.degrees(np.linalg.norm(gyro, axis=1))
     tilt = tilt_deg(quat_s2e)
     tilt_moving = tilt[moving & known]
+    rotation = rotation_from_mean_deg(quat_s2e[moving & known])
     rest_in_span = rest[span].copy()
     breaks = runs(rest_in_span)
     # A rest cut short by the span's ends is a break only if it is still long enough.
@@ -262,6 +277,8 @@ def motion_stats(
         tilt_deg=tuple(float(v) for v in np.percentile(tilt_moving, [5, 50, 95]))
         if len(tilt_moving) else nan3,
         tilt_max_deg=float(np.max(tilt_moving)) if len(tilt_moving) else math.nan,
+        rotation_rms_deg=tuple(float(v) for v in np.sqrt(np.mean(rotation**2, axis=0)))
+        if len(rotation) else nan3,
         rest_fraction=float(np.mean(rest_in_span)) if len(rest_in_span) else math.nan,
         rest_breaks=len(breaks),
         rest_break_mean_s=float(np.mean(lengths)) if len(lengths) else 0.0,
