@@ -180,7 +180,7 @@ def test_odr_snaps_to_nearest_chip_rate(asked: float) -> None:
         ("sim://static?fail_after=0", ["fail_after", "positive"]),
         ("sim://static?roll=500", ["roll", "500", "range"]),
         ("sim://interactive?jitter=2", ["jitter", "1 or 0"]),
-        ("sim://translation?strokes=2.5", ["strokes", "whole number"]),
+        ("sim://strokes?strokes=2.5", ["strokes", "whole number"]),
         ("sim://static?odr=", ["odr", "needs a value"]),
         ("sim://static?odr=104&odr=208", ["odr", "twice"]),
     ],
@@ -349,7 +349,7 @@ def test_random_walk_grows_like_the_square_root_of_time() -> None:
 
 
 def test_quantisation_and_saturation_at_2g() -> None:
-    url = "sim://translation?g=3&accel_fs=2&errors=0&noise=0&realtime=0&odr=833"
+    url = "sim://strokes?g=3&accel_fs=2&errors=0&noise=0&realtime=0&odr=833"
     device = SimulatedDevice(url, block=2048)
     block = collect(device, 4096)
     lsb = lsm6dsox.accel_m_s2_per_lsb(2)
@@ -465,6 +465,8 @@ def test_analytic_rate_is_the_derivative_of_the_orientation(name: str) -> None:
         ("wobble", 4.0),
         ("vibration?angular=1", 2.0),
         ("interactive?jitter=1", 3.0),
+        ("translation", 4.0),
+        ("handheld?level=0", 4.0),
     ],
 )
 def test_integrated_gyro_reproduces_the_reference_orientation(

@@ -20,8 +20,9 @@ MAX_BLOCK = 1_000_000
 
 GENERAL_OPTIONS: dict[str, str] = {
     "odr": "Hz, snapped to the nearest LSM6DSOX rate (12.5 ... 6667)",
-    "accel_fs": "accelerometer full scale: 2, 4, 8 or 16 g",
-    "gyro_fs": "gyroscope full scale: 125, 250, 500, 1000 or 2000 dps",
+    "accel_fs": "accelerometer full scale: 2, 4, 8 or 16 g (default 4, or what the motion needs)",
+    "gyro_fs": "gyroscope full scale: 125, 250, 500, 1000 or 2000 dps (default 250, or what the "
+               "motion needs)",
     "seed": "integer >= 0 picking the simulated unit (its id and its errors)",
     "realtime": "1: paced by the wall clock; 0: blocks as fast as possible",
     "speed": "time-lapse factor for realtime pacing (0.1 ... 100; 1 = real time)",
@@ -152,9 +153,13 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
     if "accel_fs" in raw:
         allowed = sorted(lsm6dsox.ACCEL_MG_PER_LSB)
         options["accel_fs_g"] = _choice(url, "accel_fs", raw["accel_fs"], allowed, "g")
+    elif SCENARIOS[name].accel_fs_g is not None:  # what the scenario's motion needs
+        options["accel_fs_g"] = SCENARIOS[name].accel_fs_g
     if "gyro_fs" in raw:
         allowed = sorted(lsm6dsox.GYRO_MDPS_PER_LSB)
         options["gyro_fs_dps"] = _choice(url, "gyro_fs", raw["gyro_fs"], allowed, "dps")
+    elif SCENARIOS[name].gyro_fs_dps is not None:
+        options["gyro_fs_dps"] = SCENARIOS[name].gyro_fs_dps
     if "seed" in raw:
         options["seed"] = _integer(url, "seed", raw["seed"], 0, 2**63 - 1)
     if "speed" in raw:
