@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from app.core.evaluation import calibration_from_unit_errors
-from app.core.filters import FILTERS
+from app.core.filters import ONLINE_FILTERS
 from app.core.pipeline import Pipeline
 from app.core.recording import (
     UNIT_SCALE,
@@ -335,7 +335,7 @@ def test_a_replay_reproduces_the_live_pipeline_bit_for_bit(tmp_path):
     """A week later: same samples, same calibration, same filters: exactly the same angles."""
     sim = SimulatedDevice("sim://wobble?odr=208&seed=5", realtime=False, block=5)
     calibration = calibration_from_unit_errors(sim.unit_errors)
-    others = [name for name in FILTERS if name != "vqf"]
+    others = [name for name in ONLINE_FILTERS if name != "vqf"]
     path = tmp_path / "live.csv"
     outcome = record_device(sim, path, duration_s=8.0, filter_name="vqf",
                             filter_parameters={"tau_acc_s": 2.5}, comparisons=others,
