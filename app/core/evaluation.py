@@ -562,7 +562,9 @@ def results_json(
 
 
 # -- the standard set ------------------------------------------------------------------------
-MOTION_SCENARIOS = ("static", "slow-tilt", "wobble", "vibration", "translation", "tour")
+MOTION_SCENARIOS = (
+    "static", "slow-tilt", "wobble", "vibration", "translation", "handheld", "strokes", "tour",
+)
 """Simulator scenarios with a scripted motion (``interactive`` waits for the user)."""
 SCENARIO_ODR_HZ = 208
 LONG_REST_S = 3600.0

@@ -85,7 +85,7 @@ def tour_bookmarks() -> list[dict[str, object]]:
 SAMPLES = (
     Sample("wobble-104hz", "sim://wobble?odr=104&seed=11", 30.0,
            "30 s hand-held wobble near level at 104 Hz (simulator, true orientation in qw..qz)"),
-    Sample("translation-208hz", "sim://translation?odr=208&seed=12", 30.0,
+    Sample("translation-208hz", "sim://strokes?odr=208&seed=12", 30.0,
            "30 s of several g of linear acceleration at 208 Hz: the accelerometer alone is "
            "fooled (simulator, true orientation in qw..qz)"),
     Sample("tour-104hz", "sim://tour?odr=104&seed=13", 60.0,
