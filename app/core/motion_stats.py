@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from app.core import quaternion as quat
+from app.core.orientation import angles_from_quaternion
 from app.core.samples import STANDARD_GRAVITY_M_S2, SampleBlock
 
 G = STANDARD_GRAVITY_M_S2
@@ -108,10 +109,7 @@ def linear_acceleration_earth(accel_m_s2: np.ndarray, quat_s2e: np.ndarray) -> n
 
 def tilt_deg(quat_s2e: np.ndarray) -> np.ndarray:
     """Angle of the sensor z axis from vertical (N,), degrees (NaN where unknown)."""
-    q = np.asarray(quat_s2e, dtype=np.float64)
-    norm2 = np.sum(q * q, axis=-1)
-    cos_tilt = 1.0 - 2.0 * (q[..., 1] ** 2 + q[..., 2] ** 2) / norm2
-    return np.degrees(np.arccos(np.clip(cos_tilt, -1.0, 1.0)))
+    return angles_from_quaternion(np.asarray(quat_s2e, dtype=np.float64)).tilt_deg
 
 
 def rotation_from_mean_deg(quat_s2e: np.ndarray) -> np.ndarray:

@@ -22,6 +22,12 @@ MAX_STEP_S = 0.5
 """A time step longer than this (or a marked gap) restarts integration from the accelerometer."""
 
 
+def restart_flags(dt: np.ndarray, gap: np.ndarray) -> np.ndarray:
+    """True where integration restarts: a marked gap, or a step ``dt`` (s, the time since the
+    previous sample) that is not finite, not positive or longer than :data:`MAX_STEP_S`."""
+    return ~np.isfinite(dt) | (dt <= 0.0) | (dt > MAX_STEP_S) | gap
+
+
 @dataclass(frozen=True, slots=True)
 class ParameterSpec:
     """Schema of one filter parameter.
@@ -165,7 +171,7 @@ class OrientationFilter(ABC):
         previous[0] = np.nan if self._last_t is None else self._last_t
         previous[1:] = block.t_s[:-1]
         dt = block.t_s - previous
-        restart = ~np.isfinite(dt) | (dt <= 0.0) | (dt > MAX_STEP_S) | block.gap
+        restart = restart_flags(dt, block.gap)
         if not self._has_state:
             restart[0] = True
         return np.where(restart, 0.0, dt)

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from app.core import quaternion as quat
-from app.core.filters.base import MAX_STEP_S, OrientationFilter, ParameterSpec
+from app.core.filters.base import OrientationFilter, ParameterSpec, restart_flags
 from app.core.filters.ekf import QuaternionEKF
 from app.core.filters.vqf_filter import MISSING_MESSAGE, VQFUnavailableError, _vqf
 from app.core.orientation import quaternion_from_up, up_in_sensor_frame
@@ -36,8 +36,7 @@ def restarts(t_s: np.ndarray, gap: np.ndarray) -> np.ndarray:
     """Indices where a stream restarts (the first sample, marked gaps, bad or long steps)."""
     if len(t_s) == 0:
         return np.empty(0, dtype=np.intp)
-    dt = np.diff(t_s)
-    bad = ~np.isfinite(dt) | (dt <= 0.0) | (dt > MAX_STEP_S) | gap[1:]
+    bad = restart_flags(np.diff(t_s), gap[1:])
     return np.concatenate([[0], np.flatnonzero(bad) + 1])
 
 
