@@ -278,9 +278,7 @@ def _ekf_kernel(
                     _correct(quat, aux, row[0] / s * innovation, row[1] / s * innovation)
         # ---- update: the averaged gravity direction -----------------------------------
         norm2 = ax * ax + ay * ay + az * az
-        if not (norm2 > 0.0 and norm2 < math.inf):
-            pass
-        else:
+        if norm2 > 0.0 and norm2 < math.inf:
             qw, qx, qy, qz = quat[0], quat[1], quat[2], quat[3]
             # f = R(q) a, the specific force in the earth frame (m/s^2).
             tx = 2.0 * (qy * az - qz * ay)
@@ -518,9 +516,12 @@ class QuaternionEKF(OrientationFilter):
         v = self._values
         tau = float(v["lp_tau"])
         frequency = float(v["motion_frequency"])
-        motion_gain = tau * butterworth_power_gain(tau, frequency) if frequency > 0.0 else 0.0
-        if tau <= 0.0 and frequency > 0.0:
+        if frequency <= 0.0:
+            motion_gain = 0.0
+        elif tau <= 0.0:
             motion_gain = MOTION_WINDOW_S  # no low-pass: the whole motion reaches the update
+        else:
+            motion_gain = tau * butterworth_power_gain(tau, frequency)
         rest_gyro = math.radians(float(v["rest_gyro"]))
         rest_accel = float(v["rest_accel"]) * 1e-3 * STANDARD_GRAVITY_M_S2
         return (
