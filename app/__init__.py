@@ -9,4 +9,6 @@ Layers, lowest first (imports only point downwards):
 - ``app.gui``: widgets. They display what the core computed and never do maths themselves.
 """
 
-__version__ = "0.1.0"
+from app.core.version import __version__
+
+__all__ = ["__version__"]

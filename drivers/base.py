@@ -2,52 +2,23 @@
 
 The public :meth:`Device.open`, :meth:`Device.read` and :meth:`Device.close` do the bookkeeping
 (state checks, error typing); a driver overrides only ``_open``, ``_read`` and ``_close``.
+
+The descriptions a device gives of itself (:class:`DeviceInfo`, :class:`DeviceDescriptor`,
+:class:`DeviceMessage`) are plain data in :mod:`app.core.devices`, so that layers above the
+drivers can name them without importing a driver; they are re-exported here.
 """
 
 from __future__ import annotations
 
 import threading
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import ClassVar
 
+from app.core.devices import DeviceDescriptor, DeviceInfo, DeviceMessage
 from app.core.samples import RawBlock
 from drivers.errors import DeviceClosedError, DeviceError, DeviceIOError
 
-
-@dataclass(frozen=True, slots=True)
-class DeviceInfo:
-    """What a device says about itself once open."""
-
-    url: str
-    name: str
-    unique_id: str
-    sensor: str
-    odr_hz: float
-    """Output data rate actually used (trimmed clock), samples per second."""
-    odr_nominal_hz: float
-    accel_fs_g: int
-    gyro_fs_dps: int
-    firmware: str = ""
-    extra: dict[str, Any] = field(default_factory=dict)
-
-
-@dataclass(frozen=True, slots=True)
-class DeviceMessage:
-    """Something the device itself reported for the user (a board's LOG packet)."""
-
-    level: int
-    """0 debug, 1 info, 2 warning, 3 error."""
-    text: str
-
-
-@dataclass(frozen=True, slots=True)
-class DeviceDescriptor:
-    """One entry of a device listing: a URL to open and a line to show the user."""
-
-    url: str
-    description: str
-    kind: str
+__all__ = ["Device", "DeviceDescriptor", "DeviceInfo", "DeviceMessage"]
 
 
 class Device(ABC):

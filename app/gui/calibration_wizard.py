@@ -53,10 +53,10 @@ from app.core.calibration_procedures import (
     fit_six_position,
     make_profile,
 )
+from app.core.devices import DeviceInfo
 from app.core.raw_feed import RawSampleFeed
 from app.gui import theme
 from app.worker import DeviceSession
-from drivers.base import DeviceInfo
 
 FEED_INTERVAL_MS = 100
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import QComboBox, QLabel, QSizePolicy, QToolBar, QToolButton, QWidget
 
+from app.core.devices import DeviceDescriptor
 from app.gui import theme
-from drivers.base import DeviceDescriptor
 
 TOOLTIP_ROLE = Qt.ItemDataRole.ToolTipRole
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import QFormLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
+from app.core.devices import DeviceInfo
 from app.core.self_test import SelfTestReport
 from app.gui import theme
 from app.worker import StreamStatus
-from drivers.base import DeviceInfo
 
 SELF_TEST_UNAVAILABLE = ("The sensor's self-test needs the NUCLEO firmware or a register-level "
                          "LSM6DSOX (lsm6dsox://).")

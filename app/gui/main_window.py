@@ -31,6 +31,7 @@ from PySide6.QtWidgets import (
 from app import __version__
 from app.core.calibration_procedures import CalibrationProfile, ProfileError
 from app.core.calibration_procedures.profiles import read_profile_file
+from app.core.devices import DeviceInfo
 from app.core.filters import DEFAULT_FILTER, FILTERS, ONLINE_FILTERS
 from app.core.recording import sample_recordings
 from app.core.self_test import SelfTestReport
@@ -47,7 +48,6 @@ from app.gui.readouts import TiltReadouts
 from app.gui.replay_bar import ReplayBar
 from app.gui.simulator_panel import SimulatorPanel
 from app.worker import DeviceSession, StreamStatus
-from drivers.base import DeviceInfo
 from drivers.registry import DEFAULT_DEVICE_URL, available_devices, scheme_of
 from drivers.replay import replay_url
 

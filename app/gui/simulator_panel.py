@@ -19,7 +19,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from drivers.base import DeviceDescriptor
+from app.core.devices import DeviceDescriptor
 from drivers.lsm6dsox import ACCEL_MG_PER_LSB, GYRO_MDPS_PER_LSB, ODR_CODES_HZ
 
 SLIDER_STEPS_PER_DEG = 10

@@ -33,10 +33,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from app import __version__
 from app.core import quaternion as quat
 from app.core.orientation import quaternion_from_roll_pitch
 from app.core.samples import RawBlock, ScaleFactors
+from app.core.version import __version__
 from drivers import lsm6dsox
 from drivers.base import Device, DeviceDescriptor, DeviceInfo
 from drivers.errors import DeviceError, DeviceIOError

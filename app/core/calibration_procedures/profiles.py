@@ -37,9 +37,9 @@ from typing import Any
 
 import numpy as np
 
-from app import __version__
 from app.core.calibration import SensorCalibration
 from app.core.calibration_procedures.level_reference import TareReference
+from app.core.version import __version__
 
 APP_NAME = "Inclinometer"
 FORMAT_TAG = "inclinometer-calibration-profile"

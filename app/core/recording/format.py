@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from app import __version__
 from app.core.calibration import SensorCalibration
+from app.core.version import __version__
 
 MAGIC = "inclinometer-recording"
 FORMAT_VERSION = 1
