@@ -200,7 +200,7 @@ def resolve_sources(items: list[str], seconds: float, compensate: bool) -> list[
     Raises :class:`_Usage` for a URL that cannot be evaluated, a file that is not a recording
     with a reference, or a glob that matches nothing. A file named twice is evaluated once.
     """
-    from app.core import evaluation
+    from app.services import simulation
     from drivers.errors import DeviceError, DeviceUrlError
     from drivers.registry import scheme_of
     from drivers.replay import recording_path
@@ -217,7 +217,7 @@ def resolve_sources(items: list[str], seconds: float, compensate: bool) -> list[
 
     for item in items:
         if item == "scenarios":
-            for source in evaluation.standard_sources(seconds, compensate=compensate):
+            for source in simulation.standard_sources(seconds, compensate=compensate):
                 pending.append(_Pending(source.label, source.label, errors,
                                         lambda source=source: source))
             continue
@@ -233,7 +233,7 @@ def resolve_sources(items: list[str], seconds: float, compensate: bool) -> list[
                 raise _Usage(f"{item}: only sources that know their true orientation can be "
                              "evaluated (sim:// URLs and recordings with reference columns)")
             try:
-                source = evaluation.simulator_source(item, seconds, compensate=compensate)
+                source = simulation.simulator_source(item, seconds, compensate=compensate)
             except DeviceError as exc:
                 raise _Usage(str(exc)) from None
             pending.append(_Pending(item, item, errors, lambda source=source: source))

@@ -145,7 +145,7 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     from app.core.calibration_procedures.profiles import ProfileError, read_profile_file
     from app.core.filters import FILTERS
     from app.core.recording.errors import RecordingWriteError
-    from app.core.recording.recorder import parse_duration, record_device
+    from app.services.recorder import parse_duration, record_device
     from drivers.errors import DeviceError
     from drivers.registry import create_device
 

@@ -27,7 +27,8 @@ import math
 import sys
 from pathlib import Path
 
-from app.core.motion_stats import G, MotionStats, motion_stats, simulator_stats
+from app.core.motion_stats import G, MotionStats, motion_stats
+from app.services.simulation import simulator_stats
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_GLOB = str(REPO.parent / "shared" / "datasets" / "broad" / "*.csv")

@@ -24,9 +24,10 @@ import time
 
 import numpy as np
 
-from app.core.evaluation import concatenate_blocks, simulator_blocks, split_block
+from app.core.evaluation import concatenate_blocks, split_block
 from app.core.filters import FILTERS, OrientationFilter
 from app.core.samples import SampleBlock
+from app.services.simulation import simulator_blocks
 
 ODR_HZ = 6667
 URL = f"sim://wobble?odr={ODR_HZ}&seed=7"

@@ -23,7 +23,7 @@ from PySide6.QtWidgets import QApplication
 
 from app.gui import theme
 from app.gui.main_window import MainWindow
-from app.worker import DeviceSession
+from app.services.session import DeviceSession
 
 
 class PaintCounter(QObject):

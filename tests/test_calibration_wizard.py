@@ -12,7 +12,7 @@ from PySide6.QtCore import QSettings
 from app.core.calibration_procedures import ProfileStore
 from app.gui import theme
 from app.gui.main_window import MainWindow
-from app.worker import DeviceSession
+from app.services.session import DeviceSession
 from drivers.sim.device import SimulatedDevice
 
 TIMEOUT_MS = 60_000

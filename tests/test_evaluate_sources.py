@@ -235,7 +235,7 @@ def test_a_bad_param_exits_2(param, message, tmp_path, capsys):
 
 
 def test_replay_param_changes_the_recorded_parameters(tmp_path, capsys):
-    from app.core.recording import record_device
+    from app.services.recorder import record_device
     from drivers.sim.device import SimulatedDevice
 
     source = tmp_path / "run.csv"

@@ -16,6 +16,7 @@ from app.core.filters import FILTERS
 from app.core.filters.base import OrientationFilter
 from app.core.orientation import quaternion_from_roll_pitch
 from app.core.samples import STANDARD_GRAVITY_M_S2, SampleBlock
+from app.services import simulation
 
 ODR = 100.0
 
@@ -140,9 +141,9 @@ def test_simulator_stream_compensated_or_raw():
 
     url = "sim://static?odr=104&seed=4"
     unit = SimulatedDevice(url).unit_errors
-    compensated = evaluation.concatenate_blocks(evaluation.simulator_blocks(url, 3.0))
+    compensated = evaluation.concatenate_blocks(simulation.simulator_blocks(url, 3.0))
     raw = evaluation.concatenate_blocks(
-        evaluation.simulator_blocks(url, 3.0, compensate=False)
+        simulation.simulator_blocks(url, 3.0, compensate=False)
     )
     assert len(compensated) == len(raw)
     assert compensated.reference_quat is not None
@@ -159,7 +160,7 @@ def test_simulator_stream_compensated_or_raw():
 
 def test_simulator_stream_has_the_asked_length():
     stream = evaluation.concatenate_blocks(
-        evaluation.simulator_blocks("sim://wobble?odr=52", 5.0, block=64)
+        simulation.simulator_blocks("sim://wobble?odr=52", 5.0, block=64)
     )
     summary = evaluation.stream_summary(stream)
     assert summary["duration_s"] == pytest.approx(5.0, abs=2.0 / summary["rate_hz"])
@@ -176,7 +177,7 @@ def test_with_gap_loses_samples_and_marks_the_next():
 
 
 def test_standard_sources_cover_the_scenarios_and_the_hard_cases():
-    sources = evaluation.standard_sources(10.0)
+    sources = simulation.standard_sources(10.0)
     labels = " ".join(s.label for s in sources)
     for name in ("static", "slow-tilt", "wobble", "vibration", "translation", "tour"):
         assert f"sim://{name}?" in labels

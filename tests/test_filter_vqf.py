@@ -12,7 +12,7 @@ import pytest
 vqf = pytest.importorskip("vqf")
 
 from app.core import quaternion as quat  # noqa: E402
-from app.core.evaluation import concatenate_blocks, simulator_blocks, split_block  # noqa: E402
+from app.core.evaluation import concatenate_blocks, split_block  # noqa: E402
 from app.core.filters import vqf_filter  # noqa: E402
 from app.core.filters.vqf_filter import VQFFilter  # noqa: E402
 from app.core.orientation import (  # noqa: E402
@@ -21,6 +21,7 @@ from app.core.orientation import (  # noqa: E402
     up_in_sensor_frame,
 )
 from app.core.samples import STANDARD_GRAVITY_M_S2, SampleBlock  # noqa: E402
+from app.services.simulation import simulator_blocks  # noqa: E402
 
 G = STANDARD_GRAVITY_M_S2
 

@@ -16,7 +16,7 @@ from test_firmware_commands import RecordingBus
 
 from app.gui import theme
 from app.gui.main_window import MainWindow
-from app.worker import DeviceSession
+from app.services.session import DeviceSession
 from drivers.lsm6dsox_direct.emulated_chip import EmulatedLsm6dsox
 from drivers.sim.options import SimOptions
 

@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from app.worker import DeviceSession
+from app.services.session import DeviceSession
 from drivers.emulated_nucleo import EmulatedNucleo
 
 TIMEOUT_MS = 20_000

@@ -10,7 +10,7 @@ from PySide6.QtCore import QSettings, Qt
 from app.core.filters import DEFAULT_FILTER
 from app.gui import theme
 from app.gui.main_window import MainWindow
-from app.worker import DeviceSession
+from app.services.session import DeviceSession
 
 TIMEOUT_MS = 15_000
 

@@ -13,7 +13,7 @@ from app.core.filters import DEFAULT_FILTER, FILTERS, ONLINE_FILTERS
 from app.core.pipeline import Pipeline
 from app.gui import theme
 from app.gui.filter_panel import FilterPanel
-from app.worker import DeviceWorker
+from app.services.worker import DeviceWorker
 
 OFFLINE = [name for name, cls in FILTERS.items() if cls.offline]
 TIMEOUT_MS = 15_000
@@ -105,7 +105,7 @@ def test_the_filter_panel_lists_offline_filters_greyed_out(qtbot, qapp, artifact
 
 def test_saved_offline_settings_fall_back_to_the_default(qtbot, qapp, tmp_path):
     from app.gui.main_window import MainWindow
-    from app.worker import DeviceSession
+    from app.services.session import DeviceSession
 
     theme.apply_theme(qapp)
     settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)

@@ -11,7 +11,7 @@ from PySide6.QtCore import QSettings
 from app.core.recording import read_recording
 from app.gui import theme
 from app.gui.main_window import MainWindow
-from app.worker import DeviceSession
+from app.services.session import DeviceSession
 
 TIMEOUT_MS = 30_000
 

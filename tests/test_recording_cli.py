@@ -16,7 +16,8 @@ import pytest
 
 from app.cli import list_devices, main
 from app.core.evaluation import calibration_from_unit_errors
-from app.core.recording import RecordingWarning, read_recording, record_device
+from app.core.recording import RecordingWarning, read_recording
+from app.services.recorder import record_device
 from drivers.sim.device import SimulatedDevice
 
 ROOT = Path(__file__).resolve().parent.parent

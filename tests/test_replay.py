@@ -16,10 +16,10 @@ from app.core.recording import (
     Bookmark,
     RecordingWriter,
     read_recording,
-    record_device,
     recording_metadata,
 )
 from app.core.samples import RawBlock
+from app.services.recorder import record_device
 from drivers.base import DeviceInfo
 from drivers.errors import DeviceOpenError, DeviceUrlError
 from drivers.registry import create_device, scheme_of

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from app.core import quaternion as quat
-from app.core.motion_stats import MotionStats, motion_stats, simulator_stats
+from app.core.motion_stats import MotionStats, motion_stats
+from app.services.simulation import simulator_stats
 from drivers.sim.device import SimulatedDevice
 from drivers.sim.scenarios import SCENARIOS, Handheld, Strokes, Translation
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.worker import DeviceSession
+from app.services.session import DeviceSession
 
 TIMEOUT_MS = 15_000
 

@@ -1,9 +1,9 @@
 """Filter evaluation: run orientation filters over a stream with a known true orientation.
 
 A *stream* is any iterable of :class:`~app.core.samples.SampleBlock` s that carry
-``reference_quat``: the simulator (:func:`simulator_blocks`), or a recording with reference
-columns (:func:`recording_source`). :func:`evaluate` joins the stream, runs each filter over
-it in large blocks and scores it:
+``reference_quat``: a recording with reference columns (:func:`recording_source`), or the
+simulator (:func:`app.services.simulation.simulator_source`, a layer up: it runs a device).
+:func:`evaluate` joins the stream, runs each filter over it in large blocks and scores it:
 
 - **inclination error**: the angle between estimated and true gravity directions
   (:func:`app.core.orientation.inclination_error_deg`), as RMSE and maximum in degrees. The
@@ -28,7 +28,8 @@ in one ``process`` call; the others get it in blocks of ``block`` samples.
 :func:`summarize` gives each filter's mean over several sources, and :func:`results_json`
 puts both in a JSON-ready dict (what ``inclinometer evaluate --json`` writes).
 
-This module is numpy only (no Qt). It imports ``drivers`` lazily, only in the simulator helper.
+This module is numpy only: no Qt, no drivers. Streams that come from running a device are
+built in :mod:`app.services.simulation`.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ import numpy as np
 from app.core.calibration import SensorCalibration
 from app.core.filters import FILTERS, OrientationFilter
 from app.core.orientation import inclination_error_deg
-from app.core.samples import SampleBlock, convert_raw_block
+from app.core.samples import SampleBlock
 
 DEFAULT_SKIP_S = 2.0
 """Seconds at the start of a stream that are not scored (filter convergence)."""
@@ -181,64 +182,6 @@ def calibration_from_unit_errors(unit: Any) -> SensorCalibration:
         gyro_matrix=np.linalg.inv(unit.gyro_matrix),
         name=f"true errors of seed {unit.seed}",
     )
-
-
-def simulator_blocks(
-    url: str, seconds: float, *, compensate: bool = True, block: int = 65536
-) -> Iterator[SampleBlock]:
-    """The first ``seconds`` of a ``sim://`` URL as SampleBlocks (not paced: realtime off).
-
-    A ``fail_after`` option in the URL ends the stream early.
-
-    With ``compensate`` (the default) the unit's static errors (scale, cross-axis, bias) are
-    removed with its true values (:func:`calibration_from_unit_errors`), so the scores show the
-    filters rather than an uncalibrated sensor.
-    """
-    from drivers.errors import DeviceIOError  # drivers sit above app.core: import late
-    from drivers.sim.device import SimulatedDevice
-
-    device = SimulatedDevice(url, realtime=False, block=block)
-    calibration = (
-        calibration_from_unit_errors(device.unit_errors) if compensate else SensorCalibration()
-    )
-    device.open()
-    try:
-        remaining = max(1, round(seconds * device.odr_hz))
-        while remaining > 0:
-            try:
-                raw = device.read(1.0)
-            except DeviceIOError:  # fail_after: the stream ends there, as a recording would
-                break
-            if raw is None or len(raw) == 0:
-                break
-            samples = calibration.apply(convert_raw_block(raw))
-            if len(samples) > remaining:
-                samples = next(split_block(samples, remaining))
-            remaining -= len(samples)
-            yield samples
-    finally:
-        device.close()
-
-
-def simulator_source(
-    url: str, seconds: float, *, compensate: bool = True, gap: tuple[float, float] | None = None,
-    label: str | None = None, description: str = "",
-) -> StreamSource:
-    """A :class:`StreamSource` for a simulator URL; ``gap`` = (start s, length s) drops samples.
-
-    Raises :class:`drivers.errors.DeviceUrlError` at once for a bad URL.
-    """
-    from drivers.sim.options import parse_sim_url
-
-    parse_sim_url(url)
-
-    def blocks() -> Iterable[SampleBlock]:
-        stream = simulator_blocks(url, seconds, compensate=compensate)
-        if gap is None:
-            return stream
-        return [with_gap(concatenate_blocks(stream), *gap)]
-
-    return StreamSource(label or url, blocks, description)
 
 
 def recording_source(
@@ -559,43 +502,3 @@ def results_json(
     }
     return {"settings": dict(settings or {}), "filters": described, "sources": sources,
             "mean": mean}
-
-
-# -- the standard set ------------------------------------------------------------------------
-MOTION_SCENARIOS = (
-    "static", "slow-tilt", "wobble", "vibration", "translation", "handheld", "strokes", "tour",
-)
-"""Simulator scenarios with a scripted motion (``interactive`` waits for the user)."""
-SCENARIO_ODR_HZ = 208
-LONG_REST_S = 3600.0
-
-
-def standard_sources(
-    seconds: float = 60.0, *, compensate: bool = True, seed: int = 1
-) -> list[StreamSource]:
-    """Every motion scenario for ``seconds``, plus the hard cases.
-
-    Hard cases: an hour at rest at 26 Hz (always an hour: slow drifts show there), a hand-held
-    wobble around 90 degrees of pitch, one upside down, and the six-face tour with 2.5 s of
-    samples lost over its half turn from +x up to -x up (the filter must find the new attitude
-    after the gap).
-    """
-    def url(name: str, odr: float = SCENARIO_ODR_HZ, **params: float) -> str:
-        query = "&".join([f"odr={odr:g}", f"seed={seed}", *(f"{k}={v:g}" for k, v in
-                                                            params.items())])
-        return f"sim://{name}?{query}"
-
-    sources = [simulator_source(url(name), seconds, compensate=compensate)
-               for name in MOTION_SCENARIOS]
-    sources += [
-        simulator_source(url("static", 26), LONG_REST_S, compensate=compensate,
-                         description="an hour at rest"),
-        simulator_source(url("wobble", pitch=90, roll=0), seconds, compensate=compensate,
-                         description="hand-held at 90 degrees of pitch"),
-        simulator_source(url("wobble", roll=180, pitch=0), seconds, compensate=compensate,
-                         description="hand-held upside down"),
-        simulator_source(url("tour"), max(seconds, 30.0), compensate=compensate,
-                         gap=(21.5, 2.5), label=url("tour") + " + gap 21.5-24 s",
-                         description="2.5 s of samples lost during a half turn"),
-    ]
-    return sources

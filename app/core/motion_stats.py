@@ -289,14 +289,3 @@ def block_stats(block: SampleBlock, movement: np.ndarray | None = None) -> Motio
     return motion_stats(
         block.t_s, block.accel_m_s2, block.gyro_rad_s, block.reference_quat, movement
     )
-
-
-def simulator_stats(url: str, seconds: float) -> MotionStats:
-    """The figures of the first ``seconds`` of a ``sim://`` stream, its true orientation as the
-    reference and the unit's static errors compensated (as ``inclinometer evaluate`` does).
-
-    No movement flag: the moving samples are those not at rest.
-    """
-    from app.core.evaluation import concatenate_blocks, simulator_blocks
-
-    return block_stats(concatenate_blocks(simulator_blocks(url, seconds)))

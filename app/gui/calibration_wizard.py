@@ -56,7 +56,7 @@ from app.core.calibration_procedures import (
 from app.core.devices import DeviceInfo
 from app.core.raw_feed import RawSampleFeed
 from app.gui import theme
-from app.worker import DeviceSession
+from app.services.session import DeviceSession
 
 FEED_INTERVAL_MS = 100
 

@@ -8,7 +8,7 @@ from PySide6.QtWidgets import QFormLayout, QLabel, QPushButton, QVBoxLayout, QWi
 from app.core.devices import DeviceInfo
 from app.core.self_test import SelfTestReport
 from app.gui import theme
-from app.worker import StreamStatus
+from app.services.stream_status import StreamStatus
 
 SELF_TEST_UNAVAILABLE = ("The sensor's self-test needs the NUCLEO firmware or a register-level "
                          "LSM6DSOX (lsm6dsox://).")

@@ -47,9 +47,14 @@ from app.gui.presenter import UNIT_LABELS, LivePresenter
 from app.gui.readouts import TiltReadouts
 from app.gui.replay_bar import ReplayBar
 from app.gui.simulator_panel import SimulatorPanel
-from app.worker import DeviceSession, StreamStatus
-from drivers.registry import DEFAULT_DEVICE_URL, available_devices, scheme_of
-from drivers.replay import replay_url
+from app.services.devices import (
+    DEFAULT_DEVICE_URL,
+    available_devices,
+    is_replay_url,
+    replay_url,
+)
+from app.services.session import DeviceSession
+from app.services.stream_status import StreamStatus
 
 PLOT_WINDOWS_S = (2, 5, 10, 20, 30, 60)
 AVERAGING_S = (0.05, 0.2, 0.5, 1.0, 2.0, 5.0)
@@ -509,7 +514,7 @@ class MainWindow(QMainWindow):
         self.device_bar.set_state("streaming", "Streaming")
         self.device_panel.show_info(info)
         self.status_device.setText(f"{info.name}  ·  {info.odr_hz:.1f} Hz")
-        self.replay_bar.setVisible(scheme_of(info.url) == "replay")
+        self.replay_bar.setVisible(is_replay_url(info.url))
         is_sim = urlsplit(info.url).scheme == "sim"
         if is_sim:
             self.simulator_panel.show_url(info.url)

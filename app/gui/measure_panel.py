@@ -29,7 +29,7 @@ from app.core.calibration_procedures import (
     reversal_from_angles,
 )
 from app.core.ring_follower import RingFollower
-from app.worker import DeviceSession
+from app.services.session import DeviceSession
 
 REVERSAL_AVERAGE_S = 3.0
 ANGLE_COLUMNS = ["t", "roll", "pitch", "tilt"]

@@ -24,7 +24,7 @@ from app.gui.bubble_level import BubbleLevel
 from app.gui.filter_panel import FilterPanel
 from app.gui.plots import LivePlots
 from app.gui.readouts import TiltReadouts
-from app.worker import DeviceSession
+from app.services.session import DeviceSession
 
 ANGLE_TRACES = ["roll", "pitch", "ref_roll", "ref_pitch"]
 ERROR_TABLE_INTERVAL_S = 0.5

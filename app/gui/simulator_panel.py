@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from urllib.parse import parse_qsl, urlencode, urlsplit
+from urllib.parse import urlsplit
 
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
@@ -20,7 +20,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.core.devices import DeviceDescriptor
-from drivers.lsm6dsox import ACCEL_MG_PER_LSB, GYRO_MDPS_PER_LSB, ODR_CODES_HZ
+from app.services.devices import SENSOR_CHOICES, SimulatorSettings
 
 SLIDER_STEPS_PER_DEG = 10
 
@@ -38,19 +38,20 @@ class SimulatorPanel(QWidget):
         setup = QGroupBox("Simulated LSM6DSOX")
         form = QFormLayout(setup)
         self.scenario_combo = QComboBox()
+        self.scenario_combo.currentIndexChanged.connect(self._scenario_chosen)
         form.addRow("Motion", self.scenario_combo)
         self.odr_combo = QComboBox()
-        for odr in ODR_CODES_HZ.values():
+        for odr in SENSOR_CHOICES.odr_hz:
             self.odr_combo.addItem(f"{odr:g} Hz", odr)
         self.odr_combo.setCurrentIndex(self.odr_combo.findData(104.0))
         form.addRow("Data rate", self.odr_combo)
         self.accel_fs_combo = QComboBox()
-        for fs in sorted(ACCEL_MG_PER_LSB):
+        for fs in SENSOR_CHOICES.accel_fs_g:
             self.accel_fs_combo.addItem(f"±{fs} g", fs)
         self.accel_fs_combo.setCurrentIndex(self.accel_fs_combo.findData(4))
         form.addRow("Accel range", self.accel_fs_combo)
         self.gyro_fs_combo = QComboBox()
-        for fs in sorted(GYRO_MDPS_PER_LSB):
+        for fs in SENSOR_CHOICES.gyro_fs_dps:
             self.gyro_fs_combo.addItem(f"±{fs} °/s", fs)
         self.gyro_fs_combo.setCurrentIndex(self.gyro_fs_combo.findData(250))
         form.addRow("Gyro range", self.gyro_fs_combo)
@@ -126,40 +127,49 @@ class SimulatorPanel(QWidget):
                 Qt.ItemDataRole.ToolTipRole,
             )
 
+    def settings(self) -> SimulatorSettings:
+        """The chosen settings."""
+        return SimulatorSettings(
+            scenario=str(self.scenario_combo.currentData()),
+            odr_hz=float(self.odr_combo.currentData()),
+            accel_fs_g=int(self.accel_fs_combo.currentData()),
+            gyro_fs_dps=int(self.gyro_fs_combo.currentData()),
+            seed=self.seed_spin.value(),
+            roll_deg=self.roll_spin.value(), pitch_deg=self.pitch_spin.value(),
+        )
+
     def url(self) -> str:
         """The ``sim://`` URL for the chosen settings."""
-        options = {
-            "odr": f"{self.odr_combo.currentData():g}",
-            "accel_fs": self.accel_fs_combo.currentData(),
-            "gyro_fs": self.gyro_fs_combo.currentData(),
-            "seed": self.seed_spin.value(),
-        }
-        if self.scenario_combo.currentData() == "interactive":
-            options["roll"] = f"{self.roll_spin.value():g}"
-            options["pitch"] = f"{self.pitch_spin.value():g}"
-        return f"sim://{self.scenario_combo.currentData()}?{urlencode(options)}"
+        return self.settings().url()
+
+    def _scenario_chosen(self, index: int) -> None:
+        """A motion was picked: offer the full scales it needs (a hand-held motion turns
+        faster than ±250 °/s and would clip)."""
+        scenario = self.scenario_combo.itemData(index)
+        if scenario is None:
+            return
+        defaults = SimulatorSettings.defaults(str(scenario))
+        self._select(self.accel_fs_combo, defaults.accel_fs_g)
+        self._select(self.gyro_fs_combo, defaults.gyro_fs_dps)
+
+    @staticmethod
+    def _select(combo: QComboBox, value: object) -> None:
+        found = combo.findData(value)
+        if found >= 0:
+            combo.setCurrentIndex(found)
 
     def show_url(self, url: str) -> None:
         """Reflect a connected ``sim://`` URL in the controls."""
-        parts = urlsplit(url)
-        index = self.scenario_combo.findData(parts.netloc)
-        if index >= 0:
-            self.scenario_combo.setCurrentIndex(index)
-        options = dict(parse_qsl(parts.query))
-        for combo, key, kind in (
-            (self.odr_combo, "odr", float), (self.accel_fs_combo, "accel_fs", int),
-            (self.gyro_fs_combo, "gyro_fs", int),
-        ):
-            if key in options:
-                try:
-                    found = combo.findData(kind(options[key]))
-                except ValueError:
-                    continue
-                if found >= 0:
-                    combo.setCurrentIndex(found)
-        if options.get("seed", "").isdigit():
-            self.seed_spin.setValue(int(options["seed"]))
-        self.set_interactive(parts.scheme == "sim" and parts.netloc == "interactive")
+        settings = SimulatorSettings.from_url(url)
+        if settings is None:
+            self.set_interactive(False)
+            return
+        self._select(self.scenario_combo, settings.scenario)
+        self._select(self.odr_combo, settings.odr_hz)
+        self._select(self.accel_fs_combo, settings.accel_fs_g)
+        self._select(self.gyro_fs_combo, settings.gyro_fs_dps)
+        self.seed_spin.setValue(min(settings.seed, self.seed_spin.maximum()))
+        self.set_interactive(settings.scenario == "interactive")
 
     def set_interactive(self, enabled: bool) -> None:
         for widget in (self.roll_slider, self.roll_spin, self.pitch_slider, self.pitch_spin,

@@ -4,10 +4,11 @@
 - :func:`read_recording` -> :class:`Recording`: metadata, columns, blocks for a replay.
 - :func:`recording_metadata`: the metadata a recording starts with.
 - :func:`run_filters` / :func:`write_angles_csv`: filters over a recording, angles to CSV.
-- :func:`record_device`: the headless recording loop (``inclinometer record``).
 - :func:`sample_recordings`: the recordings shipped in ``resources/recordings``.
 
-No Qt here. Replaying a recording as a device is :mod:`drivers.replay` (``replay://PATH``).
+No Qt and no devices here. Recording a device headless is :mod:`app.services.recorder`
+(``inclinometer record``); replaying a recording as a device is :mod:`drivers.replay`
+(``replay://PATH``).
 """
 
 from app.core.recording.edit import rewrite_metadata, save_bookmarks
@@ -36,16 +37,15 @@ from app.core.recording.reader import (
     read_metadata,
     read_recording,
 )
-from app.core.recording.recorder import RecordOutcome, record_device
 from app.core.recording.samples import sample_recording, sample_recordings
 from app.core.recording.writer import RecordingWriter, WriterStatus, format_rows
 
 __all__ = [
     "FORMAT_VERSION", "OPTIONAL_COLUMNS", "REQUIRED_COLUMNS", "UNIT_SCALE", "Bookmark",
-    "FilterOutput", "MissingColumnsError", "NotARecordingError", "RecordOutcome", "Recording",
+    "FilterOutput", "MissingColumnsError", "NotARecordingError", "Recording",
     "RecordingCorruptError", "RecordingError", "RecordingVersionError", "RecordingWarning",
     "RecordingWriteError", "RecordingWriter", "WriterStatus", "format_rows", "parse_recording",
-    "read_metadata", "read_recording", "record_device", "recording_metadata", "rewrite_metadata",
+    "read_metadata", "read_recording", "recording_metadata", "rewrite_metadata",
     "run_filters", "sample_recording", "sample_recordings", "save_bookmarks",
     "simulator_metadata", "write_angles_csv",
 ]

@@ -3,10 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from app.core.recording.reader import Recording
+from typing import Any
 
 
 class RecordingError(Exception):
@@ -45,12 +42,13 @@ class RecordingCorruptError(RecordingError):
     line : 1-based line number in the file (None when the problem is not one line).
     partial : the rows before the bad line, as a :class:`~app.core.recording.reader.Recording`
         (None when the problem is before the first sample). Load it on purpose with
-        ``read_recording(path, on_corrupt="truncate")``.
+        ``read_recording(path, on_corrupt="truncate")``. Typed ``Any`` because the reader
+        imports these errors, and the errors must not import the reader back.
     """
 
     def __init__(
         self, message: str, path: Path | None, line: int | None = None,
-        partial: Recording | None = None,
+        partial: Any = None,
     ) -> None:
         super().__init__(message, path)
         self.line = line

@@ -244,5 +244,9 @@ def simulator_metadata(device: Any) -> dict[str, Any]:
     unit_errors = getattr(device, "unit_errors", None)
     if unit_errors is None or not hasattr(unit_errors, "as_dict"):
         return {}
-    return {KEY_SIMULATOR: {"unit_errors": unit_errors.as_dict(),
-                            "true_odr_hz": getattr(device, "true_odr_hz", None)}}
+    simulator: dict[str, Any] = {"unit_errors": unit_errors.as_dict(),
+                                 "true_odr_hz": getattr(device, "true_odr_hz", None)}
+    faults = getattr(device, "injected_faults", None)
+    if faults:
+        simulator["faults"] = list(faults)
+    return {KEY_SIMULATOR: simulator}

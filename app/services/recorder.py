@@ -22,6 +22,7 @@ from app.core.pipeline import Pipeline
 from app.core.recording.format import KEY_REFERENCE, recording_metadata, simulator_metadata
 from app.core.recording.writer import RecordingWriter, WriterStatus
 from app.core.samples import RawBlock
+from drivers.errors import DeviceError
 
 READ_TIMEOUT_S = 0.1
 SIMULATOR_REFERENCE = "the simulator's true orientation"
@@ -88,8 +89,6 @@ def record_device(
     set or Ctrl-C. Raises :class:`~app.core.recording.errors.RecordingWriteError` when the
     file cannot be created, and the device's ``DeviceError`` when it cannot be opened.
     """
-    from drivers.errors import DeviceError  # drivers sit above app.core: import late
-
     info = device.open()
     try:
         if pipeline is None:

@@ -1,0 +1,55 @@
+"""The acquisition step: read the device, carry the time axis on, run the pipeline, record.
+
+This is the loop body the worker's poll timer runs, without Qt. The pipeline fills the ring
+buffers the views read; samples never travel through signals.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from app.core.pipeline import Pipeline
+from app.services.connection import Connection
+from app.services.recording_control import RecordingControl
+
+READ_TIMEOUT_S = 0.05
+
+
+class Acquisition:
+    """Moves one block at a time from the connection's device into the pipeline.
+
+    ``on_message(level, text)`` gets the device's own messages (a board's LOG packets).
+    """
+
+    def __init__(self, connection: Connection, pipeline: Pipeline, recording: RecordingControl,
+                 on_message: Callable[[int, str], None]) -> None:
+        self.connection = connection
+        self.pipeline = pipeline
+        self.recording = recording
+        self._on_message = on_message
+
+    def step(self, timeout_s: float = READ_TIMEOUT_S) -> int:
+        """Read at most one block (waiting up to ``timeout_s``); returns its samples.
+
+        Raises the driver's DeviceError (DeviceIOError when the device was lost) and whatever
+        the pipeline raises; the caller decides what happens to the session.
+        """
+        device = self.connection.device
+        if device is None:
+            return 0
+        raw = device.read(timeout_s)
+        for message in device.take_messages():
+            self._on_message(message.level, message.text)
+        if raw is None or not len(raw):
+            return 0
+        self.connection.continue_time_axis(raw)
+        self.pipeline.process(raw)
+        self.recording.write(raw)
+        return len(raw)
+
+    def last_sample_time(self) -> float | None:
+        """Session time of the newest sample, None before the first one."""
+        if self.pipeline.counters.samples == 0:
+            return None
+        last_t = self.pipeline.samples.latest(1)["t"]
+        return float(last_t[0]) if len(last_t) else 0.0

@@ -1,0 +1,65 @@
+"""Recording the live stream: start, write every raw block, stop (no Qt).
+
+The raw stream is recorded before calibration, in format v1 (docs/recording-format.md), with
+the metadata of the device, the calibration and the filters running at the start.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from app.core.pipeline import Pipeline
+from app.core.recording import RecordingWriter, WriterStatus, recording_metadata
+from app.core.samples import RawBlock
+from app.services.recorder import reference_source_of
+from drivers.base import Device
+
+
+class RecordingControl:
+    """At most one recording at a time.
+
+    ``on_error`` gets the writer's error messages (from its thread), ``on_status`` its
+    :class:`WriterStatus` after every flush.
+    """
+
+    def __init__(self, on_error: Callable[[str], None],
+                 on_status: Callable[[WriterStatus], None]) -> None:
+        self._on_error = on_error
+        self._on_status = on_status
+        self._writer: RecordingWriter | None = None
+
+    @property
+    def active(self) -> bool:
+        return self._writer is not None
+
+    def start(self, device: Device | None, pipeline: Pipeline, path: str,
+              note: str) -> WriterStatus:
+        """Stop any recording, then record ``device``'s stream to ``path``.
+
+        Raises ValueError when no device is connected and
+        :class:`~app.core.recording.errors.RecordingError` when the file cannot be started.
+        """
+        if device is None or device.info is None:
+            raise ValueError("Connect a device before recording.")
+        self.stop()
+        metadata = recording_metadata(
+            device=device.info, calibration=pipeline.calibration,
+            orientation_filter=pipeline.filter,
+            comparison_filters=list(pipeline.comparisons.values()), note=note,
+            reference_source=reference_source_of(device),
+        )
+        writer = RecordingWriter(path, metadata, on_error=self._on_error,
+                                 on_flush=self._on_status)
+        writer.start()
+        self._writer = writer
+        return writer.status
+
+    def write(self, raw: RawBlock) -> None:
+        """Queue a block for the file (nothing when not recording)."""
+        if self._writer is not None:
+            self._writer.write(raw)
+
+    def stop(self) -> WriterStatus | None:
+        """Finish the recording (everything queued is written and synced); None if none."""
+        writer, self._writer = self._writer, None
+        return None if writer is None else writer.close()

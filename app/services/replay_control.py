@@ -1,0 +1,110 @@
+"""Replay controls (play, pause, step, seek, ...) and what a replay restores (no Qt).
+
+A replay is a device of scheme ``replay`` (:class:`drivers.replay.ReplayDevice`); these
+functions do nothing to other devices.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from app.core.filters import known_parameters
+from app.core.filters.base import OrientationFilter
+from app.core.pipeline import Pipeline
+from drivers.base import Device
+
+COMMANDS = ("play", "pause", "step", "speed", "loop", "seek", "next_gap", "next_bookmark",
+            "add_bookmark")
+
+
+class ReplayCommandError(ValueError):
+    """A replay command that cannot be carried out (no further gap, an unknown command...)."""
+
+
+def is_replay(device: Device | None) -> bool:
+    return getattr(device, "scheme", "") == "replay"
+
+
+def replay_position(device: Device | None) -> tuple[float, float, bool] | None:
+    """(position s, duration s, playing) of a replay; None for any other device."""
+    if not is_replay(device):
+        return None
+    return (float(device.position_s), float(device.duration_s),  # type: ignore[union-attr]
+            bool(device.playing))  # type: ignore[union-attr]
+
+
+def replay_command(device: Device | None, pipeline: Pipeline, name: str, value: object) -> None:
+    """Carry out one of :data:`COMMANDS` on a replay (ignored for other devices).
+
+    ``speed`` 0 means as fast as possible; ``seek`` is in seconds from the start. A jump
+    (seek, next gap, next bookmark) starts the views afresh, since time would run backwards.
+    Raises :class:`ReplayCommandError` and the driver's DeviceError or ValueError.
+    """
+    if not is_replay(device):
+        return
+    assert device is not None
+    replay = device  # a drivers.replay.ReplayDevice
+    if name == "play":
+        replay.play()
+    elif name == "pause":
+        replay.pause()
+    elif name == "step":
+        replay.step()
+    elif name == "speed":
+        replay.set_speed(value if value else "max")
+    elif name == "loop":
+        replay.loop = bool(value)
+    elif name == "add_bookmark":
+        replay.add_bookmark()
+    elif name in ("seek", "next_gap", "next_bookmark"):
+        target = _jump_target(replay, name, value)
+        pipeline.configure(replay.info.odr_hz)
+        replay.seek(target)
+    else:
+        raise ReplayCommandError(f"unknown replay command {name!r} (known: "
+                                 f"{', '.join(COMMANDS)})")
+
+
+def _jump_target(replay: object, name: str, value: object) -> float:
+    if name == "seek":
+        return float(value)  # type: ignore[arg-type]
+    position = replay.position_s  # type: ignore[attr-defined]
+    if name == "next_bookmark":
+        later = [replay.bookmark_position_s(b) for b in replay.bookmarks  # type: ignore[attr-defined]
+                 if replay.bookmark_position_s(b) > position + 1e-9]  # type: ignore[attr-defined]
+        if not later:
+            raise ReplayCommandError("No further bookmark in this recording.")
+        return min(later)
+    later = [p for p in replay.gap_positions_s if p > position + 1e-9]  # type: ignore[attr-defined]
+    if not later:
+        raise ReplayCommandError("No further gap in this recording.")
+    return later[0]
+
+
+@dataclass(frozen=True, slots=True)
+class RestoredFilter:
+    """What :func:`restore_recorded_filter` did: the filter now running and what to tell."""
+
+    orientation_filter: OrientationFilter | None
+    """The recorded filter, now the pipeline's; None when nothing was restored."""
+    warning: str = ""
+    """Parameters from an older version that were ignored."""
+    error: str = ""
+    """Why the recorded filter could not be restored (the current one keeps running)."""
+
+
+def restore_recorded_filter(device: Device | None, pipeline: Pipeline) -> RestoredFilter:
+    """A replay runs the filter (and parameters) it was recorded with, to reproduce it."""
+    recording = getattr(device, "recording", None)
+    name = getattr(recording, "filter_name", None)
+    if not name:
+        return RestoredFilter(None)
+    try:
+        values, dropped = known_parameters(name, recording.filter_parameters)  # type: ignore[union-attr]
+        new_filter = pipeline.set_filter(name, **values)
+    except (KeyError, ValueError) as exc:
+        return RestoredFilter(None, error=f"The recording's filter cannot be restored ({exc}); "
+                                          f"replaying with {pipeline.filter.title}")
+    warning = (f"The recording's {name} parameters {', '.join(dropped)} are from an older "
+               "version and are ignored") if dropped else ""
+    return RestoredFilter(new_filter, warning=warning)

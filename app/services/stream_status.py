@@ -1,0 +1,62 @@
+"""What the status bar shows, measured a few times a second (no Qt)."""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+
+RATE_WINDOW_S = 2.0
+
+
+@dataclass(frozen=True, slots=True)
+class StreamStatus:
+    """Figures the status bar shows, sent a few times per second."""
+
+    url: str
+    measured_rate_hz: float
+    samples: int
+    lost_samples: int
+    gaps: int
+    pipeline_load: float
+    """Fraction of one core the pipeline used over the last interval."""
+    replay: tuple[float, float, bool] | None = None
+    """For a replay: position (s), duration (s), playing."""
+
+
+class StatusMeter:
+    """The measured sample rate over a sliding window and the pipeline's share of a core.
+
+    ``clock`` is the host clock in seconds (``time.monotonic`` by default).
+    """
+
+    def __init__(self, window_s: float = RATE_WINDOW_S,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.window_s = window_s
+        self._clock = clock
+        self._history: deque[tuple[float, int]] = deque()
+        self._last_cpu = (clock(), 0.0)
+
+    def reset(self, filter_cpu_s: float) -> None:
+        """Start afresh (a new device): forget the rate history."""
+        self._history.clear()
+        self._last_cpu = (self._clock(), filter_cpu_s)
+
+    def measure(self, samples: int, filter_cpu_s: float) -> tuple[float, float]:
+        """(samples per second over the window, pipeline load since the last call).
+
+        ``samples`` is the pipeline's running sample count, ``filter_cpu_s`` its running CPU
+        time in seconds.
+        """
+        now = self._clock()
+        history = self._history
+        history.append((now, samples))
+        while len(history) > 2 and now - history[0][0] > self.window_s:
+            history.popleft()
+        span = history[-1][0] - history[0][0]
+        rate = (history[-1][1] - history[0][1]) / span if span > 0 else 0.0
+        last_time, last_cpu = self._last_cpu
+        load = (filter_cpu_s - last_cpu) / max(now - last_time, 1e-9)
+        self._last_cpu = (now, filter_cpu_s)
+        return rate, load
