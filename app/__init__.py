@@ -1,12 +1,14 @@
 """Inclinometer: an LSM6DSOX tilt meter and IMU workbench.
 
-Layers, lowest first (imports only point downwards):
+Layers, lowest first (imports only point downwards; ``lint-imports`` checks it):
 
-- ``app.core``: numpy-only data model, orientation maths, filters, calibration, ring buffers
-  and the processing pipeline. No Qt.
+- ``app.core``: numpy-only data model, orientation maths, filters, calibration, ring buffers,
+  the processing pipeline and the recording format. No Qt, no drivers.
 - ``drivers``: device I/O (simulator, serial, replay). May use ``app.core``; no Qt.
-- ``app.worker``: the QtCore worker that moves a device and a pipeline onto a thread.
-- ``app.gui``: widgets. They display what the core computed and never do maths themselves.
+- ``app.services``: what runs devices: the session and its worker thread (QtCore), the
+  headless recorder, simulator streams for scoring.
+- ``app.gui`` and the command line (``app.cli*``): widgets and commands. The GUI reaches
+  devices only through ``app.services``.
 """
 
 from app.core.version import __version__
