@@ -1,0 +1,575 @@
+"""Model-based sensor fault detection and isolation, block by block.
+
+:class:`FaultDetector` takes the :class:`SampleBlock` stream (and the :class:`RawBlock` when
+there is one) and returns :class:`FaultEvent` s at the sample where each fault is declared.
+A compiled per-sample scan (numba) does the sample-level tests; 0.25 s windows carry the
+statistical ones. Thresholds and their basis (details in docs/fault-detection.md):
+
+Per channel (ax .. gz)
+    *Noise floor.* The white-noise level is measured by the mean absolute 4th difference
+    ``|x[n] - 4x[n-1] + 6x[n-2] - 4x[n-3] + x[n-4]|``: white noise of sigma gives
+    ``sqrt(70) sigma sqrt(2/pi)`` while smooth motion is suppressed by ``(2 pi f / ODR)^4``.
+    The floor starts at the datasheet value (when the sensor is known) and is learnt in quiet
+    windows (windows more than 1.5x the floor never teach it; a drop below 0.3x, which white
+    noise cannot do, neither).
+
+    *stuck / dead.* A run of identical outputs is declared when its probability under the
+    channel's own noise is below ``STUCK_FALSE_ALARM`` (1e-9): a constant true value reads the
+    same count with probability ``p0 = erf(q / (2 sqrt 2 sigma))`` (q the LSB), so the run must
+    reach ``ln(1e-9) / ln(p0)`` samples, at least 0.25 s and at most 2 s. ``dead`` when the
+    frozen value is exactly 0.
+
+    *spike.* The sample's distance from the mean of its neighbours, ``x[n-1] - (x[n-2] +
+    x[n]) / 2`` (1.22 sigma for white noise), above 10x its local scale (the floor, raised by
+    the window's own activity) on exactly one channel while every other channel stays under 5x:
+    a mechanical shock (a tap) moves several channels at once, a failing channel one.
+
+    *noise.* The floor ratio ``rho`` of each window, averaged over the last 1 s, over the
+    largest such ratio of the sensor's two other axes (shared vibration cancels), above 3.5
+    (sigma ratio; a noise of 5x the sensor's own gives 5.1). A window counts only when the
+    channel is flat but for its noise (spread within 3x its own 4th-difference noise), and only
+    while the rotation rate stays under 30 dps: hand motion puts broadband content into the
+    4th difference (up to 50x the noise on BROAD's gyro).
+
+    *saturation.* Output at the int16 limit (or at full scale when only that is known).
+
+Analytical redundancy (needs rest: every channel's window spread within 3 sigma of its noise)
+    *gyro bias.* At rest the gyro reads its bias. A change of more than 2.5 dps from the bias
+    learnt at earlier rests (half of the 5 dps to detect; turn-on bias is +-1 dps, thermal drift
+    0.01 dps/K), or more than 10 dps absolute, for 1 s of rest.
+
+    *accel bias.* Gravity carried from the previous rest by the gyro (bias removed, under 10 deg
+    of rotation and 2 s apart) against the accelerometer: a per-axis difference over 25 mg (half
+    of the 50 mg to detect; gyro bias residue and scale error add under 5 mg there) for 1 s.
+
+    *gravity.* ``| |a| - g |`` at rest over 6 % (turn-on offset +-20 mg and sensitivity +-1 %
+    give 3 % at most), isolated to the axis carrying gravity.
+
+    *consistency.* Larger rotations between rests (up to 5 s): the angle between the
+    gyro-carried and the measured gravity direction over 3 deg + 3 % of the rotation.
+
+Gaps (``gap`` flag) and a clock that goes back restart every running test; lost samples are
+reported on the ``link`` channel.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from app.core.faults.events import CHANNELS, FaultEvent, severity_rank
+from app.core.faults.spec import SensorSpec
+from app.core.samples import STANDARD_GRAVITY_M_S2, RawBlock, SampleBlock
+
+G = STANDARD_GRAVITY_M_S2
+WINDOW_S = 0.25
+D4_GAIN = math.sqrt(70.0) * math.sqrt(2.0 / math.pi)
+"""Mean |4th difference| of unit white noise."""
+STUCK_FALSE_ALARM = 1e-9
+STUCK_MIN_S = 0.25
+STUCK_MAX_S = 2.0
+SPIKE_SIGMA = 10.0
+SPIKE_OTHERS_SIGMA = 5.0
+SPIKE_NOISE_GAIN = math.sqrt(1.5)
+SPIKE_LOCAL_ALPHA = 0.05
+"""Local activity: exponential mean of |residual| over about 20 samples."""
+SPIKE_LOCAL_GAIN = math.sqrt(math.pi / 2.0)
+SPIKE_OVER_PEAK = 6.0
+SPIKE_PEAK_HALF_LIFE_S = 0.5
+"""A spike stands 6x above the largest residual of the last ~0.5 s (real shocks build up)."""
+"""Mean absolute value to standard deviation (Gaussian)."""
+D4_CLIP = 15.0
+NOISE_RATIO = 3.5
+NOISE_SPAN_WINDOWS = 4
+NOISE_FLAT = 3.0
+"""A window counts for the noise test when its spread is within 3x its own white noise
+(the channel is flat but for noise; motion of any kind has a spread far above)."""
+NOISE_ARM_RATE_RAD_S = math.radians(30.0)
+REST_SIGMA = 3.0
+REST_WINDOWS = 4
+GYRO_BIAS_STEP_RAD_S = math.radians(2.5)
+GYRO_BIAS_ABS_RAD_S = math.radians(10.0)
+ACCEL_BIAS_STEP_M_S2 = 25e-3 * G
+ACCEL_CARRY_MAX_RAD = math.radians(10.0)
+ACCEL_CARRY_MAX_S = 2.0
+GRAVITY_TOLERANCE = 0.06
+CONSISTENCY_MAX_S = 5.0
+CONSISTENCY_BASE_RAD = math.radians(3.0)
+CONSISTENCY_FRACTION = 0.03
+FLOOR_ALPHA = 0.1
+"""Floor learning per quiet window (time constant 2.5 s)."""
+HOLD_S = 5.0
+"""An event repeats only after its condition has been clear this long."""
+
+STUCK, DEAD, SPIKE, SATURATION, NOISE, BIAS = 1, 2, 4, 8, 16, 32
+FLAG_KINDS = {STUCK: "stuck", DEAD: "dead", SPIKE: "spike", SATURATION: "saturation",
+              NOISE: "noise", BIAS: "bias"}
+LATCHED_KINDS = ("bias", "gravity", "consistency")
+"""Kinds whose condition persists once declared: health stays red until :meth:`reset`."""
+
+
+@njit(cache=True)
+def _scan(t, x, gap, hist, ints, run_val, run_len, sums, quat, local, peak, peak_decay,
+          stuck_len, spike_scale, d4_clip, sat_level, gyro_ref, flags):  # pragma: no cover
+    """Per-sample tests over one chunk; updates the state arrays in place.
+
+    ints: [contiguous samples, window samples, window d4 samples]; sums: (6, 4) window sums
+    of clipped |d4|, x, x^2 and, in [:, 3] for the gyro rows, nothing; quat: rotation since the
+    window start (gyro minus gyro_ref), (w, x, y, z), then [4] the previous sample time.
+    """
+    n = x.shape[0]
+    for i in range(n):
+        restart = gap[i] or (ints[0] > 0 and t[i] <= quat[4])
+        if restart:
+            ints[0] = 0
+            for c in range(6):
+                run_len[c] = 0
+        dt = t[i] - quat[4] if ints[0] > 0 else 0.0
+        quat[4] = t[i]
+        # spike test on sample i-1 (needs i-2 .. i): out and back, on one channel only
+        if ints[0] >= 2:
+            best = -1
+            count = 0
+            worst_other = 0.0
+            for c in range(6):
+                r = abs(hist[0, c] - 0.5 * (hist[1, c] + x[i, c]))
+                scale = max(spike_scale[c], SPIKE_LOCAL_GAIN * local[c])
+                z = r / scale
+                if (z >= SPIKE_SIGMA and abs(x[i, c] - hist[1, c]) < 0.5 * r
+                        and r > SPIKE_OVER_PEAK * peak[c]):
+                    best = c
+                    count += 1
+                else:
+                    worst_other = max(worst_other, z)
+                local[c] += SPIKE_LOCAL_ALPHA * (min(r, 3.0 * scale) - local[c])
+                peak[c] = max(peak[c] * peak_decay, min(r, SPIKE_OVER_PEAK * peak[c] + scale))
+            if count == 1 and worst_other < SPIKE_OTHERS_SIGMA and run_len[best] == 0:
+                flags[i, best] |= 4
+        for c in range(6):
+            v = x[i, c]
+            if ints[0] >= 1 and v == hist[0, c]:
+                run_len[c] += 1
+            else:
+                run_len[c] = 0
+                run_val[c] = v
+            if run_len[c] + 1 >= stuck_len[c]:
+                flags[i, c] |= 2 if v == 0.0 else 1
+            if abs(v) >= sat_level[c]:
+                flags[i, c] |= 8
+            sums[c, 1] += v
+            sums[c, 2] += v * v
+            if ints[0] >= 4:
+                d = v - 4.0 * hist[0, c] + 6.0 * hist[1, c] - 4.0 * hist[2, c] + hist[3, c]
+                sums[c, 0] += min(abs(d), d4_clip[c])
+        if ints[0] >= 4:
+            ints[2] += 1
+        ints[1] += 1
+        # gyro rotation since the window start
+        if dt > 0.0:
+            wx = (x[i, 3] - gyro_ref[0]) * dt * 0.5
+            wy = (x[i, 4] - gyro_ref[1]) * dt * 0.5
+            wz = (x[i, 5] - gyro_ref[2]) * dt * 0.5
+            qw, qx, qy, qz = quat[0], quat[1], quat[2], quat[3]
+            nw = qw - qx * wx - qy * wy - qz * wz
+            nx = qx + qw * wx + qy * wz - qz * wy
+            ny = qy + qw * wy + qz * wx - qx * wz
+            nz = qz + qw * wz + qx * wy - qy * wx
+            norm = math.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
+            quat[0], quat[1], quat[2], quat[3] = nw / norm, nx / norm, ny / norm, nz / norm
+        for k in range(3, 0, -1):
+            for c in range(6):
+                hist[k, c] = hist[k - 1, c]
+        for c in range(6):
+            hist[0, c] = x[i, c]
+        ints[0] += 1
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def _rotate_inverse(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``v`` (fixed in the frame at the start) seen from the frame after rotation ``q``."""
+    w, u = q[0], -q[1:]
+    return v + 2.0 * w * np.cross(u, v) + 2.0 * np.cross(u, np.cross(u, v))
+
+
+def _units(channel: int, value: float) -> str:
+    if channel < 3:
+        return f"{value / G * 1e3:+.1f} mg"
+    return f"{math.degrees(value):+.2f} dps"
+
+
+@dataclass(slots=True)
+class _Rest:
+    """The last rest: mean acceleration and the gyro rotation and time since it."""
+
+    accel: np.ndarray
+    rotation: np.ndarray
+    elapsed_s: float
+
+
+class FaultDetector:
+    """Detects and isolates sensor faults in a sample stream; see the module docstring.
+
+    Parameters
+    ----------
+    spec : the sensor (rate, LSB, full scale, datasheet noise; unknowns are learnt or skipped).
+
+    Use :meth:`update` per block in stream order; it returns the events declared in that
+    block. :attr:`flags` holds the last block's per-sample flags (N, 6), a bit per kind
+    (:data:`FLAG_KINDS`), for NDR measures; :meth:`health` the state of each channel.
+    """
+
+    def __init__(self, spec: SensorSpec) -> None:
+        self.spec = spec
+        self.window = max(8, round(WINDOW_S * spec.odr_hz))
+        self._peak_decay = 0.5 ** (1.0 / (SPIKE_PEAK_HALF_LIFE_S * spec.odr_hz))
+        lsb = [spec.accel_lsb_m_s2] * 3 + [spec.gyro_lsb_rad_s] * 3
+        self._lsb = np.array([0.0 if q is None else q for q in lsb])
+        sat = np.full(6, np.inf)
+        if spec.accel_lsb_m_s2:
+            sat[:3] = 32767 * spec.accel_lsb_m_s2 * (1 - 1e-9)
+        elif spec.accel_fs_g:
+            sat[:3] = spec.accel_fs_g * G * (32767 / 32768) * (1 - 1e-9)
+        if spec.gyro_lsb_rad_s:
+            sat[3:] = 32767 * spec.gyro_lsb_rad_s * (1 - 1e-9)
+        elif spec.gyro_fs_dps:
+            sat[3:] = math.radians(spec.gyro_fs_dps) * (32767 / 32768) * (1 - 1e-9)
+        self._sat = sat
+        noise = [spec.accel_noise_rms_m_s2] * 3 + [spec.gyro_noise_rms_rad_s] * 3
+        self._datasheet_floor: np.ndarray | None = None
+        if all(v is not None for v in noise):
+            sigma = np.sqrt(np.array(noise, dtype=float) ** 2 + self._lsb**2 / 12.0)
+            self._datasheet_floor = sigma * D4_GAIN
+        self.events: list[FaultEvent] = []
+        """Every event so far."""
+        self.flags = np.zeros((0, 6), dtype=np.uint8)
+        self.reset()
+
+    # -- public --------------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget everything learnt and every latched fault (a new sensor, or the user's reset)."""
+        self._floor = np.zeros(6)
+        self._lsb_seen = np.full(6, np.inf)
+        self._hist = np.zeros((4, 6))
+        self._ints = np.zeros(3, dtype=np.int64)
+        self._run_val = np.zeros(6)
+        self._run_len = np.zeros(6, dtype=np.int64)
+        self._sums = np.zeros((6, 4))
+        self._local = np.zeros(6)
+        self._stuck_len = np.full(6, np.iinfo(np.int64).max // 4)
+        self._peak = np.zeros(6)
+        self._quat = np.array([1.0, 0.0, 0.0, 0.0, -np.inf])
+        self._window_t = 0.0
+        self._rho: deque[np.ndarray] = deque(maxlen=NOISE_SPAN_WINDOWS)
+        self._rho_flat: deque[np.ndarray] = deque(maxlen=NOISE_SPAN_WINDOWS)
+        self._rate: deque[float] = deque(maxlen=NOISE_SPAN_WINDOWS)
+        self._activity = np.ones(6)
+        self._active_bits = np.zeros(6, dtype=np.uint8)
+        self._gyro_ref: np.ndarray | None = None
+        self._rest: _Rest | None = None
+        self._counts = {"gyro_bias": 0, "accel_bias": 0, "gravity": 0, "gyro_abs": 0}
+        self._last_flag: dict[tuple[str, str], float] = {}
+        self._latched: dict[str, str] = {}
+        self._last_t = -np.inf
+
+    def update(self, block: SampleBlock, raw: RawBlock | None = None) -> list[FaultEvent]:
+        """Run every test over ``block``; the events declared in it, in time order."""
+        n = len(block)
+        self.flags = np.zeros((n, 6), dtype=np.uint8)
+        if n == 0:
+            return []
+        x = np.ascontiguousarray(np.hstack([block.accel_m_s2, block.gyro_rad_s]))
+        if raw is not None and raw.scale is not None:
+            self._lsb = np.array([raw.scale.accel_m_s2_per_lsb] * 3
+                                 + [raw.scale.gyro_rad_s_per_lsb] * 3)
+        t = np.ascontiguousarray(block.t_s, dtype=np.float64)
+        gap = np.ascontiguousarray(block.gap, dtype=np.bool_)
+        out: list[FaultEvent] = []
+        if gap[0] or t[0] <= self._last_t:
+            self._restart(t[0], out, lost=raw.lost_samples if raw is not None else 0)
+        start = 0
+        while start < n:
+            breaks = np.flatnonzero(gap[start + 1:])
+            stop = min(n, start + self.window - int(self._ints[1]))
+            if breaks.size:
+                stop = min(stop, start + 1 + int(breaks[0]))
+            if start > 0 and gap[start]:
+                self._restart(t[start], out, lost=0)
+            self._scan_chunk(t, x, gap, start, stop)
+            if self._ints[1] >= self.window:
+                self._end_window(float(t[stop - 1]), out)
+            start = stop
+        self._last_t = float(t[-1])
+        self._emit_sample_flags(t, x, out)
+        out.sort(key=lambda e: e.t)
+        self.events.extend(out)
+        return out
+
+    def health(self, now_s: float | None = None) -> dict[str, str]:
+        """``"ok"``, ``"warning"`` or ``"fault"`` per channel (ax..gz, accel, gyro, link).
+
+        Transient kinds count while flagged in the last :data:`HOLD_S`; bias, gravity and
+        consistency faults stay until :meth:`reset`.
+        """
+        now = self._last_t if now_s is None else now_s
+        state = {name: "ok" for name in (*CHANNELS, "accel", "gyro", "link")}
+        levels = {"saturation": "warning", "gap": "warning"}
+        for (channel, kind), t_last in self._last_flag.items():
+            if now - t_last <= HOLD_S or kind in LATCHED_KINDS:
+                level = levels.get(kind, "fault")
+                if severity_rank(level) > severity_rank(state[channel]):
+                    state[channel] = level
+        return state
+
+    # -- internals -----------------------------------------------------------------------------
+    def _restart(self, t: float, out: list[FaultEvent], lost: int) -> None:
+        """A gap or a restart: nothing carries over the hole but what was learnt."""
+        if lost > 0:
+            self._event(out, t, "link", "gap", "warning",
+                        f"{lost} samples lost before t = {t:.3f} s; tests restart")
+        self._ints[:] = 0
+        self._sums[:] = 0.0
+        self._quat[:4] = (1.0, 0.0, 0.0, 0.0)
+        self._rho.clear()
+        self._rho_flat.clear()
+        self._rate.clear()
+        self._rest = None
+        for key in self._counts:
+            self._counts[key] = 0
+
+    def _thresholds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        floor = self._floor_or_default()
+        sigma = floor / D4_GAIN
+        q = np.where(self._lsb > 0, self._lsb, self._lsb_seen)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sigma_noise = np.sqrt(np.maximum(sigma**2 - np.where(np.isfinite(q), q, 0.0)**2 / 12,
+                                             (0.05 * np.where(np.isfinite(q), q, sigma))**2))
+            p0 = np.where(np.isfinite(q), np.vectorize(math.erf)(
+                q / (2.0 * math.sqrt(2.0) * np.maximum(sigma_noise, 1e-300))), 0.0)
+            runs = np.where(p0 < 1.0, np.log(STUCK_FALSE_ALARM) / np.log(np.minimum(p0, 1 - 1e-16)),
+                            np.inf)
+        odr = self.spec.odr_hz
+        stuck = np.clip(np.nan_to_num(runs, nan=np.inf, posinf=1e18),
+                        max(8, STUCK_MIN_S * odr), STUCK_MAX_S * odr)
+        spike = sigma * SPIKE_NOISE_GAIN * self._activity
+        return np.ceil(stuck).astype(np.int64), np.maximum(spike, 1e-300), floor * D4_CLIP
+
+    def _floor_or_default(self) -> np.ndarray:
+        if np.all(self._floor > 0):
+            return self._floor
+        if self._datasheet_floor is not None:
+            return self._datasheet_floor
+        return np.full(6, np.inf)
+
+    def _scan_chunk(self, t: np.ndarray, x: np.ndarray, gap: np.ndarray, a: int, b: int) -> None:
+        stuck, spike, clip = self._thresholds()
+        self._stuck_len = stuck
+        gyro_ref = self._gyro_ref if self._gyro_ref is not None else np.zeros(3)
+        if self._ints[1] == 0:
+            self._window_t = float(t[a])
+        chunk_x = x[a:b]
+        if b - a > 1:
+            steps = np.abs(np.diff(chunk_x, axis=0))
+            steps = np.where(steps > 0, steps, np.inf).min(axis=0)
+            self._lsb_seen = np.minimum(self._lsb_seen, steps)
+        _scan(t[a:b], chunk_x, gap[a:b], self._hist, self._ints, self._run_val, self._run_len,
+              self._sums, self._quat, self._local, self._peak,
+              self._peak_decay, stuck, spike, clip, self._sat, gyro_ref,
+              self.flags[a:b])
+        self.flags[a:b] |= self._active_bits
+
+    def _end_window(self, t_end: float, out: list[FaultEvent]) -> None:
+        n = float(self._ints[1])
+        n_d4 = float(self._ints[2])
+        sums = self._sums
+        mean = sums[:, 1] / n
+        spread = np.sqrt(np.maximum(sums[:, 2] / n - mean**2, 0.0))
+        m = sums[:, 0] / max(n_d4, 1.0)
+        quat = self._quat[:4].copy()
+        duration = t_end - self._window_t
+        self._ints[1:] = 0
+        sums[:] = 0.0
+        self._quat[:4] = (1.0, 0.0, 0.0, 0.0)
+        if n_d4 < 0.5 * self.window:
+            return
+        if not np.all(self._floor > 0):
+            first = m.copy()
+            if self._datasheet_floor is not None:
+                first = np.maximum(self._datasheet_floor,
+                                   np.minimum(first, 3.0 * self._datasheet_floor))
+            self._floor = np.maximum(first, 1e-12)
+        rho = m / self._floor
+        self._activity = np.maximum(1.0, rho)
+        flat = spread <= NOISE_FLAT * m / D4_GAIN + 1e-300
+        self._rho.append(rho)
+        self._rho_flat.append(np.where(flat, rho, 0.0))
+        self._rate.append(float(np.linalg.norm(mean[3:] - (self._gyro_ref if self._gyro_ref
+                                                           is not None else 0.0))))
+        self._noise_test(t_end, out)
+        sigma = self._floor / D4_GAIN
+        resting = bool(np.all(spread <= REST_SIGMA * sigma + 1e-12))
+        self._rest_tests(resting, mean, quat, duration, t_end, out)
+        # learn the floor from quiet windows only
+        quiet = (rho < 1.5) & ((rho >= 0.3) | (self._run_len < 4))
+        self._floor = np.where(quiet, self._floor + FLOOR_ALPHA * (m - self._floor), self._floor)
+
+    def _noise_test(self, t: float, out: list[FaultEvent]) -> None:
+        self._active_bits &= ~np.uint8(NOISE)
+        if len(self._rho) < NOISE_SPAN_WINDOWS or max(self._rate) >= NOISE_ARM_RATE_RAD_S:
+            return
+        low = np.mean(np.array(self._rho), axis=0)
+        low_flat = np.mean(np.array(self._rho_flat), axis=0)
+        for c in range(6):
+            base = 0 if c < 3 else 3
+            others = max(low[o] for o in range(base, base + 3) if o != c)
+            ratio = low_flat[c] / max(1.0, others)
+            if ratio > NOISE_RATIO:
+                self._active_bits[c] |= NOISE
+                self._event(out, t, CHANNELS[c], "noise", "fault",
+                            f"{CHANNELS[c]} noise {low[c]:.1f}x its level at rest "
+                            f"(other axes {others:.1f}x) for 1 s", held=True)
+
+    def _rest_tests(self, resting: bool, mean: np.ndarray, quat: np.ndarray, duration: float,
+                    t: float, out: list[FaultEvent]) -> None:
+        rest = self._rest
+        if rest is not None:
+            rest.rotation = _quat_mul(rest.rotation, quat)
+            rest.elapsed_s += duration
+        if not resting:
+            for key in ("gyro_bias", "gravity", "gyro_abs"):
+                self._counts[key] = 0
+            if rest is not None and rest.elapsed_s > CONSISTENCY_MAX_S:
+                self._rest = None
+            return
+        accel, gyro = mean[:3], mean[3:]
+        frozen = self._frozen(t)
+        if frozen[3:].any() or frozen[:3].any():
+            # a channel already declared frozen explains any disagreement: no second culprit
+            self._rest = None
+            return
+        self._gyro_rest_test(gyro, t, out)
+        norm = float(np.linalg.norm(accel))
+        if abs(norm - G) > GRAVITY_TOLERANCE * G:
+            self._counts["gravity"] += 1
+            if self._counts["gravity"] >= REST_WINDOWS:
+                axis = int(np.argmax(np.abs(accel)))
+                channel = CHANNELS[axis] if abs(accel[axis]) > 0.9 * norm else "accel"
+                self._event(out, t, channel, "gravity", "fault",
+                            f"|a| = {norm / G:.3f} g at rest (expected 1 g within "
+                            f"{GRAVITY_TOLERANCE:.0%})", held=True)
+        else:
+            self._counts["gravity"] = 0
+        if rest is None or self._gyro_ref is None:
+            self._rest = _Rest(accel.copy(), np.array([1.0, 0, 0, 0]), 0.0)
+            return
+        carried = _rotate_inverse(rest.rotation, rest.accel)
+        angle = 2.0 * math.acos(min(1.0, abs(float(rest.rotation[0]))))
+        if angle <= ACCEL_CARRY_MAX_RAD and rest.elapsed_s <= ACCEL_CARRY_MAX_S + 1e-9:
+            diff = accel - carried
+            if np.max(np.abs(diff)) > ACCEL_BIAS_STEP_M_S2 and self._counts["gyro_bias"] == 0:
+                self._counts["accel_bias"] += 1
+                if self._counts["accel_bias"] >= REST_WINDOWS:
+                    order = np.argsort(np.abs(diff))
+                    axis = int(order[-1])
+                    dominant = abs(diff[axis]) > 2.0 * abs(diff[order[-2]])
+                    channel = CHANNELS[axis] if dominant else "accel"
+                    self._event(out, t, channel, "bias", "fault",
+                                f"accelerometer offset changed by {_units(axis, diff[axis])} "
+                                f"on {CHANNELS[axis]} at rest (gyro saw no rotation)")
+                    self._rest = _Rest(accel.copy(), np.array([1.0, 0, 0, 0]), 0.0)
+                return
+        elif rest.elapsed_s <= CONSISTENCY_MAX_S:
+            cosine = float(np.dot(carried, accel) / (np.linalg.norm(carried) * norm + 1e-300))
+            error = math.acos(max(-1.0, min(1.0, cosine)))
+            if error > CONSISTENCY_BASE_RAD + CONSISTENCY_FRACTION * angle:
+                self._event(out, t, "gyro", "consistency", "fault",
+                            f"gyro-carried gravity is {math.degrees(error):.1f} deg from the "
+                            f"accelerometer's after a {math.degrees(angle):.0f} deg rotation",
+                            held=True)
+        self._counts["accel_bias"] = 0
+        self._rest = _Rest(accel.copy(), np.array([1.0, 0, 0, 0]), 0.0)
+
+    def _frozen(self, t: float) -> np.ndarray:
+        """Channels declared stuck or dead within the last HOLD_S."""
+        running = self._run_len + 1 >= np.maximum(self._stuck_len // 2, 2)
+        return running | np.array([
+            any(t - self._last_flag.get((name, kind), -np.inf) <= HOLD_S
+                for kind in ("stuck", "dead"))
+            for name in CHANNELS
+        ])
+
+    def _gyro_rest_test(self, gyro: np.ndarray, t: float, out: list[FaultEvent]) -> None:
+        if np.max(np.abs(gyro)) > GYRO_BIAS_ABS_RAD_S:
+            self._counts["gyro_abs"] += 1
+        else:
+            self._counts["gyro_abs"] = 0
+        if self._gyro_ref is None:
+            if self._counts["gyro_abs"] >= REST_WINDOWS:
+                axis = int(np.argmax(np.abs(gyro)))
+                self._event(out, t, CHANNELS[3 + axis], "bias", "fault",
+                            f"{CHANNELS[3 + axis]} reads {_units(3 + axis, gyro[axis])} at rest")
+                self._gyro_ref = gyro.copy()
+            elif self._counts["gyro_abs"] == 0:
+                self._gyro_ref = gyro.copy()
+            return
+        diff = gyro - self._gyro_ref
+        if np.max(np.abs(diff)) > GYRO_BIAS_STEP_RAD_S:
+            self._counts["gyro_bias"] += 1
+            if self._counts["gyro_bias"] >= REST_WINDOWS:
+                axis = int(np.argmax(np.abs(diff)))
+                self._event(out, t, CHANNELS[3 + axis], "bias", "fault",
+                            f"gyro bias changed by {_units(3 + axis, diff[axis])} on "
+                            f"{CHANNELS[3 + axis]} at rest (accelerometer saw no rotation)")
+                self._gyro_ref = gyro.copy()
+                self._counts["gyro_bias"] = 0
+                self._rest = None
+        else:
+            self._counts["gyro_bias"] = 0
+            self._gyro_ref = self._gyro_ref + 0.1 * diff
+
+    def _emit_sample_flags(self, t: np.ndarray, x: np.ndarray, out: list[FaultEvent]) -> None:
+        for bit in (STUCK, DEAD, SPIKE, SATURATION):
+            rows, cols = np.nonzero(self.flags & bit)
+            if rows.size == 0:
+                continue
+            kind = FLAG_KINDS[bit]
+            for c in np.unique(cols):
+                idx = rows[cols == c]
+                times = t[idx]
+                channel = CHANNELS[c]
+                last = self._last_flag.get((channel, kind), -np.inf)
+                prev = np.concatenate([[last], times[:-1]])
+                for i in np.flatnonzero(times - prev > HOLD_S):
+                    self._event(out, float(times[i]), channel, kind,
+                                "warning" if bit == SATURATION else "fault",
+                                self._sample_message(bit, c, x[idx[i], c]))
+                self._last_flag[(channel, kind)] = float(times[-1])
+
+    def _sample_message(self, bit: int, c: int, value: float) -> str:
+        name = CHANNELS[c]
+        if bit == STUCK:
+            return f"{name} frozen at {_units(c, value)} (a run no noise would allow)"
+        if bit == DEAD:
+            return f"{name} reads exactly 0 (dead output)"
+        if bit == SPIKE:
+            return f"{name} one-sample spike on this channel alone (now {_units(c, value)})"
+        return f"{name} at full scale ({_units(c, value)}): the reading is clipped"
+
+    def _event(self, out: list[FaultEvent], t: float, channel: str, kind: str, severity: str,
+               message: str, *, held: bool = False) -> None:
+        """Append an event; ``held``: not while the same one was raised in the last HOLD_S."""
+        key = (channel, kind)
+        last = self._last_flag.get(key)
+        self._last_flag[key] = t
+        if held and last is not None and t - last <= HOLD_S:
+            return
+        out.append(FaultEvent(round(float(t), 6), channel, kind, severity, message))
