@@ -13,6 +13,8 @@ interactive. Options every scenario accepts:
 - ``errors`` 0: an ideal chip; ``noise`` 0: no white noise (quantisation stays)
 - ``fail_after`` seconds of device time, after which reads raise ``DeviceIOError`` as if the
   cable had been unplugged
+- ``fault=KIND:CHANNEL[:SIZE]@START[-END]``, repeatable: an injected sensor fault
+  (:mod:`app.core.faults.injection`, :mod:`drivers.sim.faults`), e.g. ``fault=stuck:gx@10``
 
 plus the scenario's own options (``SCENARIOS[name].parameters``), such as ``roll``/``pitch``.
 
@@ -47,6 +49,7 @@ from drivers.sim.error_model import (
     UnitErrors,
     unique_id_for_seed,
 )
+from drivers.sim.faults import SimulatedFaults
 from drivers.sim.options import SimOptions, parse_sim_url
 from drivers.sim.scenarios import SCENARIOS, Interactive, Scenario
 
@@ -103,6 +106,7 @@ class SimulatedDevice(Device):
             temp_degc_per_lsb=1.0 / lsm6dsox.TEMP_LSB_PER_DEGC,
             temp_offset_degc=lsm6dsox.TEMP_OFFSET_DEGC,
         )
+        self._faults = self._new_faults()
 
     # -- what the GUI and tests use ------------------------------------------------------------
     @property
@@ -119,6 +123,11 @@ class SimulatedDevice(Device):
     def measurement(self) -> MeasurementModel:
         """Noise levels, LSB sizes and the current bias random-walk state."""
         return self._measurement
+
+    @property
+    def injected_faults(self) -> list[dict[str, object]]:
+        """The faults of the URL's ``fault=`` options, as a recording's metadata lists them."""
+        return self._faults.as_metadata()
 
     @property
     def is_interactive(self) -> bool:
@@ -156,6 +165,7 @@ class SimulatedDevice(Device):
             if self._opened_before:
                 self.scenario = self._new_scenario()
                 self._measurement = self._new_measurement()
+                self._faults = self._new_faults()
             self._opened_before = True
             self._next_index = 0
             self._stop.clear()
@@ -178,6 +188,7 @@ class SimulatedDevice(Device):
                 "errors": opts.errors,
                 "noise": opts.noise,
                 "realtime": opts.realtime,
+                **({"faults": self.injected_faults} if opts.faults else {}),
             },
         )
 
@@ -216,6 +227,10 @@ class SimulatedDevice(Device):
             self.odr_hz,
             white_noise=self.options.noise,
         )
+
+    def _new_faults(self) -> SimulatedFaults:
+        return SimulatedFaults(self.options.faults, self.options.seed,
+                               self._measurement.accel_lsb_m_s2, self._measurement.gyro_lsb_rad_s)
 
     def _sample_limit(self) -> int:
         """Index of the first sample never delivered (fail_after), or a huge number."""
@@ -264,10 +279,12 @@ class SimulatedDevice(Device):
                 )
                 reference[start:stop] = motion.orientation_quat
         temp_raw = np.rint((temp_degc - REFERENCE_TEMP_DEGC) * lsm6dsox.TEMP_LSB_PER_DEGC)
+        t_s = np.arange(first, first + n) / self.odr_hz
+        accel_raw, gyro_raw = self._faults.apply(t_s, accel_raw, gyro_raw)
         gap = np.zeros(n, dtype=bool)
         gap[0] = lost > 0
         return RawBlock(
-            t_s=np.arange(first, first + n) / self.odr_hz,
+            t_s=t_s,
             accel_raw=accel_raw,
             gyro_raw=gyro_raw,
             temp_raw=temp_raw.astype(np.int16),

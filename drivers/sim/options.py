@@ -7,6 +7,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from urllib.parse import parse_qsl, urlsplit
 
+from app.core.faults.injection import FaultSpec, parse_fault_spec
 from drivers import lsm6dsox
 from drivers.errors import DeviceUrlError
 from drivers.sim.scenarios import SCENARIOS, Param
@@ -30,6 +31,8 @@ GENERAL_OPTIONS: dict[str, str] = {
     "errors": "0: an ideal chip (no bias, scale, cross-axis, drift or clock error)",
     "noise": "0: no white noise (quantisation stays)",
     "fail_after": "seconds of device time after which reads fail like an unplugged cable",
+    "fault": "inject a fault, KIND:CHANNEL[:SIZE]@START[-END] (repeatable), KIND one of "
+             "noise, stuck, dead, spike, bias, scale; SIZE in g (ax..az) or dps (gx..gz)",
 }
 """Options every scenario accepts, with a line of help each."""
 
@@ -53,6 +56,8 @@ class SimOptions:
     noise: bool = True
     fail_after_s: float | None = None
     scenario_params: dict[str, float | int | bool] = field(default_factory=dict)
+    faults: tuple[FaultSpec, ...] = ()
+    """Injected faults (``fault=...``, repeatable), in URL order."""
 
 
 def _fail(url: str, message: str) -> DeviceUrlError:
@@ -104,10 +109,17 @@ def _param(url: str, key: str, text: str, spec: Param) -> float | int | bool:
     return value
 
 
-def _query(url: str, query: str, overrides: Mapping[str, object]) -> dict[str, str]:
+def _query(
+    url: str, query: str, overrides: Mapping[str, object], faults: list[str]
+) -> dict[str, str]:
     raw: dict[str, str] = {}
     for key, value in parse_qsl(query, keep_blank_values=True):
         key = key.strip().lower()
+        if key == "fault":
+            if not value.strip():
+                raise _fail(url, "option 'fault' needs a value (fault=KIND:CHANNEL[:SIZE]@START)")
+            faults.append(value.strip())
+            continue
         if key in raw:
             raise _fail(url, f"option {key!r} is given twice")
         raw[key] = value.strip()
@@ -138,7 +150,8 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
         names = ", ".join(SCENARIOS)
         raise _fail(url, f"unknown simulator scenario {name!r}; choose one of: {names}")
     spec = SCENARIOS[name].parameters
-    raw = _query(url, parts.query, overrides or {})
+    fault_texts: list[str] = []
+    raw = _query(url, parts.query, overrides or {}, fault_texts)
     unknown = sorted(set(raw) - set(GENERAL_OPTIONS) - set(spec))
     if unknown:
         allowed = ", ".join([*GENERAL_OPTIONS, *spec])
@@ -180,4 +193,11 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
     options["scenario_params"] = {
         key: _param(url, key, raw[key], spec[key]) for key in spec if key in raw
     }
+    faults = []
+    for text in fault_texts:
+        try:
+            faults.append(parse_fault_spec(text))
+        except ValueError as exc:
+            raise _fail(url, str(exc)) from None
+    options["faults"] = tuple(faults)
     return SimOptions(**options)  # type: ignore[arg-type]
