@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from app import __version__
 from app.cli_check import add_check_parser, check_command
+from app.cli_diagnose import add_diagnose_parser, diagnose_command
 from app.cli_recording import (
     add_param_argument,
     add_recording_parsers,
@@ -55,6 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_recording_parsers(commands)
     add_simulate_parser(commands)
     add_check_parser(commands)
+    add_diagnose_parser(commands)
     return parser
 
 
@@ -428,6 +430,8 @@ def main(argv: list[str] | None = None) -> int:
         return simulate_command(args)
     if args.command == "check-board":
         return check_command(args)
+    if args.command == "diagnose":
+        return diagnose_command(args)
     if args.filter is not None:
         from app.core.filters import FILTERS, ONLINE_FILTERS
 

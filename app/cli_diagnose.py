@@ -1,0 +1,65 @@
+"""``inclinometer diagnose SOURCE [--seconds N] [--json]``: sensor fault events of a source.
+
+SOURCE is a recording or a device URL. The table (or, with ``--json``, one JSON object per
+line, printed at the moment of detection: ``{"t", "channel", "kind", "severity", "message"}``)
+lists what :class:`app.core.faults.FaultDetector` declared; a clean source prints no events.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from app.core.faults import FaultEvent
+
+
+def add_diagnose_parser(commands: argparse._SubParsersAction) -> None:
+    """Register ``diagnose``."""
+    parser = commands.add_parser(
+        "diagnose", help="detect sensor faults (stuck, dead, spikes, noise, bias, ...) in a "
+                         "recording or a device's stream",
+        description="Run the sensor fault detector over SOURCE (a recording or a device URL) "
+                    "and list the fault events (docs/fault-detection.md). Exit status 0 "
+                    "whether or not there are faults, 2 when the source cannot be read.",
+    )
+    parser.add_argument("source", metavar="SOURCE", help="recording file or device URL")
+    parser.add_argument("--seconds", type=float, default=None, metavar="N",
+                        help="read at most N seconds (default: a whole recording, 10 s of a "
+                             "device)")
+    parser.add_argument("--json", action="store_true",
+                        help="one JSON object per event and line, at detection time")
+
+
+def _row(event: FaultEvent) -> str:
+    return f"{event.t:10.3f}  {event.channel:7s} {event.kind:12s} {event.severity:8s} " \
+           f"{event.message}"
+
+
+def diagnose_command(args: argparse.Namespace) -> int:
+    """Run ``diagnose``; returns the exit status."""
+    from app.core.recording.errors import RecordingError
+    from app.services.diagnosis import Diagnosis, diagnose_events
+    from drivers.errors import DeviceError
+
+    if args.seconds is not None and not args.seconds > 0:
+        print("inclinometer diagnose: --seconds must be positive", file=sys.stderr)
+        return 2
+    result = Diagnosis()
+    header_done = False
+    try:
+        for event in diagnose_events(args.source, args.seconds, result):
+            if args.json:
+                print(event.to_json(), flush=True)
+                continue
+            if not header_done:
+                print(f"{'t (s)':>10s}  {'channel':7s} {'kind':12s} {'severity':8s} message")
+                header_done = True
+            print(_row(event), flush=True)
+    except (RecordingError, DeviceError, OSError) as exc:
+        print(f"inclinometer diagnose: {exc}", file=sys.stderr)
+        return 2
+    if not args.json:
+        count = len(result.events)
+        print(f"{args.source}: {result.samples} samples, {result.duration_s:.1f} s, "
+              f"{count} fault event{'s' if count != 1 else ''}", file=sys.stderr)
+    return 0

@@ -1,0 +1,177 @@
+"""Fault detection and isolation (issue 15): injected faults are found on the right channel in
+time, clean sources raise nothing, the URL syntax is checked, ``diagnose --json`` keeps its
+binding line format and recordings carry what was injected."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from app.cli import main
+from app.core.faults import CHANNELS, FaultDetector, SensorSpec
+from app.core.faults import spec as fault_spec
+from app.core.faults.injection import FaultInjector, parse_fault_spec
+from app.core.recording.format import simulator_metadata
+from app.services.diagnosis import diagnose_events
+from drivers import lsm6dsox
+from drivers.errors import DeviceUrlError
+from drivers.sim.device import SimulatedDevice
+from drivers.sim.options import parse_sim_url
+from drivers.sim.scenarios import SCENARIOS
+from tests.broad_trials import BROAD_DIR, MISSING_REASON
+
+ONSET_S = 20.0
+SPEC_104 = SensorSpec.lsm6dsox(104.0, 4, 250)
+NOISE_5X = {"a": 5 * SPEC_104.accel_noise_rms_m_s2 / lsm6dsox.STANDARD_GRAVITY_M_S2,
+            "g": 5 * math.degrees(SPEC_104.gyro_noise_rms_rad_s)}
+CASES = [  # kind, size per sensor (None: no size), time limit (s)
+    ("stuck", None, 1.0),
+    ("dead", None, 1.0),
+    ("spike", {"a": 0.5, "g": 50.0}, 1.0),
+    ("noise", NOISE_5X, 2.0),
+    ("bias", {"a": 0.05, "g": 5.0}, 10.0),
+]
+ALL_TRIALS = sorted(BROAD_DIR.glob("*.csv")) if BROAD_DIR.is_dir() else []
+
+
+def _url(scenario: str, kind: str, channel: str, sizes: dict[str, float] | None) -> str:
+    size = "" if sizes is None else f":{sizes[channel[0]]:.6g}"
+    return f"sim://{scenario}?fault={kind}:{channel}{size}@{ONSET_S:g}&seed=3"
+
+
+@pytest.mark.parametrize("channel", CHANNELS)
+@pytest.mark.parametrize(("kind", "sizes", "limit_s"), CASES)
+def test_injected_fault_found_on_its_channel_in_time(
+    kind: str, sizes: dict[str, float] | None, limit_s: float, channel: str
+) -> None:
+    events = list(diagnose_events(_url("static", kind, channel, sizes), seconds=ONSET_S + 12))
+    assert events, f"{kind} on {channel} not detected"
+    first = events[0]
+    assert first.channel == channel, events
+    assert ONSET_S <= first.t <= ONSET_S + limit_s, events
+    # a bias on the axis that carries gravity may first show as |a| != g, on the same axis
+    assert first.kind == kind or (kind, first.kind) == ("bias", "gravity")
+    assert all(e.channel == channel for e in events), events
+
+
+@pytest.mark.parametrize("kind", ["stuck", "dead", "spike"])
+def test_instant_faults_found_in_motion(kind: str) -> None:
+    sizes = {"a": 1.0, "g": 100.0}
+    url = _url("slow-tilt", kind, "gy", sizes if kind == "spike" else None)
+    events = list(diagnose_events(url, seconds=ONSET_S + 5))
+    assert events and events[0].channel == "gy" and events[0].t <= ONSET_S + 1.0, events
+
+
+def test_gravity_magnitude_isolates_the_vertical_axis() -> None:
+    events = list(diagnose_events("sim://static?fault=scale:az:1.2@10", seconds=20))
+    assert events and {e.channel for e in events} == {"az"}, events
+
+
+@pytest.mark.parametrize("scenario", list(SCENARIOS))
+def test_clean_scenarios_raise_nothing(scenario: str) -> None:
+    assert list(diagnose_events(f"sim://{scenario}?seed=5", seconds=180)) == []
+
+
+@pytest.mark.skipif(not ALL_TRIALS, reason=MISSING_REASON)
+@pytest.mark.parametrize("path", ALL_TRIALS, ids=lambda p: p.stem[:12])
+def test_clean_broad_trials_raise_nothing(path) -> None:
+    assert list(diagnose_events(str(path))) == []
+
+
+def test_gap_restarts_and_is_reported_on_the_link() -> None:
+    device = SimulatedDevice("sim://static?realtime=0&block=100")
+    info = device.open()
+    detector = FaultDetector(SensorSpec.from_device_info(info, device.scale))
+    from app.core.samples import convert_raw_block
+
+    events = []
+    health = []
+    for i in range(30):
+        raw = device.read(0.1)
+        if i == 10:
+            raw.gap[0] = True
+            raw.lost_samples = 50
+        events += detector.update(convert_raw_block(raw), raw)
+        health.append(detector.health())
+    assert [(e.channel, e.kind) for e in events] == [("link", "gap")]
+    assert health[10]["link"] == "warning" and health[10]["ax"] == "ok"
+    assert health[-1]["link"] == "ok"  # HOLD_S later
+
+
+@pytest.mark.parametrize(("spec", "message"), [
+    ("stuck:gx", "missing '@START'"),
+    ("melt:gx@1", "unknown kind 'melt'"),
+    ("stuck:qx@1", "unknown channel 'qx'"),
+    ("noise:ax@1", "needs a SIZE"),
+    ("stuck:ax:3@1", "takes no SIZE"),
+    ("bias:ax:big@1", "SIZE 'big' is not a number"),
+    ("bias:ax:1@x", "START 'x' is not a number"),
+    ("bias:ax:1@5-2", "must be after START"),
+    ("noise:ax:-1@1", "must be positive"),
+])
+def test_bad_fault_specs_are_refused_with_the_reason(spec: str, message: str) -> None:
+    with pytest.raises(DeviceUrlError, match="sim://static") as caught:
+        parse_sim_url(f"sim://static?fault={spec}")
+    assert message in str(caught.value)
+
+
+def test_fault_option_is_repeatable_and_round_trips() -> None:
+    options = parse_sim_url("sim://static?fault=stuck:gx@10&fault=noise:AZ:0.01@5-15")
+    assert [f.text() for f in options.faults] == ["stuck:gx@10", "noise:az:0.01@5-15"]
+    assert parse_fault_spec("spike:gy:-20@1.5-4").end_s == 4.0
+
+
+def test_injection_is_deterministic_and_block_independent() -> None:
+    specs = [parse_fault_spec("noise:ax:0.01@0.5"), parse_fault_spec("spike:gz:10@0.3-2"),
+             parse_fault_spec("stuck:ay@1")]
+    t = np.arange(300) / 100.0
+    values = np.random.default_rng(0).standard_normal((300, 6))
+    whole = FaultInjector(specs, seed=4).apply(t, values)
+    injector = FaultInjector(specs, seed=4)
+    parts = np.vstack([injector.apply(t[a:b], values[a:b]) for a, b in [(0, 70), (70, 71),
+                                                                          (71, 300)]])
+    np.testing.assert_array_equal(whole, parts)
+    assert np.count_nonzero(whole[:, 5] != values[:, 5]) == 2  # spikes at 0.3 s and 1.3 s
+    assert np.all(whole[100:, 1] == values[99, 1])
+
+
+def test_recording_metadata_lists_injected_faults() -> None:
+    device = SimulatedDevice("sim://static?fault=bias:gz:5@10-20&realtime=0")
+    info = device.open()
+    listed = simulator_metadata(device)["simulator"]["faults"]
+    assert listed == [{"spec": "bias:gz:5@10-20", "kind": "bias", "channel": "gz", "size": 5.0,
+                       "unit": "dps", "start_s": 10.0, "end_s": 20.0}]
+    assert info.extra["faults"] == listed
+    assert "faults" not in simulator_metadata(SimulatedDevice("sim://static"))["simulator"]
+
+
+def test_diagnose_json_lines(capsys: pytest.CaptureFixture[str]) -> None:
+    status = main(["diagnose", "sim://static?fault=dead:gy@2&fault=spike:ax:1@3",
+                   "--seconds", "5", "--json"])
+    assert status == 0
+    lines = capsys.readouterr().out.splitlines()
+    objects = [json.loads(line) for line in lines]
+    assert [list(o) for o in objects] == [["t", "channel", "kind", "severity", "message"]] * 2
+    assert [(o["channel"], o["kind"]) for o in objects] == [("gy", "dead"), ("ax", "spike")]
+    assert all(isinstance(o["t"], float) and o["severity"] == "fault" for o in objects)
+
+
+def test_diagnose_clean_prints_no_events(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["diagnose", "sim://wobble", "--seconds", "20", "--json"]) == 0
+    assert capsys.readouterr().out == ""
+
+
+def test_diagnose_bad_source_exits_2(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["diagnose", "sim://static?fault=stuck:qx@1", "--json"]) == 2
+    assert "unknown channel 'qx'" in capsys.readouterr().err
+
+
+def test_datasheet_figures_match_the_driver() -> None:
+    assert fault_spec.LSM6DSOX_ACCEL_MG_PER_LSB == lsm6dsox.ACCEL_MG_PER_LSB
+    assert fault_spec.LSM6DSOX_GYRO_MDPS_PER_LSB == lsm6dsox.GYRO_MDPS_PER_LSB
+    assert fault_spec.LSM6DSOX_GYRO_NOISE_DPS_PER_SQRT_HZ == lsm6dsox.GYRO_NOISE_DPS_PER_SQRT_HZ
+    assert fault_spec.LSM6DSOX_ACCEL_NOISE_G_PER_SQRT_HZ == \
+        lsm6dsox.ACCEL_NOISE_G_PER_SQRT_HZ_LOW_FS
