@@ -8,6 +8,7 @@
 ``inclinometer replay IN.csv ...``  run filters over a recording, export their angles
 ``inclinometer simulate --pty``     an emulated NUCLEO board on a pseudo-terminal
 ``inclinometer check-board PORT``   put a NUCLEO board through its paces (app/cli_check.py)
+``inclinometer calibrate|allan ...`` the calibration lab, headless (app/cli_calibration.py)
 ``inclinometer --version``
 """
 
@@ -25,6 +26,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from app import __version__
+from app.cli_calibration import CALIBRATION_COMMANDS, add_calibration_parsers, calibration_command
 from app.cli_check import add_check_parser, check_command
 from app.cli_diagnose import add_diagnose_parser, diagnose_command
 from app.cli_recording import (
@@ -57,6 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_simulate_parser(commands)
     add_check_parser(commands)
     add_diagnose_parser(commands)
+    add_calibration_parsers(commands)
     return parser
 
 
@@ -432,6 +435,8 @@ def main(argv: list[str] | None = None) -> int:
         return check_command(args)
     if args.command == "diagnose":
         return diagnose_command(args)
+    if args.command in CALIBRATION_COMMANDS:
+        return calibration_command(args)
     if args.filter is not None:
         from app.core.filters import FILTERS, ONLINE_FILTERS
 

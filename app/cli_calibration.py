@@ -1,0 +1,268 @@
+"""The calibration lab's sub-commands of ``inclinometer``.
+
+``inclinometer calibrate RECORDING [--method six-position|free] --out FILE.json [--save]``
+    the wizard's stillness detection, pose capture and fit on a recorded tour (or on
+    ``--device URL --seconds N``); prints the poses, residuals, uncertainties and tilt errors,
+    writes the calibration JSON, ``--save`` stores it as the device's profile.
+``inclinometer allan RECORDING [--json OUT]``
+    Allan deviation of a static recording: noise density, bias instability and random walk
+    per axis of the gyroscope and the accelerometer.
+
+Exit status: 0 done, 1 the data does not calibrate (the message says why), 2 bad usage or a
+file that cannot be read.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TextIO
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from app.core.calibration_procedures.offline import OfflineCalibration
+    from app.services.calibration_runs import CapturedStream
+
+CALIBRATION_COMMANDS = ("calibrate",)
+EXIT_FAILED = 1
+EXIT_USAGE = 2
+DEFAULT_ACCEL_FS_G = 4
+DEFAULT_GYRO_FS_DPS = 250
+
+
+class _Usage(Exception):
+    """Bad arguments or an unreadable input: exit 2."""
+
+
+class _Failed(Exception):
+    """The data does not give a result: exit 1."""
+
+
+def add_calibration_parsers(commands: argparse._SubParsersAction) -> None:
+    calibrate = commands.add_parser(
+        "calibrate",
+        help="calibrate from a recorded six-face tour or free poses (headless wizard)",
+        description=(
+            "Run the calibration wizard's stillness detection, pose capture and fit on a "
+            "recording of uncalibrated samples (or on --seconds of a live --device). Prints "
+            "the poses found and rejected (with reasons), the fit's residuals and "
+            "uncertainties and the tilt error before and after; writes the calibration as "
+            "JSON (accel_bias_m_s2, accel_matrix, gyro_bias_rad_s, gyro_matrix; "
+            "a_cal = A (a_raw - b_a)). A simulator recording is compared with its true errors."
+        ),
+    )
+    calibrate.add_argument("recording", nargs="?", metavar="RECORDING",
+                           help="a recording (format v1) of the board resting in each pose")
+    calibrate.add_argument("--method", choices=("six-position", "free"), default="six-position",
+                           help="six faces of a box (default) or >= 12 free orientations")
+    calibrate.add_argument("--out", metavar="FILE.json", help="write the calibration JSON here")
+    calibrate.add_argument("--save", action="store_true",
+                           help="store the result as the device's calibration profile")
+    calibrate.add_argument("--device", metavar="URL",
+                           help="calibrate from a live device instead of a recording")
+    calibrate.add_argument("--seconds", type=float, metavar="N",
+                           help="with --device: how many seconds to read")
+    calibrate.add_argument("--gyro-seconds", type=float, default=10.0, metavar="S",
+                           help="still time for the gyro bias step (default %(default)g; "
+                           "without such a stretch the poses' mean is used)")
+    calibrate.add_argument("--profile-dir", metavar="DIR", help=argparse.SUPPRESS)
+
+
+# -- input -------------------------------------------------------------------------------------
+def _settings_from_device(device: dict[str, Any], rate_hz: float, out: TextIO):
+    from app.core.calibration_procedures.profiles import SensorSettings
+
+    odr = device.get("odr_hz")
+    accel_fs = device.get("accel_fs_g")
+    gyro_fs = device.get("gyro_fs_dps")
+    if not isinstance(odr, int | float) or odr <= 0:
+        odr = rate_hz
+    if not isinstance(accel_fs, int) or not isinstance(gyro_fs, int):
+        print(f"note: the recording does not name its full scales; assuming +-"
+              f"{DEFAULT_ACCEL_FS_G} g and +-{DEFAULT_GYRO_FS_DPS} dps", file=out)
+        accel_fs, gyro_fs = DEFAULT_ACCEL_FS_G, DEFAULT_GYRO_FS_DPS
+    return SensorSettings(float(odr), accel_fs, gyro_fs, str(device.get("sensor") or "LSM6DSOX"))
+
+
+def load_stream(args: argparse.Namespace, out: TextIO) -> tuple[CapturedStream, str]:
+    """The samples to work on (a recording or a live device) and a label for them."""
+    from app.core.recording.errors import RecordingError
+    from app.core.recording.reader import read_recording
+    from app.services.calibration_runs import CapturedStream, capture_device
+    from drivers.errors import DeviceError
+
+    if args.device is not None:
+        if args.recording is not None:
+            raise _Usage("give a RECORDING or --device URL, not both")
+        if args.seconds is None:
+            raise _Usage("--device needs --seconds N (how long to read)")
+        print(f"reading {args.seconds:g} s from {args.device} ...", file=out)
+        out.flush()
+        try:
+            stream = capture_device(args.device, args.seconds)
+        except (DeviceError, ValueError) as exc:
+            raise _Usage(str(exc)) from None
+        if stream.note:
+            print(f"note: {stream.note}", file=out)
+        return stream, args.device
+    if args.recording is None:
+        raise _Usage("give a RECORDING (or --device URL --seconds N)")
+    if args.seconds is not None:
+        raise _Usage("--seconds goes with --device")
+    path = Path(args.recording)
+    if not path.is_file():
+        raise _Usage(f"{path}: no such file" if not path.exists() else f"{path}: not a file")
+    try:
+        recording = read_recording(path)
+    except RecordingError as exc:
+        raise _Usage(str(exc)) from None
+    except OSError as exc:
+        raise _Usage(f"{path}: cannot read the recording: {exc.strerror or exc}") from None
+    calibration = recording.calibration
+    if calibration is not None and not calibration.is_identity:
+        print(f"note: the recording was made with calibration {calibration.name!r}; its raw "
+              "samples are used", file=out)
+    simulator = recording.metadata.get("simulator")
+    unit = simulator.get("unit_errors") if isinstance(simulator, dict) else None
+    stream = CapturedStream(
+        block=recording.sample_block(),
+        settings=_settings_from_device(recording.device, recording.rate_hz, out),
+        device=recording.device,
+        unit_errors=unit if isinstance(unit, dict) else None,
+    )
+    return stream, str(path)
+
+
+# -- printing ----------------------------------------------------------------------------------
+def _vec(values: np.ndarray, spec: str, width: int = 10) -> str:
+    return "".join(f"{format(float(v), spec):>{width}}" for v in values)
+
+
+def print_summary(result: OfflineCalibration, label: str, stream: CapturedStream,
+                  out: TextIO) -> None:
+    fit = result.fit
+    s = result.settings
+    print(f"{label}: {result.duration_s:.1f} s, {result.samples} samples at {s.odr_hz:.4g} Hz "
+          f"(+-{s.accel_fs_g} g, +-{s.gyro_fs_dps} dps), {result.still_s:.1f} s still", file=out)
+    if stream.unique_id:
+        print(f"device {stream.unique_id}", file=out)
+    print(f"method {result.method}: {len(result.poses)} poses accepted, "
+          f"{len(result.rejected)} rejected", file=out)
+    print(f"  {'#':>2}  {'face':<4}  {'t (s)':>13}  {'T (degC)':>8}  {'|a|-g (mg)':>10}  "
+          f"{'tilt err before':>15}  {'after (deg)':>11}", file=out)
+    for i, pose in enumerate(result.poses):
+        temp = pose.temperature_degc
+        print(f"  {i + 1:>2}  {pose.face:<4}  {pose.t_start_s:6.1f}-{pose.t_end_s:6.1f}  "
+              f"{temp if math.isfinite(temp) else math.nan:8.2f}  "
+              f"{fit.norm_errors_mg[i]:10.3f}  "
+              f"{result.comparison.before.inclination_deg[i]:15.3f}  "
+              f"{result.comparison.after.inclination_deg[i]:11.4f}", file=out)
+    for event in result.rejected:
+        print(f"  rejected at t = {event.time_s:.1f} s: {event.reason}", file=out)
+    print("accelerometer fit (a_meas = M a_true + b), value +- 1 sigma per axis x, y, z:",
+          file=out)
+    print(f"  bias (mg)          {_vec(fit.bias_mg, '+.3f')}   +- "
+          f"{_vec(fit.bias_std_mg, '.3f', 7)}", file=out)
+    print(f"  scale error (%)    {_vec(100 * fit.scale_error, '+.4f')}   +- "
+          f"{_vec(100 * fit.scale_error_std, '.4f', 7)}", file=out)
+    nonortho = ", ".join(f"{k} {v:+.3f}" for k, v in fit.non_orthogonality_deg.items())
+    print(f"  non-orthogonality (deg): {nonortho}", file=out)
+    print(f"  residual: {fit.residual_norm_rms_mg:.3f} mg RMS of |a| - 1 g"
+          + ("" if not math.isfinite(fit.residual_component_rms_mg) else
+             f", {fit.residual_component_rms_mg:.3f} mg RMS per component"), file=out)
+    gyro_dps = np.degrees(result.gyro_bias_rad_s)
+    gyro_std = np.degrees(result.gyro_bias_std_rad_s)
+    print(f"gyro bias (dps)      {_vec(gyro_dps, '+.4f')}   +- {_vec(gyro_std, '.4f', 7)}",
+          file=out)
+    print(f"  from the {result.gyro_source}", file=out)
+    c = result.comparison
+    against = ("the reference orientation" if result.comparison_reference == "truth"
+               else "the nominal faces")
+    print(f"tilt error over the poses, against {against}: before max {c.before.max_deg:.3f} "
+          f"deg (RMS {c.before.rms_deg:.3f}), after max {c.after.max_deg:.4f} deg "
+          f"(RMS {c.after.rms_deg:.4f})", file=out)
+    for note in result.notes:
+        print(f"note: {note}", file=out)
+
+
+def print_truth(result: OfflineCalibration, unit_errors: dict[str, Any], out: TextIO) -> None:
+    from app.core.calibration_procedures.offline import compare_with_truth
+
+    truth = compare_with_truth(result, unit_errors)
+    temp = truth.temperature_degc
+    at = f" at {temp:.2f} degC" if math.isfinite(temp) else ""
+    print(f"against the simulator's true unit errors{at} (recovered / truth / error):", file=out)
+    for name, unit, recovered, true in truth.rows:
+        print(f"  {name + ' (' + unit + ')':<32}{_vec(recovered, '+.4f')}", file=out)
+        print(f"  {'  truth':<32}{_vec(true, '+.4f')}", file=out)
+        print(f"  {'  error':<32}{_vec(recovered - true, '+.4f')}", file=out)
+
+
+# -- commands ----------------------------------------------------------------------------------
+def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """The ``calibrate`` sub-command."""
+    from app.core.calibration_procedures.offline import (
+        OfflineCalibrationError,
+        calibrate_stream,
+        calibration_json,
+    )
+    from app.core.calibration_procedures.profiles import (
+        ProfileStore,
+        make_profile,
+        utc_now_iso,
+        write_bytes_atomic,
+    )
+
+    out = sys.stdout if out is None else out
+    try:
+        if args.out is None and not args.save:
+            raise _Usage("say what to do with the result: --out FILE.json and/or --save")
+        if args.out is not None and not Path(args.out).resolve().parent.is_dir():
+            raise _Usage(f"--out {args.out}: no such directory")
+        if not math.isfinite(args.gyro_seconds) or args.gyro_seconds <= 0:
+            raise _Usage("--gyro-seconds must be positive")
+        stream, label = load_stream(args, out)
+        if args.save and not stream.unique_id:
+            raise _Usage(f"{label}: the device has no unique id, so --save cannot name its "
+                         "profile; use --out FILE.json")
+        try:
+            result = calibrate_stream(stream.block, stream.settings, method=args.method,
+                                      gyro_seconds=args.gyro_seconds)
+        except OfflineCalibrationError as exc:
+            raise _Failed(f"{label}: cannot calibrate: {exc}") from None
+    except _Usage as exc:
+        print(f"inclinometer calibrate: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except _Failed as exc:
+        print(f"inclinometer calibrate: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    print_summary(result, label, stream, out)
+    if stream.unit_errors:
+        print_truth(result, stream.unit_errors, out)
+    created = utc_now_iso()
+    if args.out is not None:
+        document = calibration_json(result, stream.unique_id, label, created)
+        text = json.dumps(document, indent=2, allow_nan=False) + "\n"
+        write_bytes_atomic(Path(args.out), text.encode("utf-8"))
+        print(f"wrote {args.out}", file=out)
+    profile = make_profile(
+        stream.unique_id or "unknown", result.calibration, result.settings,
+        method=result.fit.method, temperature_degc=result.temperature_degc,
+        residuals=result.residuals(), created_utc=created,
+        notes=f"inclinometer calibrate {label}",
+    )
+    if args.save:
+        store = ProfileStore(args.profile_dir)
+        path = store.save(profile)
+        print(f"saved as the profile of device {stream.unique_id}: {path}", file=out)
+    out.flush()
+    return 0
+
+
+def calibration_command(args: argparse.Namespace) -> int:
+    """Run the calibration-lab sub-command ``args.command`` names."""
+    return calibrate_command(args)
