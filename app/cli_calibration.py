@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from app.core.calibration_procedures.offline import OfflineCalibration
     from app.services.calibration_runs import CapturedStream
 
-CALIBRATION_COMMANDS = ("calibrate",)
+CALIBRATION_COMMANDS = ("calibrate", "allan")
 EXIT_FAILED = 1
 EXIT_USAGE = 2
 DEFAULT_ACCEL_FS_G = 4
@@ -70,6 +70,27 @@ def add_calibration_parsers(commands: argparse._SubParsersAction) -> None:
                            help="still time for the gyro bias step (default %(default)g; "
                            "without such a stretch the poses' mean is used)")
     calibrate.add_argument("--profile-dir", metavar="DIR", help=argparse.SUPPRESS)
+
+    allan = commands.add_parser(
+        "allan",
+        help="Allan deviation of a static recording: noise density, bias instability, "
+        "random walk",
+        description=(
+            "Allan deviation (allantools) of every gyroscope and accelerometer axis of a "
+            "recording of the sensor at rest, and the noise model fitted to it: noise density "
+            "(dps/sqrt(Hz), ug/sqrt(Hz)), bias instability (deg/h, ug) and bias random walk "
+            "(deg/h/sqrt(h), ug/sqrt(h)). A temperature that moves is regressed out first "
+            "(--keep-temperature keeps it). Record at least 30 minutes; the random walk needs "
+            "an hour or more."
+        ),
+    )
+    allan.add_argument("recording", nargs="?", metavar="RECORDING",
+                       help="a recording (format v1) of the sensor lying still")
+    allan.add_argument("--json", metavar="OUT", help="write the figures as JSON ('-': stdout)")
+    allan.add_argument("--device", metavar="URL", help="read a live device instead")
+    allan.add_argument("--seconds", type=float, metavar="N", help="with --device: how long")
+    allan.add_argument("--keep-temperature", action="store_true",
+                       help="do not regress the temperature out before the analysis")
 
 
 # -- input -------------------------------------------------------------------------------------
@@ -265,4 +286,114 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
 
 def calibration_command(args: argparse.Namespace) -> int:
     """Run the calibration-lab sub-command ``args.command`` names."""
+    if args.command == "allan":
+        return allan_command(args)
     return calibrate_command(args)
+
+
+# -- allan ---------------------------------------------------------------------------------------
+def _allan_rows(result) -> list[tuple[str, str, str, np.ndarray, float]]:
+    """(sensor, figure, unit, values (3,), SI-to-unit factor) in the familiar units."""
+    from app.core.samples import STANDARD_GRAVITY_M_S2
+
+    deg = 180.0 / math.pi
+    ug = 1e6 / STANDARD_GRAVITY_M_S2
+    g, a = result.gyro, result.accel
+    return [
+        ("gyro", "noise density", "dps/rtHz", g.noise_density, deg),
+        ("gyro", "bias instability", "deg/h", g.bias_instability, deg * 3600.0),
+        ("gyro", "random walk", "deg/h/rth", g.random_walk, deg * 3600.0 * 60.0),
+        ("accel", "noise density", "ug/rtHz", a.noise_density, ug),
+        ("accel", "bias instability", "ug", a.bias_instability, ug),
+        ("accel", "random walk", "ug/rth", a.random_walk, ug * 60.0),
+    ]
+
+
+def allan_truth(unit_errors: dict[str, Any], accel_fs_g: int) -> dict[str, dict[str, float]]:
+    """A simulated unit's noise figures in SI units (every axis alike).
+
+    Noise densities are the datasheet's (what the simulator adds), random walks the unit's;
+    the bias instability has no term of its own in the simulator: its truth is the floor where
+    white noise meets the walk, ``min sqrt(N^2 / 2 tau + K^2 tau / 3) / 0.664``.
+    """
+    from app.core.allan import FLICKER_FACTOR
+    from app.core.calibration_procedures.stillness import (
+        ACCEL_NOISE_G_PER_SQRT_HZ_16G,
+        ACCEL_NOISE_G_PER_SQRT_HZ_LOW_FS,
+        GYRO_NOISE_DPS_PER_SQRT_HZ,
+    )
+    from app.core.samples import STANDARD_GRAVITY_M_S2
+
+    density_g = ACCEL_NOISE_G_PER_SQRT_HZ_16G if accel_fs_g == 16 else (
+        ACCEL_NOISE_G_PER_SQRT_HZ_LOW_FS)
+    out = {}
+    for sensor, n, k in (
+        ("gyro", math.radians(GYRO_NOISE_DPS_PER_SQRT_HZ),
+         float(unit_errors["gyro_bias_walk_rad_s_per_sqrt_s"])),
+        ("accel", density_g * STANDARD_GRAVITY_M_S2,
+         float(unit_errors["accel_bias_walk_m_s2_per_sqrt_s"])),
+    ):
+        floor = math.sqrt(2.0 * math.sqrt(n * n / 2.0 * k * k / 3.0)) if k > 0 else 0.0
+        out[sensor] = {"noise density": n, "random walk": k,
+                       "bias instability": floor / FLICKER_FACTOR}
+    return out
+
+
+def print_allan(result, label: str, stream: CapturedStream, out: TextIO) -> None:
+    print(f"{label}: {result.duration_s / 60:.1f} min at rest, {result.samples} samples at "
+          f"{result.rate_hz:.4g} Hz", file=out)
+    span = result.temperature_span_degc
+    if math.isfinite(span):
+        what = "regressed out" if result.temperature_removed else "kept"
+        print(f"temperature moved {span:.2f} degC ({what})", file=out)
+    truth = None
+    if stream.unit_errors:
+        truth = allan_truth(stream.unit_errors, stream.settings.accel_fs_g)
+    head = f"  {'':<6}{'figure':<18}{'unit':<10}{'x':>11}{'y':>11}{'z':>11}"
+    print(head + ("  truth (simulator)" if truth else ""), file=out)
+    for sensor, figure, unit, values, factor in _allan_rows(result):
+        cells = "".join(f"{v * factor:11.4g}" for v in values)
+        extra = f"  {truth[sensor][figure] * factor:11.4g}" if truth else ""
+        print(f"  {sensor:<6}{figure:<18}{unit:<10}{cells}{extra}", file=out)
+    if result.duration_s < 1800:
+        print("note: under 30 minutes of data; the random walk and the bias instability are "
+              "rough", file=out)
+
+
+def allan_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """The ``allan`` sub-command."""
+    from app.core.allan import analyse_static
+
+    out = sys.stdout if out is None else out
+    try:
+        if args.json not in (None, "-") and not Path(args.json).resolve().parent.is_dir():
+            raise _Usage(f"--json {args.json}: no such directory")
+        if args.json == "-":
+            out = sys.stderr
+        stream, label = load_stream(args, out)
+        block = stream.block
+        try:
+            result = analyse_static(block.gyro_rad_s, block.accel_m_s2, stream.settings.odr_hz,
+                                    block.temp_degc,
+                                    remove_temperature=not args.keep_temperature)
+        except ValueError as exc:
+            raise _Failed(f"{label}: {exc}") from None
+    except _Usage as exc:
+        print(f"inclinometer allan: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except _Failed as exc:
+        print(f"inclinometer allan: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    print_allan(result, label, stream, out)
+    if args.json is not None:
+        document = {**result.to_json(), "source": label,
+                    "device_unique_id": stream.unique_id}
+        text = json.dumps(document, indent=1, allow_nan=False) + "\n"
+        if args.json == "-":
+            sys.stdout.write(text)
+            sys.stdout.flush()
+        else:
+            Path(args.json).write_text(text, encoding="utf-8")
+            print(f"wrote {args.json}", file=out)
+    out.flush()
+    return 0

@@ -1,0 +1,115 @@
+"""Allan-variance noise figures of the simulated LSM6DSOX against the simulator's truth.
+
+For each seed (simulated unit) a static stream of ``--minutes`` is read from the simulator as
+fast as it computes, from power-up (the board warms by 1.5-4 degC in the first minutes; the
+analysis regresses the temperature out) or after ``--warmup`` minutes. The Allan analysis of
+``inclinometer allan`` (app/core/allan.py) runs on it; printed per unit and axis: the relative
+error of the noise density (truth: the datasheet density the simulator adds) and of the bias
+random walk (truth: the unit's walk), and at the end how many axes meet the goals of issue 16
+(noise density within 10 %, random walk within 35 %).
+
+    .venv/bin/python benchmarks/allan_truth.py --minutes 30 60 --seeds 8
+
+A walk shows only where it rises above the white noise: from tau ~ 1.2 N / K, 25-100 s for
+the simulated accelerometer but 200-500 s for the gyroscope, so 30 or 60 minutes hold only a
+few independent clusters of gyro walk. ``--synthetic`` repeats the check on numpy white noise
+plus a random walk with the same figures: the estimator's own scatter, with no simulator.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from app.core.allan import analyse_static, axis_noise
+from app.core.samples import STANDARD_GRAVITY_M_S2
+from app.services.calibration_runs import capture_device
+
+GYRO_DENSITY = math.radians(3.8e-3)
+ACCEL_DENSITY = 70e-6 * STANDARD_GRAVITY_M_S2
+NOISE_GOAL = 0.10
+WALK_GOAL = 0.35
+
+
+def run(minutes: float, seeds: int, odr: float, warmup: float) -> dict[str, np.ndarray]:
+    errors: dict[str, list[float]] = {"gyro N": [], "accel N": [], "gyro K": [], "accel K": []}
+    print(f"\n{minutes:g} min static at {odr:g} Hz, after {warmup:g} min of warm-up")
+    print(f"{'seed':>4}  {'dT degC':>7}  {'gyro N err %':>20}  {'accel N err %':>20}  "
+          f"{'gyro K err %':>22}  {'accel K err %':>22}")
+    for seed in range(1, seeds + 1):
+        stream = capture_device(f"sim://static?odr={odr:g}&seed={seed}&realtime=0&block=65536",
+                                (minutes + warmup) * 60.0)
+        unit = stream.unit_errors or {}
+        block = stream.block
+        start = round(warmup * 60.0 * stream.settings.odr_hz)
+        result = analyse_static(block.gyro_rad_s[start:], block.accel_m_s2[start:],
+                                stream.settings.odr_hz, block.temp_degc[start:])
+        rows = {
+            "gyro N": result.gyro.noise_density / GYRO_DENSITY - 1.0,
+            "accel N": result.accel.noise_density / ACCEL_DENSITY - 1.0,
+            "gyro K": result.gyro.random_walk / unit["gyro_bias_walk_rad_s_per_sqrt_s"] - 1.0,
+            "accel K": result.accel.random_walk / unit["accel_bias_walk_m_s2_per_sqrt_s"] - 1.0,
+        }
+        for key, value in rows.items():
+            errors[key].extend(value.tolist())
+
+        def cells(values: np.ndarray, width: int) -> str:
+            return f"{' '.join(f'{100 * v:+6.1f}' for v in values):>{width}}"
+
+        print(f"{seed:>4}  {result.temperature_span_degc:7.2f}  {cells(rows['gyro N'], 20)}  "
+              f"{cells(rows['accel N'], 20)}  {cells(rows['gyro K'], 22)}  "
+              f"{cells(rows['accel K'], 22)}")
+    return {key: np.array(values) for key, values in errors.items()}
+
+
+def summary(errors: dict[str, np.ndarray]) -> None:
+    for key, values in errors.items():
+        goal = NOISE_GOAL if key.endswith("N") else WALK_GOAL
+        inside = np.mean(np.abs(values) <= goal)
+        worst = values[np.argmax(np.abs(values))]
+        print(f"  {key:<8} within {100 * goal:.0f} %: {100 * inside:5.1f} % of axes; median "
+              f"error {100 * np.median(values):+.1f} %, worst {100 * worst:+.1f} %")
+
+
+def synthetic(minutes: float, repeats: int, odr: float) -> None:
+    """The estimator alone: white noise + random walk with the simulator's gyro figures."""
+    rng = np.random.default_rng(1)
+    n = round(minutes * 60.0 * odr)
+    for walk_deg_h in (2.0, 5.0):
+        k = math.radians(walk_deg_h / 3600.0) / 60.0
+        errors = []
+        for _ in range(repeats):
+            x = (rng.standard_normal(n) * GYRO_DENSITY * math.sqrt(odr / 2.0)
+                 + np.cumsum(rng.standard_normal(n)) * k / math.sqrt(odr))
+            errors.append(axis_noise(x, odr).random_walk / k - 1.0)
+        e = np.array(errors)
+        print(f"  synthetic gyro walk {walk_deg_h:g} deg/h/sqrt(h), {minutes:g} min: within 35 % "
+              f"in {100 * np.mean(np.abs(e) <= WALK_GOAL):.0f} % of {repeats}; median "
+              f"{100 * np.median(e):+.1f} %")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--minutes", type=float, nargs="+", default=[30.0, 60.0])
+    parser.add_argument("--seeds", type=int, default=8)
+    parser.add_argument("--odr", type=float, default=104.0)
+    parser.add_argument("--warmup", type=float, default=0.0, help="minutes skipped first")
+    parser.add_argument("--synthetic", type=int, default=0, metavar="REPEATS",
+                        help="also check the estimator on synthetic gyro data")
+    args = parser.parse_args()
+    for minutes in args.minutes:
+        errors = run(minutes, args.seeds, args.odr, args.warmup)
+        summary(errors)
+        if args.synthetic:
+            synthetic(minutes, args.synthetic, args.odr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
