@@ -291,3 +291,40 @@ def analyse_static(
         temperature_removed=removed, gyro_slopes_per_degc=gyro_slopes,
         accel_slopes_per_degc=accel_slopes,
     )
+
+
+# -- filter tuning ---------------------------------------------------------------------------------
+NOISE_PARAMETERS: dict[str, tuple[str, str, float]] = {
+    "gyro_noise": ("gyro", "noise_density", math.degrees(1.0) * 1e3),  # rad/s/rtHz -> mdps/rtHz
+    "bias_drift": ("gyro", "random_walk", math.degrees(1.0) * 1e3),  # rad/s/rts -> mdps/rts
+    "accel_noise": ("accel", "noise_density", 1e6 / 9.80665),  # m/s^2/rtHz -> ug/rtHz
+}
+"""Filter parameters that are sensor noise figures: name -> (sensor, figure, SI-to-unit)."""
+
+
+MIN_WALK_RECORD_S = 1800.0
+"""A random walk from a shorter record is too rough to set a filter's bias drift."""
+
+
+def filter_noise_parameters(result: AllanResult, filters: dict[str, Any]
+                            ) -> dict[str, dict[str, float]]:
+    """``{filter: {parameter: value}}`` for every filter that has a noise-figure parameter.
+
+    Each value is the axes' mean (the filters take one figure for all three axes), in the
+    parameter's unit, clamped to its range. A figure the data could not resolve (a random walk
+    of zero, or from under :data:`MIN_WALK_RECORD_S`) is left out, keeping the filter's value.
+    """
+    out: dict[str, dict[str, float]] = {}
+    for name, cls in filters.items():
+        for spec in getattr(cls, "parameters", ()):
+            mapping = NOISE_PARAMETERS.get(spec.name)
+            if mapping is None:
+                continue
+            sensor, figure, factor = mapping
+            if figure == "random_walk" and result.duration_s < MIN_WALK_RECORD_S:
+                continue
+            value = float(np.mean(getattr(getattr(result, sensor), figure))) * factor
+            if not math.isfinite(value) or value <= 0.0:
+                continue
+            out.setdefault(name, {})[spec.name] = min(max(value, spec.minimum), spec.maximum)
+    return out

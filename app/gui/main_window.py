@@ -351,6 +351,8 @@ class MainWindow(QMainWindow):
         calibration_menu = self.menuBar().addMenu("&Calibration")
         self.wizard_action = QAction("Calibration &wizard…", self)
         self.wizard_action.triggered.connect(self.open_calibration_wizard)
+        self.allan_action = QAction("&Allan variance: noise figures…", self)
+        self.allan_action.triggered.connect(self.open_allan_page)
         self.tare_action = QAction("&Tare: take the current attitude as level", self)
         self.tare_action.setShortcut(QKeySequence("Ctrl+T"))
         self.tare_action.triggered.connect(self.session.requestTare)
@@ -363,7 +365,8 @@ class MainWindow(QMainWindow):
         self.export_action = QAction("&Export profile…", self)
         self.export_action.triggered.connect(self.export_profile)
         for action in (
-            self.wizard_action, None, self.tare_action, self.clear_tare_action, None,
+            self.wizard_action, self.allan_action, None, self.tare_action,
+            self.clear_tare_action, None,
             self.no_calibration_action, self.import_action, self.export_action,
         ):
             if action is None:
@@ -570,6 +573,30 @@ class MainWindow(QMainWindow):
         self.calibration_wizard = wizard
         wizard.show()
         return wizard
+
+    def open_allan_page(self):
+        """The Allan variance page (a window); its button tunes the filters' noise figures."""
+        from app.gui.allan_page import AllanPage
+
+        page = getattr(self, "allan_page", None)
+        if page is None:
+            page = AllanPage()
+            page.parametersApplied.connect(self.apply_noise_parameters)
+            self.allan_page = page
+        page.show()
+        page.raise_()
+        return page
+
+    def apply_noise_parameters(self, name: str, values: dict, source: str) -> None:
+        """Set a filter's noise parameters (the running one live) and log where they came from."""
+        listed = ", ".join(f"{key} = {value:.4g}" for key, value in values.items())
+        if name == self.filter_panel.current_filter:
+            for key, value in values.items():
+                self.session.requestFilterParameter.emit(key, value)
+            self.log(f"{name}: {listed} set from {source}")
+        else:
+            self.log(f"{name} (not running): {listed} from {source}; choose {name} and set "
+                     "them again to use them")
 
     def import_profile(self, path: str | None = None) -> None:
         info = self.session.device_info

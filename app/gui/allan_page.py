@@ -1,0 +1,192 @@
+"""The Allan variance page: log-log deviation of a static recording, fitted noise lines, and a
+button that sets the filters' noise parameters from the result.
+
+The maths is :mod:`app.core.allan`; this view loads a recording (or takes a result), plots
+gyroscope (deg/h) and accelerometer (ug) deviations per axis with the fitted model (dashed)
+and the white-noise and random-walk asymptotes of the x axis (dotted), and tabulates the
+figures in the usual units. *Set filter noise parameters* emits ``parametersApplied`` per
+filter that has noise-figure parameters (the EKF and its smoother) with a sentence naming
+the source, which the main window applies and logs.
+"""
+
+from __future__ import annotations
+
+import math
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import QSettings, Qt, Signal
+from PySide6.QtWidgets import (
+    QFileDialog,
+    QHBoxLayout,
+    QHeaderView,
+    QLabel,
+    QPushButton,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
+)
+
+from app.core.allan import AllanResult, SensorNoiseFigures, analyse_static, filter_noise_parameters
+from app.core.filters import FILTERS
+from app.core.samples import STANDARD_GRAVITY_M_S2
+
+AXIS_COLOURS = ("#e5534b", "#57ab5a", "#539bf5")
+SETTINGS_KEY = "calibration_lab/filter_noise_source"
+DEG_H = math.degrees(1.0) * 3600.0
+UG = 1e6 / STANDARD_GRAVITY_M_S2
+
+
+def figure_rows(result: AllanResult) -> list[tuple[str, str, np.ndarray]]:
+    """(label, unit, values (3,)) in the familiar units."""
+    deg = math.degrees(1.0)
+    g, a = result.gyro, result.accel
+    return [
+        ("Gyro noise density", "°/s/√Hz", g.noise_density * deg),
+        ("Gyro bias instability", "°/h", g.bias_instability * DEG_H),
+        ("Gyro random walk", "°/h/√h", g.random_walk * DEG_H * 60.0),
+        ("Accel noise density", "µg/√Hz", a.noise_density * UG),
+        ("Accel bias instability", "µg", a.bias_instability * UG),
+        ("Accel random walk", "µg/√h", a.random_walk * UG * 60.0),
+    ]
+
+
+class AllanPage(QWidget):
+    """See the module docstring."""
+
+    parametersApplied = Signal(str, dict, str)  # filter name, {parameter: value}, source
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setWindowTitle("Allan variance — noise figures")
+        self.result: AllanResult | None = None
+        self.source = ""
+        layout = QVBoxLayout(self)
+        top = QHBoxLayout()
+        self.open_button = QPushButton("Open static recording…")
+        self.open_button.clicked.connect(self._choose_file)
+        self.apply_button = QPushButton("Set filter noise parameters")
+        self.apply_button.setToolTip(
+            "Set the EKF's gyro noise density, gyro bias drift and gravity noise floor (and "
+            "the smoother's) from these figures")
+        self.apply_button.setEnabled(False)
+        self.apply_button.clicked.connect(self.apply_to_filters)
+        top.addWidget(self.open_button)
+        top.addWidget(self.apply_button)
+        top.addStretch(1)
+        layout.addLayout(top)
+        self.summary = QLabel("Open a recording of the sensor lying still (30 minutes or more).")
+        self.summary.setWordWrap(True)
+        layout.addWidget(self.summary)
+        plots = QHBoxLayout()
+        self.gyro_plot = self._make_plot("Gyroscope", "Allan deviation (°/h)")
+        self.accel_plot = self._make_plot("Accelerometer", "Allan deviation (µg)")
+        plots.addWidget(self.gyro_plot)
+        plots.addWidget(self.accel_plot)
+        layout.addLayout(plots, 1)
+        self.table = QTableWidget(0, 5)
+        self.table.setHorizontalHeaderLabels(["Figure", "Unit", "x", "y", "z"])
+        self.table.verticalHeader().setVisible(False)
+        self.table.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
+        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
+        self.table.setMaximumHeight(250)
+        layout.addWidget(self.table)
+        self.applied_label = QLabel(self._last_source())
+        self.applied_label.setWordWrap(True)
+        self.applied_label.setObjectName("dimLabel")
+        layout.addWidget(self.applied_label)
+        self.resize(1000, 720)
+
+    @staticmethod
+    def _make_plot(title: str, label: str) -> pg.PlotWidget:
+        plot = pg.PlotWidget(title=title)
+        plot.setLogMode(True, True)
+        plot.showGrid(x=True, y=True, alpha=0.3)
+        plot.setLabel("bottom", "averaging time τ (s)")
+        plot.setLabel("left", label)
+        plot.addLegend(offset=(-10, 10))
+        return plot
+
+    @staticmethod
+    def _last_source() -> str:
+        value = QSettings().value(SETTINGS_KEY, "")
+        return f"Filter noise parameters last set from: {value}" if value else ""
+
+    # -- input ---------------------------------------------------------------------------------
+    def _choose_file(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Static recording", "",
+                                              "Recordings (*.csv)")
+        if path:
+            self.load_recording(path)
+
+    def load_recording(self, path: str | Path) -> AllanResult | None:
+        """Read a recording and show its analysis; a bad file is shown, not raised."""
+        from app.core.recording.errors import RecordingError
+        from app.core.recording.reader import read_recording
+
+        try:
+            recording = read_recording(path)
+            result = analyse_static(recording.gyro_rad_s, recording.accel_m_s2,
+                                    recording.rate_hz, recording.temp_degc)
+        except (RecordingError, OSError, ValueError) as exc:
+            self.summary.setText(f"<b>Cannot analyse {Path(path).name}:</b> {exc}")
+            return None
+        self.show_result(result, f"Allan analysis of {Path(path).name}")
+        return result
+
+    def show_result(self, result: AllanResult, source: str) -> None:
+        self.result, self.source = result, source
+        span = result.temperature_span_degc
+        temperature = ""
+        if math.isfinite(span):
+            temperature = (f"; temperature moved {span:.2f} °C"
+                           + (", regressed out" if result.temperature_removed else ""))
+        self.summary.setText(
+            f"{source}: {result.duration_s / 60:.1f} min at {result.rate_hz:.4g} Hz"
+            f"{temperature}. Solid: measured; dashed: fitted model; dotted: white noise "
+            "(slope −½) and random walk (slope +½) of x.")
+        self._plot(self.gyro_plot, result.gyro, DEG_H)
+        self._plot(self.accel_plot, result.accel, UG)
+        rows = figure_rows(result)
+        self.table.setRowCount(len(rows))
+        for r, (label, unit, values) in enumerate(rows):
+            cells = [label, unit, *(f"{v:.4g}" for v in values)]
+            for c, text in enumerate(cells):
+                self.table.setItem(r, c, QTableWidgetItem(text))
+        self.apply_button.setEnabled(True)
+
+    def _plot(self, plot: pg.PlotWidget, figures: SensorNoiseFigures, factor: float) -> None:
+        plot.clear()
+        tau = figures.tau_s
+        for axis, name, colour in zip(figures.axes, "xyz", AXIS_COLOURS, strict=True):
+            plot.plot(tau, axis.adev * factor, pen=pg.mkPen(colour, width=2), name=name,
+                      symbol="o", symbolSize=4, symbolBrush=colour, symbolPen=None)
+            plot.plot(tau, axis.model_adev(tau) * factor,
+                      pen=pg.mkPen(colour, width=1, style=Qt.PenStyle.DashLine))
+        first = figures.axes[0]
+        dotted = pg.mkPen("#aaaaaa", width=1, style=Qt.PenStyle.DotLine)
+        plot.plot(tau, first.white_line(tau) * factor, pen=dotted)
+        if first.random_walk > 0:
+            plot.plot(tau, first.walk_line(tau) * factor, pen=dotted)
+
+    # -- the button ----------------------------------------------------------------------------
+    def proposed_parameters(self) -> dict[str, dict[str, float]]:
+        return {} if self.result is None else filter_noise_parameters(self.result, FILTERS)
+
+    def apply_to_filters(self) -> dict[str, dict[str, float]]:
+        """Emit the noise parameters per filter and remember where they came from."""
+        proposed = self.proposed_parameters()
+        if not proposed:
+            return proposed
+        stamp = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
+        source = f"{self.source} ({stamp})"
+        QSettings().setValue(SETTINGS_KEY, source)
+        for name, values in proposed.items():
+            self.parametersApplied.emit(name, values, source)
+        text = "; ".join(f"{name}: " + ", ".join(f"{k} = {v:.4g}" for k, v in values.items())
+                         for name, values in proposed.items())
+        self.applied_label.setText(f"Set {text} — from {source}")
+        return proposed

@@ -1,0 +1,77 @@
+"""The Allan variance page: the plot and table of a simulated static recording, and the button
+that sets the running EKF's noise parameters (seen in the worker's filter) with its source."""
+
+from __future__ import annotations
+
+import math
+import os
+
+import pytest
+from PySide6.QtCore import QSettings
+
+from app.cli import main
+from app.gui import theme
+from app.gui.allan_page import SETTINGS_KEY, AllanPage
+from app.gui.main_window import MainWindow
+from app.services.session import DeviceSession
+
+TIMEOUT_MS = 15_000
+
+
+@pytest.fixture(scope="module")
+def static_csv(tmp_path_factory):
+    path = tmp_path_factory.mktemp("allan-gui") / "static.csv"
+    assert main(["record", "--device", "sim://static?odr=26&seed=2&realtime=0",
+                 "--duration", "6m", str(path)]) == 0
+    return path
+
+
+def test_allan_page_plots_and_tabulates_a_static_recording(qtbot, qapp, static_csv,
+                                                           artifacts_dir):
+    theme.apply_theme(qapp)
+    page = AllanPage()
+    qtbot.addWidget(page)
+    page.show()
+    result = page.load_recording(static_csv)
+    assert result is not None
+    assert page.table.rowCount() == 6
+    assert page.table.item(0, 0).text() == "Gyro noise density"
+    gyro_density = float(page.table.item(0, 2).text())
+    assert gyro_density == pytest.approx(3.8e-3, rel=0.1)
+    # Three measured curves, three fitted ones and the asymptotes per plot.
+    assert len(page.gyro_plot.getPlotItem().listDataItems()) >= 7
+    proposed = page.proposed_parameters()
+    assert set(proposed) == {"ekf", "ekf-smoother"}
+    assert proposed["ekf"]["gyro_noise"] == pytest.approx(3.8, rel=0.1)  # mdps/rtHz
+    assert proposed["ekf"]["accel_noise"] == pytest.approx(70.0, rel=0.1)  # ug/rtHz
+    page.grab().save(os.path.join(artifacts_dir, "allan_page.png"))
+
+
+def test_the_button_sets_the_running_ekf_and_records_the_source(qtbot, qapp, tmp_path,
+                                                                 static_csv):
+    theme.apply_theme(qapp)
+    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+    session = DeviceSession()
+    window = MainWindow(session, settings, "sim://static?odr=52&seed=3")
+    qtbot.addWidget(window)
+    window.show()
+    qtbot.waitUntil(lambda: session.device_info is not None, timeout=TIMEOUT_MS)
+    assert session.pipeline.filter.name == "ekf"
+    page = window.open_allan_page()
+    qtbot.addWidget(page)
+    assert page.load_recording(static_csv) is not None
+    before = session.pipeline.filter.get_parameter("gyro_noise")
+    proposed = page.apply_to_filters()["ekf"]
+    assert not math.isclose(before, proposed["gyro_noise"])
+    qtbot.waitUntil(lambda: math.isclose(session.pipeline.filter.get_parameter("gyro_noise"),
+                                         proposed["gyro_noise"]), timeout=TIMEOUT_MS)
+    assert session.pipeline.filter.get_parameter("accel_noise") == pytest.approx(
+        proposed["accel_noise"])
+    # A 6-minute record sets the noise densities, not the bias drift (needs 30 minutes).
+    assert "bias_drift" not in proposed
+    log = window.messages.toPlainText()
+    assert "ekf: " in log and "gyro_noise = " in log and "Allan analysis of static.csv" in log
+    assert "Allan analysis of static.csv" in QSettings().value(SETTINGS_KEY)
+    assert "Allan analysis of static.csv" in page.applied_label.text()
+    page.close()
+    window.close()
