@@ -22,7 +22,7 @@ _BUILTIN: dict[str, tuple[str, str]] = {
     "lsm6dsox": ("drivers.lsm6dsox_direct.device", "Lsm6dsoxDirectDevice"),  # host names the bus
     "serial": ("drivers.serial_link", "SerialLinkDevice"),
     "port": ("drivers.serial_link", "PortDevice"),  # a bare port name: v1 or text, detected
-    "replay": ("drivers.replay", "ReplayDevice"),  # also a bare path ending in .csv
+    "replay": ("drivers.replay", "ReplayDevice"),  # also a bare path to a .csv or .csv.gz
 }
 _BARE_PORT = re.compile(r"(/|\\\\\.\\|\./)\S+|(?i:com)\d+")
 """A serial port given without a scheme: ``/dev/ttyACM0``, ``COM3``, ``\\\\.\\COM12``."""
@@ -38,7 +38,7 @@ def _schemes() -> dict[str, tuple[str, str]]:
 
 def scheme_of(url: str) -> str:
     """The scheme of a device URL (``sim`` for ``sim://static``)."""
-    if "://" not in url and url.strip().lower().endswith(".csv"):
+    if "://" not in url and url.strip().lower().endswith((".csv", ".csv.gz")):
         return "replay"  # a recording file
     if "://" not in url and _BARE_PORT.fullmatch(url.partition("?")[0]):
         return "port"

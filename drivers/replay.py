@@ -89,8 +89,8 @@ _FALSE = {"0", "false", "no", "off"}
 
 
 def is_recording_path(url: str) -> bool:
-    """True for a plain file path ending in ``.csv`` (no ``scheme://``)."""
-    return "://" not in url and url.strip().lower().endswith(".csv")
+    """True for a plain file path ending in ``.csv`` or ``.csv.gz`` (no ``scheme://``)."""
+    return "://" not in url and url.strip().lower().endswith((".csv", ".csv.gz"))
 
 
 def replay_url(path: str | Path, **options: Any) -> str:

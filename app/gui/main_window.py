@@ -53,6 +53,7 @@ from app.services.devices import (
     is_replay_url,
     replay_url,
 )
+from app.services.recording_control import recording_cost
 from app.services.session import DeviceSession
 from app.services.stream_status import StreamStatus
 
@@ -62,6 +63,10 @@ LEVEL_RANGES_DEG = (0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 90.0)
 DEVICE_MESSAGE_WARNING = 2
 DEVICE_MESSAGE_ERROR = 3
 """Levels of a device's own messages (the link protocol's LOG levels)."""
+
+
+RECORDING_FILTER = "Recordings (*.csv)"
+COMPRESSED_RECORDING_FILTER = "Compressed recordings (*.csv.gz)"
 
 
 def recordings_dir() -> Path:
@@ -432,7 +437,8 @@ class MainWindow(QMainWindow):
         """Replay a recording through the whole pipeline (it becomes the device)."""
         if path is None:
             path, _ = QFileDialog.getOpenFileName(
-                self, "Open recording", str(recordings_dir()), "Recordings (*.csv)"
+                self, "Open recording", str(recordings_dir()),
+                "Recordings (*.csv *.csv.gz);;All files (*)"
             )
             if not path:
                 return
@@ -468,11 +474,18 @@ class MainWindow(QMainWindow):
         folder = recordings_dir()
         folder.mkdir(parents=True, exist_ok=True)
         name = time.strftime("inclinometer-%Y%m%d-%H%M%S.csv")
-        path, _ = QFileDialog.getSaveFileName(
-            self, "Record to", str(folder / name), "Recordings (*.csv)"
+        info = self.session.device_info
+        cost = recording_cost(folder, info.odr_hz, reference=info.url.startswith("sim:"))
+        path, chosen = QFileDialog.getSaveFileName(
+            self, f"Record to ({cost})", str(folder / name),
+            f"{RECORDING_FILTER};;{COMPRESSED_RECORDING_FILTER}",
         )
-        if path:
-            self.start_recording(path)
+        if not path:
+            return
+        if chosen == COMPRESSED_RECORDING_FILTER and not path.lower().endswith(".gz"):
+            path += ".gz"
+        self.log(f"Recording to {path}: {cost}")
+        self.start_recording(path)
 
     def _on_recording_changed(self, status) -> None:
         recording = status is not None and status.state == "recording"

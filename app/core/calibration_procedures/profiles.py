@@ -42,6 +42,8 @@ from app.core.calibration_procedures.level_reference import TareReference
 from app.core.version import __version__
 
 APP_NAME = "Inclinometer"
+MAX_PROFILE_BYTES = 16 << 20
+"""Larger files are refused unread (a profile, history included, takes a few kB)."""
 FORMAT_TAG = "inclinometer-calibration-profile"
 FORMAT_VERSION = 1
 HISTORY_DIR = "history"
@@ -331,6 +333,11 @@ def read_profile_file(path: Path, expected_unique_id: str | None = None) -> Cali
     """
     path = Path(path)
     try:
+        if path.stat().st_size > MAX_PROFILE_BYTES:
+            raise ProfileCorruptError(
+                f"{path}: not a calibration profile: the file is too large "
+                f"({path.stat().st_size} bytes; a profile takes a few kB). The file was left "
+                "untouched.", path)
         raw = path.read_bytes()
     except FileNotFoundError:
         raise ProfileNotFoundError(f"{path}: no such profile file", path) from None
@@ -344,6 +351,10 @@ def read_profile_file(path: Path, expected_unique_id: str | None = None) -> Cali
             "The file was left untouched.",
             path,
         ) from None
+    except RecursionError:
+        raise ProfileCorruptError(
+            f"{path}: not a valid calibration profile: its JSON is nested too deeply to "
+            "read. The file was left untouched.", path) from None
     profile = CalibrationProfile.from_json_dict(data, path)
     if expected_unique_id is not None and profile.device_unique_id != expected_unique_id:
         raise ProfileDeviceMismatchError(

@@ -8,8 +8,9 @@ import shutil
 import tempfile
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
+from app.core.recording.compressed import GZIP_MAGIC, GzipBytes, gzip_member
 from app.core.recording.format import KEY_BOOKMARKS, metadata_text
 from app.core.recording.reader import Bookmark, read_head
 
@@ -32,21 +33,43 @@ def rewrite_metadata(
     text = metadata_text(metadata)
     if head.comments:
         text += "".join(f"{comment}\n" for comment in head.comments)
+    new_head = text.encode("utf-8") + chunk[header_start: head.body_start]
     fd, temp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as out, open(path, "rb") as source:
-            out.write(text.encode("utf-8"))
-            out.write(chunk[header_start: head.body_start])
-            source.seek(head.body_start)
-            shutil.copyfileobj(source, out, 1 << 20)
+            if source.read(2) == GZIP_MAGIC:
+                _copy_compressed(path, source, out, new_head, head.body_start)
+            else:
+                out.write(new_head)
+                source.seek(head.body_start)
+                shutil.copyfileobj(source, out, 1 << 20)
             out.flush()
             os.fsync(out.fileno())
+        shutil.copymode(path, temp_name)  # the same permissions as before, not mkstemp's 0600
         os.replace(temp_name, path)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(temp_name)
         raise
     return metadata
+
+
+def _copy_compressed(path: Path, source: BinaryIO, out: BinaryIO, new_head: bytes,
+                     body_start: int) -> None:
+    """A compressed recording with a new head: the rows' gzip members are copied as they are
+    when they start where the rows do (as the recorder writes them), else recompressed."""
+    out.write(gzip_member(new_head))
+    reader = GzipBytes(source, path)
+    reader.seek(body_start)
+    first = reader.read(1)  # finds the member that holds the first row
+    starts = {decompressed: compressed for compressed, decompressed in reader.members}
+    if body_start in starts:
+        source.seek(starts[body_start])
+        shutil.copyfileobj(source, out, 1 << 20)
+        return
+    while data := first + reader.read(8 << 20):
+        out.write(gzip_member(data))
+        first = b""
 
 
 def save_bookmarks(path: str | os.PathLike[str], bookmarks: Iterable[Bookmark]) -> None:

@@ -1,7 +1,9 @@
 """Read a v1 recording: metadata, columns, and clear errors for anything else.
 
 :func:`read_recording` loads a whole file (an hour at 1 kHz in a few seconds: the numbers are
-parsed by :mod:`app.core.recording.fast_csv` on every core) and returns a :class:`Recording`.
+parsed by :mod:`app.core.recording.fast_csv` on every core) and returns a :class:`Recording`;
+a compressed recording (format v1 inside gzip, ``.csv.gz``) is read the same way. To read a
+long recording in bounded memory, use :class:`app.core.recording.stream.RecordingStream`.
 
 What it tolerates, and says so (a :class:`~app.core.recording.errors.RecordingWarning`, and
 the message in :attr:`Recording.warnings`):
@@ -28,7 +30,8 @@ import mmap
 import os
 import re
 import warnings
-from collections.abc import Iterator
+from collections import Counter
+from collections.abc import Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +41,7 @@ import numpy as np
 
 from app.core.calibration import SensorCalibration
 from app.core.recording import fast_csv
+from app.core.recording.compressed import GZIP_MAGIC, GzipBytes, PlainBytes, decompress_file
 from app.core.recording.errors import (
     MissingColumnsError,
     NotARecordingError,
@@ -76,6 +80,12 @@ Buffer = bytes | mmap.mmap
 """The file's bytes: ``bytes``, or a read-only memory map (no ``count``, ``startswith``)."""
 
 OnCorrupt = Literal["raise", "truncate"]
+MAX_HEAD_BYTES = 16 << 20
+"""The metadata and header must end within this many bytes (a recording's take a few kB)."""
+MAX_LISTED = 10
+"""Names a message lists before "... and N more"."""
+MAX_WARNINGS = 20
+"""Warnings kept per file before "... and N more"."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,6 +120,7 @@ class Recording:
     dropped_partial_row: bool = False
     corrupt_line: int | None = None
     comments: list[str] = field(default_factory=list)
+    _known_reference: bool | None = field(default=None, init=False, repr=False, compare=False)
 
     # -- samples ---------------------------------------------------------------------------------
     def __len__(self) -> int:
@@ -149,9 +160,10 @@ class Recording:
     @property
     def has_reference(self) -> bool:
         """True when the reference columns exist and hold at least one full quaternion."""
-        if not all(c in self.columns for c in REFERENCE_COLUMNS):
-            return False
-        return bool(np.any(np.all(np.isfinite(self._reference()), axis=1)))
+        if self._known_reference is None:  # once: it looks at every row
+            self._known_reference = all(c in self.columns for c in REFERENCE_COLUMNS) and bool(
+                np.any(np.all(np.isfinite(self._reference()), axis=1)))
+        return self._known_reference
 
     @property
     def reference_quat(self) -> np.ndarray | None:
@@ -164,14 +176,15 @@ class Recording:
         known = set(REQUIRED_COLUMNS) | set(OPTIONAL_COLUMNS)
         return {name: values for name, values in self.columns.items() if name not in known}
 
-    def _flag(self, name: str) -> np.ndarray:
+    def _flag(self, name: str, rows: slice = slice(None)) -> np.ndarray:
         values = self.columns.get(name)
         if values is None:
-            return np.zeros(len(self), dtype=bool)
+            return np.zeros(len(range(*rows.indices(len(self)))), dtype=bool)
+        values = values[rows]
         return np.isfinite(values) & (values != 0.0)
 
-    def _reference(self) -> np.ndarray:
-        return np.column_stack([self.columns[c] for c in REFERENCE_COLUMNS])
+    def _reference(self, rows: slice = slice(None)) -> np.ndarray:
+        return np.column_stack([self.columns[c][rows] for c in REFERENCE_COLUMNS])
 
     # -- metadata ------------------------------------------------------------------------------
     @property
@@ -237,16 +250,16 @@ class Recording:
     def raw_block(self, start: int = 0, stop: int | None = None) -> RawBlock:
         """Rows ``[start, stop)`` as a device block in SI units (scale factors of 1.0)."""
         stop = len(self) if stop is None else stop
-        rows = slice(start, stop)
-        reference = self.reference_quat
+        rows = slice(start, stop)  # only these rows are touched: replay is linear in length
+        temp = self.columns.get("temp")
         return RawBlock(
             t_s=self.t_s[rows],
             accel_raw=np.column_stack([self.columns[c][rows] for c in ACCEL_COLUMNS]),
             gyro_raw=np.column_stack([self.columns[c][rows] for c in GYRO_COLUMNS]),
-            temp_raw=self.temp_degc[rows],
+            temp_raw=np.full(len(self.t_s[rows]), np.nan) if temp is None else temp[rows],
             scale=UNIT_SCALE,
-            gap=self.gap[rows],
-            reference_quat=None if reference is None else reference[rows],
+            gap=self._flag("gap", rows),
+            reference_quat=self._reference(rows) if self.has_reference else None,
         )
 
     def block_bounds(self, size: int | None = None) -> np.ndarray:
@@ -301,6 +314,16 @@ def read_recording(path: str | os.PathLike[str], *, on_corrupt: OnCorrupt = "rai
     path = Path(path)
     try:
         with open(path, "rb") as handle:
+            if handle.read(2) == GZIP_MAGIC:  # format v1 inside gzip
+                data, truncated = decompress_file(path)
+                recording = parse_recording(data, path, on_corrupt=on_corrupt)
+                if truncated:
+                    message = (f"{path}: the compressed file ends early (the recording was "
+                               "interrupted); everything up to its last complete write was read")
+                    recording.warnings.append(message)
+                    warnings.warn(message, RecordingWarning, stacklevel=2)
+                return recording
+            handle.seek(0)
             if os.fstat(handle.fileno()).st_size < MMAP_MIN_BYTES:
                 return parse_recording(handle.read(), path, on_corrupt=on_corrupt)
             # Large files are mapped, not copied: the parser reads the page cache directly.
@@ -319,26 +342,38 @@ def read_metadata(path: str | os.PathLike[str]) -> tuple[dict[str, Any], tuple[s
 
 def read_head(path: Path) -> tuple[RecordingHead, bytes]:
     """The parsed metadata and header, and the bytes read (at least up to the header)."""
-    chunk = b""
+    chunk = bytearray()
+    scanned = 0  # lines before this offset are metadata: never scanned twice
     with open(path, "rb") as handle:
+        compressed = handle.read(2) == GZIP_MAGIC
+        handle.seek(0)
+        source: PlainBytes | GzipBytes = (GzipBytes(handle, path) if compressed
+                                          else PlainBytes(handle))
         while True:
-            more = handle.read(65536)
+            more = source.read(1 << 20)
             chunk += more
-            if _header_end(chunk) is not None or not more:
+            end, scanned = _header_end(chunk, scanned)
+            if end is not None or not more:
                 break
-    return _parse_head(chunk, path), chunk
+            if len(chunk) > MAX_HEAD_BYTES:
+                raise RecordingCorruptError(
+                    f"{path}: no header row within the first {MAX_HEAD_BYTES >> 20} MB: the "
+                    "metadata lines go on and on, this is not a recording that can be read",
+                    path)
+    data = bytes(chunk)
+    return _parse_head(data, path), data
 
 
-def _header_end(chunk: bytes) -> int | None:
-    """Offset just after the header line when ``chunk`` holds it."""
-    position = 0
+def _header_end(chunk: bytes | bytearray, position: int = 0) -> tuple[int | None, int]:
+    """(offset just after the header line, or None while ``chunk`` lacks it; where the
+    complete metadata lines seen so far end, to continue from)."""
     while True:
         newline = chunk.find(b"\n", position)
         if newline < 0:
-            return None
+            return None, position
         if not chunk.startswith(b"#", position) and not chunk.startswith(b"\xef\xbb\xbf#",
                                                                           position):
-            return newline + 1
+            return newline + 1, position
         position = newline + 1
 
 
@@ -409,9 +444,14 @@ def _parse_head(data: Buffer, path: Path | None) -> RecordingHead:
             decoded = json.loads(value)
         except json.JSONDecodeError:
             decoded = value.strip()
-            problems.append(f"line {line_number}: metadata {key!r} is not JSON; kept as text")
+            problems.append(f"line {line_number}: metadata {_short(key)} is not JSON; kept "
+                            "as text")
+        except RecursionError:  # JSON nested deeper than any recording writes
+            decoded = value.strip()
+            problems.append(f"line {line_number}: metadata {_short(key)} is nested too "
+                            "deeply to read; kept as text")
         if key in metadata:
-            problems.append(f"line {line_number}: metadata {key!r} appears again; "
+            problems.append(f"line {line_number}: metadata {_short(key)} appears again; "
                             "the last value is kept")
         metadata[key] = decoded
     try:
@@ -422,18 +462,38 @@ def _parse_head(data: Buffer, path: Path | None) -> RecordingHead:
             line_number) from None
     names = next(csv.reader([header_text])) if header_text.strip() else []
     header = tuple(name.strip() for name in names)
-    duplicates = sorted({name for name in header if header.count(name) > 1})
+    counts = Counter(header)
+    duplicates = sorted(name for name, count in counts.items() if count > 1)
     if duplicates:
         raise RecordingCorruptError(
-            f"{where}line {line_number}: the header names {', '.join(duplicates)} more than "
+            f"{where}line {line_number}: the header names {_listing(duplicates)} more than "
             "once", path, line_number)
-    missing = [name for name in REQUIRED_COLUMNS if name not in header]
+    missing = [name for name in REQUIRED_COLUMNS if name not in counts]
     if missing:
         raise MissingColumnsError(
             f"{where}line {line_number}: the header lacks the required column(s) "
-            f"{', '.join(missing)} (it has: {', '.join(header) or 'nothing'}); required are "
+            f"{', '.join(missing)} (it has: {_listing(header) or 'nothing'}); required are "
             f"{', '.join(REQUIRED_COLUMNS)}", path, missing)
-    return RecordingHead(metadata, header, position, line_number, comments, problems)
+    return RecordingHead(metadata, header, position, line_number, comments,
+                         _bounded(problems))
+
+
+def _short(text: str, limit: int = 40) -> str:
+    """``repr`` of a name, cut to about ``limit`` characters."""
+    return repr(text if len(text) <= limit else text[:limit] + "...")
+
+
+def _listing(items: Sequence[str], limit: int = MAX_LISTED) -> str:
+    """``a, b, c ... and N more``: names for a message, never the whole of a hostile list."""
+    shown = ", ".join(item if len(item) <= 40 else item[:40] + "..." for item in items[:limit])
+    return shown + (f" ... and {len(items) - limit} more" if len(items) > limit else "")
+
+
+def _bounded(problems: list[str], limit: int = MAX_WARNINGS) -> list[str]:
+    """At most ``limit`` messages, then one that counts the rest."""
+    if len(problems) <= limit:
+        return problems
+    return [*problems[:limit], f"... and {len(problems) - limit} more such problems"]
 
 
 def parse_recording(

@@ -1,0 +1,291 @@
+"""Read a recording in chunks: bounded memory and linear time, plain CSV or CSV inside gzip.
+
+:class:`RecordingStream` opens a file, reads its metadata and header (the first kilobytes) and
+then yields :class:`Chunk` s of rows, each parsed by the same compiled kernel as
+:func:`~app.core.recording.reader.read_recording`. Memory is one chunk (about
+:data:`CHUNK_BYTES` of text and its numbers), whatever the file's length; nothing done per
+chunk looks at the rest of the file.
+
+Compressed recordings (``.csv.gz``, format v1 inside gzip) are recognised by their first
+bytes, not their name. The recorder writes one gzip member per durable write (RFC 1952 allows
+any number of members; ``zcat`` and every gzip reader read them as one stream), so a file cut
+short by a crash reads up to its last complete member, and :meth:`RecordingStream.seek` can
+start decompressing at any member without reading what comes before it.
+
+Row blocks as the device delivered them (the ``block_start`` column) may straddle two chunks:
+:func:`device_blocks` carries the unfinished block over, so a replay hands every filter
+exactly the blocks it got live.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import warnings
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+
+from app.core.recording.compressed import GZIP_MAGIC, READ_BYTES, GzipBytes, PlainBytes
+from app.core.recording.errors import RecordingCorruptError, RecordingError, RecordingWarning
+from app.core.recording.format import REFERENCE_COLUMNS
+from app.core.recording.reader import (
+    MAX_HEAD_BYTES,
+    Recording,
+    RecordingHead,
+    _count_lines,
+    _header_end,
+    _kind,
+    _parse_fast,
+    _parse_head,
+    _parse_slow,
+)
+from app.core.samples import RawBlock
+
+CHUNK_BYTES = 8 << 20
+"""Text read and parsed at a time (about 37 k rows of a 6667 Hz recording)."""
+
+
+@dataclass(slots=True)
+class Chunk:
+    """Consecutive rows of a recording.
+
+    ``rows`` is a :class:`Recording` of just these rows (the file's metadata and header);
+    ``first_row`` the index of its first row in the file, ``offset`` the (decompressed) byte
+    offset where its first line starts and ``line`` that line's number.
+    """
+
+    rows: Recording
+    first_row: int
+    offset: int
+    line: int
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+
+class RecordingStream:
+    """An open recording read in chunks (use as a context manager, or call :meth:`close`).
+
+    Raises the reader's typed errors (:class:`~app.core.recording.errors.RecordingError`
+    subclasses) for a file that is not a recording, another version or missing columns, at
+    once; a bad row raises :class:`RecordingCorruptError` from :meth:`chunks` after the chunk
+    of rows before it.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], *, chunk_bytes: int = CHUNK_BYTES) -> None:
+        self.path = Path(path)
+        self.chunk_bytes = int(chunk_bytes)
+        try:
+            self._handle: BinaryIO = open(self.path, "rb")  # noqa: SIM115 (closed in close())
+        except OSError as exc:
+            raise RecordingError(f"{self.path}: cannot read the recording: "
+                                 f"{exc.strerror or exc}", self.path) from exc
+        try:
+            self.compressed = self._handle.read(2) == GZIP_MAGIC
+            self._handle.seek(0)
+            self._bytes: PlainBytes | GzipBytes = (
+                GzipBytes(self._handle, self.path) if self.compressed
+                else PlainBytes(self._handle))
+            self.head = self._read_head()
+        except BaseException:
+            self._handle.close()
+            raise
+        self._kinds = np.array([_kind(name) for name in self.head.header], dtype=np.int8)
+        self.warnings: list[str] = list(self.head.warnings)
+        self._has_reference_columns = all(c in self.head.header for c in REFERENCE_COLUMNS)
+
+    def _read_head(self) -> RecordingHead:
+        data = bytearray()
+        scanned = 0
+        while True:
+            more = self._bytes.read(READ_BYTES)
+            data += more
+            end, scanned = _header_end(data, scanned)
+            if end is not None or not more:
+                break
+            if len(data) > MAX_HEAD_BYTES:
+                raise RecordingCorruptError(
+                    f"{self.path}: no header row within the first {MAX_HEAD_BYTES >> 20} MB: "
+                    "this is not a recording that can be read", self.path)
+        head = _parse_head(bytes(data), self.path)
+        self._body = bytes(data[head.body_start:])  # already read: the first rows
+        return head
+
+    @property
+    def metadata(self) -> dict:
+        return self.head.metadata
+
+    @property
+    def header(self) -> tuple[str, ...]:
+        return self.head.header
+
+    @property
+    def members(self) -> list[tuple[int, int]]:
+        """Gzip members seen so far: (compressed offset, decompressed offset); [] when plain."""
+        return list(self._bytes.members) if isinstance(self._bytes, GzipBytes) else []
+
+    def file_size(self) -> int:
+        return os.fstat(self._handle.fileno()).st_size
+
+    def close(self) -> None:
+        self._handle.close()
+
+    def __enter__(self) -> RecordingStream:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def chunks(self, offset: int | None = None, first_row: int = 0,
+               line: int | None = None) -> Iterator[Chunk]:
+        """The rows from the body's start, or from a line start at ``offset`` (decompressed
+        bytes, as :attr:`Chunk.offset` gives; ``first_row`` and ``line`` then say which row
+        and line that is). Warns (:class:`RecordingWarning`) for an incomplete last row."""
+        if offset is None or offset == self.head.body_start:
+            offset = self.head.body_start
+            line = self.head.header_line + 1
+            self._bytes.seek(self.head.body_start + len(self._body))
+            carry = self._body
+        else:
+            self._bytes.seek(offset)
+            carry = b""
+        line = self.head.header_line + 1 if line is None else line
+        row = first_row
+        pending: list[bytes] = [carry] if carry else []
+        while True:
+            more = self._bytes.read(self.chunk_bytes)
+            if more and b"\n" not in more:
+                pending.append(more)  # a long line: gather it without copying it twice
+                continue
+            data = b"".join([*pending, more])
+            pending = []
+            if not more:
+                self._end(data, line)
+                return
+            cut = data.rfind(b"\n") + 1
+            body = data[:cut]
+            parse = _parse_slow if b'"' in body else _parse_fast
+            columns, rows, error = parse(body, 0, cut, self.head.header, self._kinds)
+            recording = Recording(metadata=self.head.metadata, header=self.head.header,
+                                  columns=columns, path=self.path)
+            # Every chunk carries the reference columns the header has (NaN where unknown),
+            # so chunks join; whether any row knows it is for the whole file to say.
+            recording._known_reference = self._has_reference_columns
+            if rows:
+                yield Chunk(recording, row, offset, line)
+            if error is not None:
+                bad, message = error
+                at = line + _count_lines(body, 0, bad)
+                raise RecordingCorruptError(
+                    f"{self.path}: line {at}: {message}; the {row + rows} row(s) before it "
+                    "are valid", self.path, at)
+            line += _count_lines(body, 0, cut)
+            row += rows
+            offset += cut
+            tail = data[cut:]
+            if tail:
+                pending.append(tail)
+
+    def _end(self, tail: bytes, line: int) -> None:
+        problems = []
+        if tail.strip(b" \t\r\n\x00"):
+            problems.append(f"{self.path}: line {line}: the last row is incomplete (the "
+                            "recording was interrupted while writing it); it was dropped")
+        if self._bytes.truncated:
+            problems.append(f"{self.path}: the compressed file ends early (the recording was "
+                            "interrupted); everything up to its last complete write was read")
+        for message in problems:
+            self.warnings.append(message)
+            warnings.warn(message, RecordingWarning, stacklevel=3)
+
+
+def read_stream(path: str | os.PathLike[str], *, on_corrupt: str = "raise") -> Recording:
+    """A whole recording read through :class:`RecordingStream` (for compressed files).
+
+    Same contract as :func:`~app.core.recording.reader.read_recording`.
+    """
+    with RecordingStream(path) as stream:
+        parts: list[Recording] = []
+        corrupt: RecordingCorruptError | None = None
+        try:
+            parts.extend(chunk.rows for chunk in stream.chunks())
+        except RecordingCorruptError as exc:
+            corrupt = exc
+        recording = concatenate_recordings(stream, parts)
+        recording.warnings = list(stream.warnings)
+        if corrupt is not None:
+            if on_corrupt == "raise":
+                corrupt.partial = recording
+                raise corrupt
+            recording.corrupt_line = corrupt.line
+            recording.warnings.append(f"{corrupt}; reading stopped there")
+            warnings.warn(recording.warnings[-1], RecordingWarning, stacklevel=2)
+        recording.dropped_partial_row = any("incomplete" in w for w in recording.warnings)
+        recording.comments = list(stream.head.comments)
+        return recording
+
+
+def concatenate_recordings(stream: RecordingStream, parts: list[Recording]) -> Recording:
+    """One :class:`Recording` of consecutive chunks."""
+    columns: dict[str, np.ndarray] = {}
+    for name in stream.header:
+        pieces = [p.columns[name] for p in parts]
+        if not pieces:
+            columns[name] = np.empty(0)
+        elif any(p.dtype == object for p in pieces):
+            columns[name] = np.concatenate([p.astype(object) for p in pieces])
+        else:
+            columns[name] = np.concatenate(pieces)
+    return Recording(metadata=stream.metadata, header=stream.header, columns=columns,
+                     path=stream.path)
+
+
+# -- device blocks across chunks ------------------------------------------------------------
+def _join(first: RawBlock, second: RawBlock) -> RawBlock:
+    ref = (None if first.reference_quat is None or second.reference_quat is None
+           else np.concatenate([first.reference_quat, second.reference_quat]))
+    return RawBlock(
+        t_s=np.concatenate([first.t_s, second.t_s]),
+        accel_raw=np.concatenate([first.accel_raw, second.accel_raw]),
+        gyro_raw=np.concatenate([first.gyro_raw, second.gyro_raw]),
+        temp_raw=np.concatenate([first.temp_raw, second.temp_raw]),
+        scale=first.scale,
+        gap=np.concatenate([first.gap, second.gap]),  # type: ignore[list-item]
+        reference_quat=ref,
+    )
+
+
+def device_blocks(chunks: Iterator[Chunk], size: int | None = None) -> Iterator[RawBlock]:
+    """The rows as device blocks, exactly as :meth:`Recording.raw_blocks` cuts a whole file.
+
+    ``size=None``: the blocks the device delivered (``block_start``), else blocks of ``size``
+    rows counted from the file's first row. A block cut by a chunk's end is completed from
+    the next chunk.
+    """
+    carry: RawBlock | None = None
+    for chunk in chunks:
+        rows = chunk.rows
+        n = len(rows)
+        if size is None and "block_start" in rows.columns:
+            starts = np.flatnonzero(rows.block_start).tolist()
+        else:
+            step = size or 65536
+            starts = list(range((-chunk.first_row) % step, n, step))
+        continues = not starts or starts[0] != 0
+        bounds = ([0] if continues else []) + starts + [n]
+        blocks = [rows.raw_block(a, b) for a, b in itertools.pairwise(bounds) if b > a]
+        if carry is not None:
+            if continues and blocks:
+                blocks[0] = _join(carry, blocks[0])
+            else:
+                yield carry
+            carry = None
+        if blocks:
+            carry = blocks.pop()
+        yield from blocks
+    if carry is not None:
+        yield carry
