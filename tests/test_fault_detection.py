@@ -175,3 +175,21 @@ def test_datasheet_figures_match_the_driver() -> None:
     assert fault_spec.LSM6DSOX_GYRO_NOISE_DPS_PER_SQRT_HZ == lsm6dsox.GYRO_NOISE_DPS_PER_SQRT_HZ
     assert fault_spec.LSM6DSOX_ACCEL_NOISE_G_PER_SQRT_HZ == \
         lsm6dsox.ACCEL_NOISE_G_PER_SQRT_HZ_LOW_FS
+
+
+def test_fault_events_round_trip_through_a_recording(tmp_path) -> None:
+    from app.core.faults.recording import recorded_fault_events, save_fault_events
+    from app.core.recording.reader import read_recording
+    from app.core.recording.writer import RecordingWriter  # noqa: F401 - the format's writer
+
+    path = tmp_path / "r.csv"
+    main(["record", "--device", "sim://static?fault=dead:gy@1&realtime=0", "--duration", "3",
+          str(path)])
+    recording = read_recording(path)
+    assert recording.metadata["simulator"]["faults"][0]["spec"] == "dead:gy@1"
+    events = list(diagnose_events(str(path)))
+    assert [(e.channel, e.kind) for e in events] == [("gy", "dead")]
+    save_fault_events(path, events)
+    again = read_recording(path)
+    assert recorded_fault_events(again.metadata) == events
+    assert len(again) == len(recording)

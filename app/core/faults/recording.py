@@ -1,0 +1,38 @@
+"""Fault events in a recording: the ``fault_events`` metadata key (docs/recording-format.md).
+
+The worker collects the detector's events while recording and calls :func:`save_fault_events`
+once the file is closed (as bookmarks are saved); a replay reads them back with
+:func:`recorded_fault_events`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+from app.core.faults.events import FaultEvent
+
+KEY_FAULT_EVENTS = "fault_events"
+
+
+def save_fault_events(path: str | os.PathLike[str], events: Iterable[FaultEvent]) -> None:
+    """Store ``events`` as the finished recording's ``fault_events`` (replacing earlier ones)."""
+    from app.core.recording.edit import rewrite_metadata
+
+    entries = [e.as_dict() for e in sorted(events, key=lambda e: e.t)]
+    rewrite_metadata(path, {KEY_FAULT_EVENTS: entries})
+
+
+def recorded_fault_events(metadata: Mapping[str, Any]) -> list[FaultEvent]:
+    """The events a recording's metadata holds (none when the key is absent or malformed)."""
+    entries = metadata.get(KEY_FAULT_EVENTS)
+    if not isinstance(entries, list):
+        return []
+    events = []
+    for entry in entries:
+        try:
+            events.append(FaultEvent.from_dict(entry))
+        except (KeyError, TypeError, ValueError):
+            continue
+    return events
