@@ -3,7 +3,8 @@
 ``inclinometer calibrate RECORDING [--method six-position|free] --out FILE.json [--save]``
     the wizard's stillness detection, pose capture and fit on a recorded tour (or on
     ``--device URL --seconds N``); prints the poses, residuals, uncertainties and tilt errors,
-    writes the calibration JSON, ``--save`` stores it as the device's profile.
+    writes the calibration JSON, ``--save`` stores it as the device's profile, ``--report``
+    writes an HTML or PDF report.
 ``inclinometer allan RECORDING [--json OUT]``
     Allan deviation of a static recording: noise density, bias instability and random walk
     per axis of the gyroscope and the accelerometer.
@@ -62,6 +63,8 @@ def add_calibration_parsers(commands: argparse._SubParsersAction) -> None:
     calibrate.add_argument("--out", metavar="FILE.json", help="write the calibration JSON here")
     calibrate.add_argument("--save", action="store_true",
                            help="store the result as the device's calibration profile")
+    calibrate.add_argument("--report", metavar="FILE.html|FILE.pdf",
+                           help="write a calibration report (HTML, or PDF through Qt)")
     calibrate.add_argument("--device", metavar="URL",
                            help="calibrate from a live device instead of a recording")
     calibrate.add_argument("--seconds", type=float, metavar="N",
@@ -223,6 +226,22 @@ def print_truth(result: OfflineCalibration, unit_errors: dict[str, Any], out: Te
         print(f"  {'  error':<32}{_vec(recovered - true, '+.4f')}", file=out)
 
 
+def write_calibration_report(result, profile, stream, label: str, path: Path) -> None:
+    """The report through Qt (a QGuiApplication is made when none runs, offscreen is fine)."""
+    import os
+
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                 or os.environ.get("WAYLAND_DISPLAY")):
+        os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")  # a lab script, no screen
+    from PySide6.QtGui import QGuiApplication
+
+    from app.gui.calibration_report import report_from_offline, write_report
+
+    _app = QGuiApplication.instance() or QGuiApplication(["inclinometer"])
+    report = report_from_offline(result, profile, stream.device, label, stream.unit_errors)
+    write_report(report, path)
+
+
 # -- commands ----------------------------------------------------------------------------------
 def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """The ``calibrate`` sub-command."""
@@ -240,10 +259,15 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
 
     out = sys.stdout if out is None else out
     try:
-        if args.out is None and not args.save:
-            raise _Usage("say what to do with the result: --out FILE.json and/or --save")
-        if args.out is not None and not Path(args.out).resolve().parent.is_dir():
-            raise _Usage(f"--out {args.out}: no such directory")
+        if args.out is None and not args.save and args.report is None:
+            raise _Usage("say what to do with the result: --out FILE.json, --save and/or "
+                         "--report FILE")
+        for option, value in (("--out", args.out), ("--report", args.report)):
+            if value is not None and not Path(value).resolve().parent.is_dir():
+                raise _Usage(f"{option} {value}: no such directory")
+        if args.report is not None and Path(args.report).suffix.lower() not in (
+                ".html", ".htm", ".pdf"):
+            raise _Usage(f"--report {args.report}: name an .html or a .pdf file")
         if not math.isfinite(args.gyro_seconds) or args.gyro_seconds <= 0:
             raise _Usage("--gyro-seconds must be positive")
         stream, label = load_stream(args, out)
@@ -280,6 +304,9 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
         store = ProfileStore(args.profile_dir)
         path = store.save(profile)
         print(f"saved as the profile of device {stream.unique_id}: {path}", file=out)
+    if args.report is not None:
+        write_calibration_report(result, profile, stream, label, Path(args.report))
+        print(f"wrote the report {args.report}", file=out)
     out.flush()
     return 0
 

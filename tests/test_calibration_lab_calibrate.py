@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -190,7 +191,7 @@ def test_a_live_device_for_n_seconds(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv, message", [
     (["calibrate", "missing.csv", "--out", "x.json"], "no such file"),
-    (["calibrate", "--device", "sim://tour"], "--out FILE.json and/or --save"),
+    (["calibrate", "--device", "sim://tour"], "--out FILE.json, --save and/or"),
     (["calibrate", "--device", "sim://tour", "--out", "x.json"], "--seconds"),
     (["calibrate", "--device", "nosuch://x", "--seconds", "5", "--out", "x.json"], "nosuch"),
 ])
@@ -198,3 +199,35 @@ def test_usage_errors_exit_2(argv, message, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     assert main(argv) == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("suffix", [".html", ".pdf"])
+def test_report_from_calibrate(tour_csv, tmp_path, suffix, qapp, artifacts_dir, capsys):
+    path = tmp_path / f"report{suffix}"
+    assert main(["calibrate", str(tour_csv), "--report", str(path)]) == 0
+    assert f"wrote the report {path}" in capsys.readouterr().out
+    data = path.read_bytes()
+    unique_id = read_recording(tour_csv).device["unique_id"]
+    if suffix == ".pdf":
+        assert data.startswith(b"%PDF") and len(data) > 10_000
+        return
+    text = data.decode("utf-8")
+    for needle in (unique_id, "Accelerometer bias", "Gyroscope bias", "±", "+z up", "-y up",
+                   "Against the simulator's truth", "data:image/png;base64,", "°C"):
+        assert needle in text, needle
+    # The preview is the document the PDF prints.
+    from app.core.calibration_procedures import SensorSettings, make_profile
+    from app.core.calibration_procedures.offline import calibrate_stream
+    from app.gui.calibration_report import render_preview, report_from_offline
+
+    recording = read_recording(tour_csv)
+    d = recording.device
+    result = calibrate_stream(recording.sample_block(),
+                              SensorSettings(d["odr_hz"], d["accel_fs_g"], d["gyro_fs_dps"]))
+    profile = make_profile(unique_id, result.calibration, result.settings,
+                           method=result.fit.method, temperature_degc=result.temperature_degc)
+    report = report_from_offline(result, profile, d, str(tour_csv),
+                                 recording.metadata["simulator"]["unit_errors"])
+    image = render_preview(report)
+    assert image.height() > 800
+    image.save(os.path.join(artifacts_dir, "calibration_report.png"))

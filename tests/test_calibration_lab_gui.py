@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import os
+from pathlib import Path
 
 import pytest
 from PySide6.QtCore import QSettings
@@ -74,4 +75,31 @@ def test_the_button_sets_the_running_ekf_and_records_the_source(qtbot, qapp, tmp
     assert "Allan analysis of static.csv" in QSettings().value(SETTINGS_KEY)
     assert "Allan analysis of static.csv" in page.applied_label.text()
     page.close()
+    window.close()
+
+
+def test_the_wizards_finish_page_saves_the_report(qtbot, qapp, tmp_path):
+    theme.apply_theme(qapp)
+    from app.core.calibration_procedures import ProfileStore
+
+    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+    session = DeviceSession(profile_store=ProfileStore(tmp_path / "profiles"))
+    window = MainWindow(session, settings, "sim://tour?odr=104&seed=4&hold=8&speed=10")
+    qtbot.addWidget(window)
+    window.show()
+    qtbot.waitUntil(lambda: session.device_info is not None, timeout=TIMEOUT_MS)
+    wizard = window.open_calibration_wizard()
+    wizard.intro.gyro_seconds.setValue(2.0)
+    wizard.next()
+    qtbot.waitUntil(wizard.gyro_page.isComplete, timeout=TIMEOUT_MS)
+    wizard.next()
+    qtbot.waitUntil(wizard.poses_page.isComplete, timeout=TIMEOUT_MS)
+    wizard.next()
+    results = wizard.results_page
+    html_path = results.save_report(str(tmp_path / "wizard.html"))
+    pdf_path = results.save_report(str(tmp_path / "wizard.pdf"))
+    text = Path(html_path).read_text(encoding="utf-8")
+    assert session.device_info.unique_id in text and "+z up" in text and "-y up" in text
+    assert Path(pdf_path).read_bytes()[:4] == b"%PDF"
+    wizard.close()
     window.close()

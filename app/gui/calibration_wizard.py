@@ -9,6 +9,7 @@ reaches the pipeline only when the user presses Finish (``profileAccepted``).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from PySide6.QtCore import QPointF, QRectF, Qt, QTimer, Signal
@@ -386,12 +387,16 @@ class ResultsPage(_Page):
         self.name_edit = QLineEdit()
         form.addRow("Profile name", self.name_edit)
         layout.addLayout(form)
+        self.report_button = QPushButton("Save report (HTML or PDF)…")
+        self.report_button.clicked.connect(lambda: self.save_report())
+        layout.addWidget(self.report_button, 0, Qt.AlignmentFlag.AlignLeft)
         self.fit: AccelFit | None = None
+        self.tilt_comparison = None
         self.error: str = ""
 
     def initializePage(self) -> None:
         wizard = self._wizard
-        self.fit, self.error = None, ""
+        self.fit, self.error, self.tilt_comparison = None, "", None
         gyro = wizard.gyro_page.procedure.result if wizard.gyro_page.procedure else None
         rows: list[tuple[str, list[str]]] = []
         if gyro is not None:
@@ -413,6 +418,7 @@ class ResultsPage(_Page):
                 rows.append(("  ± (%)", [f"{100 * v:.3f}" for v in fit.scale_error_std]))
                 calibration = fit.to_calibration(gyro)
                 comparison = compare_poses(capture.poses, calibration)
+                self.tilt_comparison = comparison
                 for row in comparison.rows():
                     comparison_rows.append(
                         (str(row["pose"]), f"{float(row['error_before_deg']):.3f}°",
@@ -443,6 +449,38 @@ class ResultsPage(_Page):
 
     def isComplete(self) -> bool:
         return not self.error
+
+    def save_report(self, path: str | None = None) -> str | None:
+        """Write the calibration report (app.gui.calibration_report) for this result."""
+        from PySide6.QtWidgets import QFileDialog
+
+        from app.gui.calibration_report import report_from_parts, write_report
+
+        profile = self.profile()
+        if self.fit is None or self.tilt_comparison is None or profile is None:
+            self.summary.setText("A report needs an accelerometer fit of a connected device.")
+            return None
+        if path is None:
+            path, _ = QFileDialog.getSaveFileName(
+                self, "Save calibration report", f"calibration-{profile.device_unique_id}.pdf",
+                "PDF (*.pdf);;HTML (*.html)")
+            if not path:
+                return None
+        wizard = self._wizard
+        gyro = wizard.gyro_page.procedure.result if wizard.gyro_page.procedure else None
+        capture = wizard.poses_page.capture
+        info = wizard.info
+        report = report_from_parts(
+            self.fit, np.zeros(3) if gyro is None else gyro.bias_rad_s,
+            np.full(3, np.nan) if gyro is None else gyro.std_error_rad_s, self.tilt_comparison,
+            profile, {"name": info.name if info else ""}, "calibration wizard",
+            rejected=[f"t = {e.time_s:.1f} s: {e.reason}" for e in
+                      (capture.events if capture else []) if not e.accepted],
+            gyro_source="" if gyro is None else f"gyro step ({gyro.duration_s:.1f} s still)")
+        report.tilt_reference = "the reference orientation, else the nominal faces"
+        write_report(report, Path(path))
+        self.summary.setText(self.summary.text() + f" Report saved: {path}")
+        return path
 
     def profile(self) -> CalibrationProfile | None:
         wizard = self._wizard

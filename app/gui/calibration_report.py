@@ -1,0 +1,299 @@
+"""The calibration report: one self-contained HTML or PDF document per calibrated unit.
+
+It holds the device id, date, sensor settings, temperature, the fitted parameters with
+their uncertainties, per-pose residuals and tilt errors before/after, a plot of those, the
+rejected capture attempts and, for a simulated unit, the recovered parameters against its
+truth. HTML embeds its plot as a data URI; PDF goes through Qt's own printing support
+(``QTextDocument.print_`` on a ``QPdfWriter``): no new dependency.
+
+Used by ``inclinometer calibrate --report FILE`` and the wizard's Finish page.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from PySide6.QtCore import QBuffer, QByteArray, QIODevice, QMarginsF, QPointF, QRectF, Qt, QUrl
+from PySide6.QtGui import (
+    QColor,
+    QFont,
+    QImage,
+    QPageLayout,
+    QPageSize,
+    QPainter,
+    QPdfWriter,
+    QPen,
+    QTextDocument,
+)
+
+from app.core.version import __version__
+
+PLOT_NAME = "tilt-errors.png"
+BEFORE_COLOUR = "#d9822b"
+AFTER_COLOUR = "#2b7bd9"
+
+
+@dataclass
+class CalibrationReport:
+    """What the report shows (plain values; build with :func:`report_from_offline`)."""
+
+    device_id: str
+    created_utc: str
+    method: str
+    source: str
+    settings: dict[str, Any]
+    temperature_degc: float
+    parameters: list[tuple[str, str, Sequence[float], Sequence[float] | None]]
+    """(name, unit, values x y z, 1-sigma x y z or None)."""
+    poses: list[tuple[str, float, float, float]]
+    """(label, |a| - g in mg, tilt error before, after in degrees)."""
+    residual_norm_rms_mg: float
+    tilt_reference: str
+    rejected: list[str] = field(default_factory=list)
+    truth: list[tuple[str, str, Sequence[float], Sequence[float]]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+def report_from_parts(fit, gyro_bias_rad_s, gyro_std_rad_s, comparison, profile, device,
+                      source: str, rejected: Sequence[str] = (), truth=None,
+                      notes: Sequence[str] = (), gyro_source: str = "") -> CalibrationReport:
+    """A report from an accelerometer fit, a gyro bias, a tilt comparison and the profile."""
+    s = profile.settings
+    parameters = [
+        ("Accelerometer bias", "mg", fit.bias_mg, fit.bias_std_mg),
+        ("Accelerometer scale error", "%", 100 * fit.scale_error, 100 * fit.scale_error_std),
+        ("Frame rotation", "°", fit.frame_rotation_deg, None),
+        ("Gyroscope bias", "°/s", np.degrees(gyro_bias_rad_s), np.degrees(gyro_std_rad_s)),
+    ]
+    nonortho = fit.non_orthogonality_deg
+    parameters.insert(2, ("Non-orthogonality xy, xz, yz", "°",
+                          [nonortho["xy"], nonortho["xz"], nonortho["yz"]], None))
+    poses = [
+        (label, float(fit.norm_errors_mg[i]), float(comparison.before.inclination_deg[i]),
+         float(comparison.after.inclination_deg[i]))
+        for i, label in enumerate(comparison.labels)
+    ]
+    all_notes = list(notes)
+    if gyro_source:
+        all_notes.insert(0, f"Gyroscope bias from the {gyro_source}.")
+    return CalibrationReport(
+        device_id=profile.device_unique_id, created_utc=profile.created_utc,
+        method=fit.method, source=source,
+        settings={"sensor": s.sensor, "odr_hz": s.odr_hz, "accel_fs_g": s.accel_fs_g,
+                  "gyro_fs_dps": s.gyro_fs_dps, "device": (device or {}).get("name", "")},
+        temperature_degc=fit.temperature_degc, parameters=parameters, poses=poses,
+        residual_norm_rms_mg=fit.residual_norm_rms_mg,
+        tilt_reference=getattr(comparison, "reference", "") or "",
+        rejected=list(rejected),
+        truth=[(name, unit, rec, tru) for name, unit, rec, tru in (truth.rows if truth else [])],
+        notes=all_notes,
+    )
+
+
+def report_from_offline(result, profile, device, source: str,
+                        unit_errors: dict[str, Any] | None = None) -> CalibrationReport:
+    """The report of a headless run (:class:`~app.core.calibration_procedures.offline.
+    OfflineCalibration`), with the simulator's truth when ``unit_errors`` is given."""
+    from app.core.calibration_procedures.offline import compare_with_truth
+
+    truth = compare_with_truth(result, unit_errors) if unit_errors else None
+    report = report_from_parts(
+        result.fit, result.gyro_bias_rad_s, result.gyro_bias_std_rad_s, result.comparison,
+        profile, device, source,
+        rejected=[f"t = {e.time_s:.1f} s: {e.reason}" for e in result.rejected],
+        truth=truth, notes=result.notes, gyro_source=result.gyro_source)
+    report.tilt_reference = ("the reference orientation" if result.comparison_reference ==
+                             "truth" else "the nominal faces")
+    return report
+
+
+# -- the plot --------------------------------------------------------------------------------------
+def tilt_plot(report: CalibrationReport, width: int = 900, height: int = 320) -> QImage:
+    """Bars of the tilt error before and after per pose, on a log scale (degrees)."""
+    image = QImage(width, height, QImage.Format.Format_ARGB32)
+    image.fill(QColor("white"))
+    painter = QPainter(image)
+    painter.setRenderHint(QPainter.RenderHint.Antialiasing)
+    font = QFont()
+    font.setPixelSize(13)
+    painter.setFont(font)
+    left, right, top, bottom = 70, 20, 30, 50
+    plot = QRectF(left, top, width - left - right, height - top - bottom)
+    values = [v for _, _, b, a in report.poses for v in (b, a) if v > 0 and math.isfinite(v)]
+    low = 10 ** math.floor(math.log10(min(values))) if values else 1e-4
+    high = 10 ** math.ceil(math.log10(max(values))) if values else 10.0
+    low, high = min(low, high / 10), max(high, low * 10)
+
+    def y_of(value: float) -> float:
+        value = max(value, low)
+        frac = (math.log10(value) - math.log10(low)) / (math.log10(high) - math.log10(low))
+        return plot.bottom() - frac * plot.height()
+
+    painter.setPen(QPen(QColor("#cccccc"), 1))
+    exponent = round(math.log10(low))
+    while 10.0**exponent <= high * 1.0001:
+        y = y_of(10.0**exponent)
+        painter.drawLine(QPointF(plot.left(), y), QPointF(plot.right(), y))
+        painter.setPen(QColor("#333333"))
+        painter.drawText(QRectF(0, y - 9, left - 8, 18),
+                         Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter,
+                         f"{10.0**exponent:g}°")
+        painter.setPen(QPen(QColor("#cccccc"), 1))
+        exponent += 1
+    n = max(1, len(report.poses))
+    slot = plot.width() / n
+    bar = slot * 0.32
+    for i, (label, _, before, after) in enumerate(report.poses):
+        x = plot.left() + i * slot + slot * 0.16
+        for value, colour, offset in ((before, BEFORE_COLOUR, 0.0), (after, AFTER_COLOUR, bar)):
+            y = y_of(value)
+            painter.fillRect(QRectF(x + offset, y, bar * 0.95, plot.bottom() - y), QColor(colour))
+        painter.setPen(QColor("#333333"))
+        painter.drawText(QRectF(plot.left() + i * slot, plot.bottom() + 4, slot, 18),
+                         Qt.AlignmentFlag.AlignCenter, label)
+    painter.setPen(QPen(QColor("#333333"), 1))
+    painter.drawRect(plot)
+    for k, (text, colour) in enumerate((("before calibration", BEFORE_COLOUR),
+                                        ("after", AFTER_COLOUR))):
+        x = plot.left() + 10 + k * 170
+        painter.fillRect(QRectF(x, 8, 14, 14), QColor(colour))
+        painter.drawText(QPointF(x + 20, 20), text)
+    painter.drawText(QRectF(0, height - 22, width, 20), Qt.AlignmentFlag.AlignCenter,
+                     f"tilt error per pose against {report.tilt_reference or 'the reference'}"
+                     " (log scale)")
+    painter.end()
+    return image
+
+
+def _png_bytes(image: QImage) -> bytes:
+    data = QByteArray()
+    buffer = QBuffer(data)
+    buffer.open(QIODevice.OpenModeFlag.WriteOnly)
+    image.save(buffer, "PNG")
+    buffer.close()
+    return bytes(data.data())
+
+
+# -- the document ----------------------------------------------------------------------------------
+def _fmt(value: float, spec: str = "+.4f") -> str:
+    return format(float(value), spec) if value is not None and math.isfinite(value) else "–"
+
+
+def report_html(report: CalibrationReport, image_src: str = PLOT_NAME) -> str:
+    """The report as HTML (Qt's rich-text subset, so the PDF looks the same)."""
+    e = html.escape
+    s = report.settings
+    temperature = (f"{report.temperature_degc:.2f} °C" if math.isfinite(report.temperature_degc)
+                   else "unknown")
+    rows = []
+    for name, unit, values, std in report.parameters:
+        cells = "".join(
+            f"<td align='right'>{_fmt(v)}" + (f" ± {_fmt(sd, '.4f')}" if std is not None else "")
+            + "</td>" for v, sd in zip(values, std if std is not None else [None] * 3,
+                                       strict=True))
+        rows.append(f"<tr><td>{e(name)}</td><td>{e(unit)}</td>{cells}</tr>")
+    poses = "".join(
+        f"<tr><td>{i + 1}</td><td>{e(label)}</td><td align='right'>{norm:+.3f}</td>"
+        f"<td align='right'>{before:.3f}</td><td align='right'>{after:.4f}</td></tr>"
+        for i, (label, norm, before, after) in enumerate(report.poses))
+    before_max = max((b for _, _, b, _ in report.poses), default=math.nan)
+    after_max = max((a for _, _, _, a in report.poses), default=math.nan)
+    parts = [
+        "<html><head><meta charset='utf-8'><title>Calibration report</title>",
+        "<style>body{font-family:sans-serif;font-size:10pt} table{border-collapse:collapse}"
+        " td,th{border:1px solid #999;padding:3px 6px} th{background:#e8e8e8}"
+        " h1{font-size:16pt} h2{font-size:12pt;margin-top:14px}</style></head><body>",
+        f"<h1>Calibration report — {e(report.device_id)}</h1>",
+        "<table>",
+        f"<tr><th align='left'>Device</th><td>{e(report.device_id)} {e(str(s.get('device', '')))}"
+        "</td></tr>",
+        f"<tr><th align='left'>Date (UTC)</th><td>{e(report.created_utc)}</td></tr>",
+        f"<tr><th align='left'>Sensor settings</th><td>{e(str(s.get('sensor', '')))}, "
+        f"{float(s.get('odr_hz', math.nan)):.4g} Hz, ±{s.get('accel_fs_g')} g, "
+        f"±{s.get('gyro_fs_dps')} °/s</td></tr>",
+        f"<tr><th align='left'>Temperature</th><td>{temperature}</td></tr>",
+        f"<tr><th align='left'>Method</th><td>{e(report.method)}</td></tr>",
+        f"<tr><th align='left'>Source</th><td>{e(report.source)}</td></tr>",
+        f"<tr><th align='left'>Program</th><td>inclinometer {e(__version__)}</td></tr>",
+        "</table>",
+        "<h2>Fitted parameters (value ± 1σ)</h2>",
+        "<p>Model a<sub>meas</sub> = M a<sub>true</sub> + b; the pipeline applies "
+        "a<sub>cal</sub> = M<sup>−1</sup> (a<sub>raw</sub> − b).</p>",
+        "<table><tr><th>Parameter</th><th>Unit</th><th>x</th><th>y</th><th>z</th></tr>",
+        *rows, "</table>",
+        f"<p>Residual: {_fmt(report.residual_norm_rms_mg, '.3f')} mg RMS of |a| − 1 g.</p>",
+        "<h2>Poses: residuals and tilt error before / after</h2>",
+        f"<p>Tilt error against {e(report.tilt_reference)}: worst {before_max:.3f}° before, "
+        f"{after_max:.4f}° after.</p>",
+        "<table><tr><th>#</th><th>Pose</th><th>|a| − g (mg)</th><th>before (°)</th>"
+        "<th>after (°)</th></tr>", poses, "</table>",
+        f"<p><img src='{image_src}' width='640'></p>",
+    ]
+    if report.rejected:
+        parts.append("<h2>Rejected capture attempts</h2><ul>"
+                     + "".join(f"<li>{e(r)}</li>" for r in report.rejected) + "</ul>")
+    if report.truth:
+        parts.append("<h2>Against the simulator's truth</h2><table><tr><th>Parameter</th>"
+                     "<th>Unit</th><th></th><th>x</th><th>y</th><th>z</th></tr>")
+        for name, unit, recovered, true in report.truth:
+            for what, values in (("recovered", recovered), ("truth", true),
+                                 ("error", np.asarray(recovered) - np.asarray(true))):
+                cells = "".join(f"<td align='right'>{_fmt(v)}</td>" for v in values)
+                parts.append(f"<tr><td>{e(name) if what == 'recovered' else ''}</td>"
+                             f"<td>{e(unit) if what == 'recovered' else ''}</td><td>{what}</td>"
+                             f"{cells}</tr>")
+        parts.append("</table>")
+    if report.notes:
+        parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{e(n)}</li>" for n in report.notes)
+                     + "</ul>")
+    parts.append("</body></html>")
+    return "\n".join(parts)
+
+
+def report_document(report: CalibrationReport) -> QTextDocument:
+    """The report as a QTextDocument with its plot as a resource (for PDF and screenshots)."""
+    document = QTextDocument()
+    document.addResource(QTextDocument.ResourceType.ImageResource, QUrl(PLOT_NAME),
+                         tilt_plot(report))
+    document.setHtml(report_html(report))
+    return document
+
+
+def write_report(report: CalibrationReport, path: Path) -> Path:
+    """Write ``path`` as HTML (plot embedded) or PDF (by its suffix)."""
+    path = Path(path)
+    if path.suffix.lower() == ".pdf":
+        writer = QPdfWriter(str(path))
+        writer.setPageLayout(QPageLayout(QPageSize(QPageSize.PageSizeId.A4),
+                                         QPageLayout.Orientation.Portrait,
+                                         QMarginsF(15, 15, 15, 15),
+                                         QPageLayout.Unit.Millimeter))
+        writer.setTitle(f"Calibration report {report.device_id}")
+        writer.setCreator(f"inclinometer {__version__}")
+        document = report_document(report)
+        document.print_(writer)
+        del writer  # finishes the file
+        return path
+    png = base64.b64encode(_png_bytes(tilt_plot(report))).decode("ascii")
+    path.write_text(report_html(report, f"data:image/png;base64,{png}"), encoding="utf-8")
+    return path
+
+
+def render_preview(report: CalibrationReport, width: int = 820) -> QImage:
+    """The document drawn into an image (what the PDF pages hold, for a screenshot)."""
+    document = report_document(report)
+    document.setTextWidth(width)
+    size = document.size()
+    image = QImage(int(size.width()), int(size.height()), QImage.Format.Format_ARGB32)
+    image.fill(QColor("white"))
+    painter = QPainter(image)
+    document.drawContents(painter)
+    painter.end()
+    return image
