@@ -279,6 +279,8 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
         run_filters,
         write_angles_csv,
     )
+    from app.core.recording.reader import Recording
+    from app.core.recording.stream import RecordingStream
     from drivers.errors import DeviceUrlError
 
     out = sys.stdout if out is None else out
@@ -292,11 +294,25 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
         return EXIT_USAGE
     try:
         source_path = _recording_path(args.source)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            head = RecordingStream(source_path)
+    except (RecordingError, DeviceUrlError) as exc:
+        _error(str(exc))
+        return EXIT_USAGE
+    for warning in caught:
+        _error(f"warning: {warning.message}")
+    with head:
+        recorded_name = Recording(head.metadata, head.header, {}).filter_name
+        names = args.filters or [recorded_name or DEFAULT_FILTER]
+        if "all" not in names and all(n in FILTERS and not FILTERS[n].offline for n in names):
+            return _replay_streamed(args, head, list(dict.fromkeys(names)), cli_parameters,
+                                    source_path, out)
+    try:
         recording = load_recording_for_cli(args.source)
     except (RecordingError, DeviceUrlError) as exc:
         _error(str(exc))
         return EXIT_USAGE
-    names = args.filters or [recording.filter_name or DEFAULT_FILTER]
     if "all" in names:
         names = list(FILTERS)
     unknown = [n for n in names if n not in FILTERS]
@@ -343,6 +359,68 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
         if reference is not None:
             stats = error_statistics(output.quat, reference, recording.t_s, DEFAULT_SKIP_S,
                                      score_mask)
+            rmse, worst = stats["rmse_deg"], stats["max_deg"]
+            line += (f"  {rmse:9.3f}  {worst:9.3f}" if math.isfinite(rmse)
+                     else f"  {'-':>9}  {'-':>9}")
+        print(line, file=out)
+    return 0
+
+
+def _replay_streamed(args: argparse.Namespace, stream: Any, names: list[str],
+                     cli_parameters: dict[str, dict[str, Any]], source_path: Path,
+                     out: TextIO) -> int:
+    """``replay`` of online filters in one streamed pass: memory does not grow with the file."""
+    from app.core.recording.errors import RecordingError
+    from app.core.recording.export import recorded_filter_parameters, replay_streamed
+    from app.core.recording.reader import Recording
+    from app.core.scoring import DEFAULT_SKIP_S, SCORE_COLUMN
+
+    try:
+        check_parameters_for(cli_parameters, names)
+    except ValueError as exc:
+        _error(str(exc))
+        return EXIT_USAGE
+    target = Path(args.out)
+    if target.exists() and target.resolve() == source_path.resolve():
+        _error("--out would overwrite the recording itself")
+        return EXIT_USAGE
+    recorded = recorded_filter_parameters(Recording(stream.metadata, stream.header, {}))
+    parameters = {name: {**recorded.get(name, {}), **cli_parameters.get(name, {})}
+                  for name in names}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            summary = replay_streamed(stream, names, target,
+                                      calibration=None if args.raw else "recorded",
+                                      parameters=parameters, block=args.block)
+        except (RecordingError, ValueError) as exc:
+            failure = str(exc)
+        else:
+            failure = ""
+    for warning in caught:
+        _error(f"warning: {warning.message}")
+    if failure:
+        _error(failure)
+        return EXIT_FAILED
+    calibration = None if args.raw else Recording(stream.metadata, stream.header, {}).calibration
+    applied = ("no calibration" if calibration is None
+               else f"calibration {calibration.name!r}")
+    print(f"{target}: {summary.rows} rows, {summary.duration_s:.1f} s, {applied}", file=out)
+    if summary.reference:
+        rule = (f"rows with {SCORE_COLUMN} == 1" if summary.masked
+                else f"after the first {DEFAULT_SKIP_S:g} s")
+        print(f"  inclination error scored {rule} with a reference: "
+              f"{summary.scored_rows} of {summary.rows} rows", file=out)
+    width = max(6, *(len(f.name) for f in summary.filters))
+    header = f"  {'filter':<{width}}  {'final roll':>10}  {'final pitch':>11}"
+    if summary.reference:
+        header += f"  {'RMSE deg':>9}  {'max deg':>9}"
+    print(header, file=out)
+    for result in summary.filters:
+        line = (f"  {result.name:<{width}}  {result.final_roll_deg:10.3f}  "
+                f"{result.final_pitch_deg:11.3f}")
+        if summary.reference:
+            stats = result.errors.result()
             rmse, worst = stats["rmse_deg"], stats["max_deg"]
             line += (f"  {rmse:9.3f}  {worst:9.3f}" if math.isfinite(rmse)
                      else f"  {'-':>9}  {'-':>9}")

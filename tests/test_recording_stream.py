@@ -185,3 +185,13 @@ def test_data_rate_estimates():
     assert "GB free last about" in rate.text()
     assert duration_text(90) == "90 s" and duration_text(3 * 3600) == "3.0 h"
     assert duration_text(10 * 86400) == "10 days"
+
+
+def test_a_recording_smaller_than_the_first_read_streams_whole(tmp_path):
+    small = tmp_path / "small.csv"
+    rows = record(small, "sim://static?odr=104&realtime=0&block=10", blocks=12)
+    with RecordingStream(small) as stream:
+        chunks = list(stream.chunks())
+    assert sum(len(c) for c in chunks) == rows == 120
+    np.testing.assert_array_equal(np.concatenate([c.rows.t_s for c in chunks]),
+                                  read_recording(small).t_s)

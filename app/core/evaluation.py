@@ -17,9 +17,9 @@ simulator (:func:`app.services.simulation.simulator_source`, a layer up: it runs
   scored.
 - **throughput**: samples per second of wall time inside ``filter.process`` only.
 - **flag**: ``ok``; ``NaN`` when an estimate is not finite; ``diverged`` when the error RMS over
-  the last 10 % of the scored samples exceeds :data:`DIVERGED_DEG` and
-  :data:`DIVERGED_RATIO` times that over the rest (the estimate runs away); ``error`` when the
-  filter raised (``message`` says what).
+  the last 10 % of the scored samples exceeds :data:`~app.core.scoring.DIVERGED_DEG` and
+  :data:`~app.core.scoring.DIVERGED_RATIO` times that over the rest (the estimate runs away);
+  ``error`` when the filter raised (``message`` says what).
 
 An *offline* filter (``OrientationFilter.offline``: an acausal smoother) gets the whole stream
 in one ``process`` call; the others get it in blocks of ``block`` samples.
@@ -38,29 +38,30 @@ import math
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from app.core.calibration import SensorCalibration
 from app.core.filters import FILTERS, OrientationFilter
-from app.core.orientation import inclination_error_deg
 from app.core.samples import SampleBlock
+from app.core.scoring import (
+    DEFAULT_SKIP_S,
+    SCORE_COLUMN,
+    ErrorAccumulator,
+    error_statistics,
+    scoring_rows,
+)
 
-DEFAULT_SKIP_S = 2.0
-"""Seconds at the start of a stream that are not scored (filter convergence)."""
 DEFAULT_BLOCK = 65536
 """Samples per ``filter.process`` call during evaluation (large: a batch, as a recording)."""
 DEFAULT_REPEATS = 3
 """Runs per filter and stream; the throughput is that of the fastest."""
+STREAM_MIN_BYTES = 64 << 20
+"""Recordings at least this large are scored in pieces (memory then does not grow)."""
 LARGE_STREAM = 1_000_000
 """A stream with at least this many samples is timed in one run (it times well as it is)."""
-SCORE_COLUMN = "movement"
-"""The optional recording column that says which rows are scored (1 = score this row)."""
-DIVERGED_DEG = 5.0
-DIVERGED_RATIO = 1.5
-LATE_FRACTION = 0.1
-
 FilterSpec = str | type[OrientationFilter]
 """A filter to evaluate: a registry name (:data:`app.core.filters.FILTERS`) or a class."""
 
@@ -95,6 +96,10 @@ class StreamSource:
     description: str = ""
     score_mask: np.ndarray | None = None
     scoring: str = ""
+    pieces: Callable[[], Iterable[tuple[SampleBlock, np.ndarray | None]]] | None = None
+    """Optional: the stream afresh in pieces, each with its own score mask (or None for the
+    ``skip_s`` rule), for scoring in memory that does not grow with the stream (a long
+    recording). Online filters then read it; ``blocks`` is left to offline filters."""
 
 
 @dataclass(slots=True)
@@ -197,22 +202,40 @@ def recording_source(
     When the recording has a ``movement`` column (:data:`SCORE_COLUMN`), its rows with
     ``movement == 1`` are the ones scored (:func:`recording_score_mask`).
     """
-    from app.core.recording.reader import read_recording
+    from app.core.recording.reader import Recording, read_recording
+    from app.core.recording.stream import RecordingStream
 
-    recording = read_recording(path)
-    if not recording.has_reference:
+    with RecordingStream(path) as stream:  # the head only: typed errors for a bad file
+        head = Recording(stream.metadata, stream.header, {}, Path(path))
+        streamed = stream.file_size() >= STREAM_MIN_BYTES  # else read it whole, as before
+    if not streamed:
+        recording = read_recording(path)
+        if not recording.has_reference:
+            raise ValueError(f"{path}: the recording has no reference orientation (columns qw, "
+                             "qx, qy, qz) to compare the filters with")
+    elif not all(name in head.header for name in ("qw", "qx", "qy", "qz")):
         raise ValueError(f"{path}: the recording has no reference orientation (columns qw, qx, "
                          "qy, qz) to compare the filters with")
-    calibration = recording.calibration if recalibrate else None
+    calibration = head.calibration if recalibrate else None
     applied = (f"recorded calibration {calibration.name!r} applied" if calibration is not None
                else "raw samples, no calibration")
-    mask = recording_score_mask(recording)
+    masked = SCORE_COLUMN in head.header
+    scoring = f"rows with {SCORE_COLUMN} == 1" if masked else ""
+    if not streamed:
+        mask = recording_score_mask(recording)
+        return StreamSource(label or str(path),
+                            lambda: [recording.sample_block(calibration)], applied, mask,
+                            scoring)
 
-    def blocks() -> Iterable[SampleBlock]:
-        return [recording.sample_block(calibration)]
+    def pieces() -> Iterator[tuple[SampleBlock, np.ndarray | None]]:
+        with RecordingStream(path) as chunks:
+            for chunk in chunks.chunks():
+                yield chunk.rows.sample_block(calibration), recording_score_mask(chunk.rows)
 
-    scoring = f"rows with {SCORE_COLUMN} == 1" if mask is not None else ""
-    return StreamSource(label or str(path), blocks, applied, mask, scoring)
+    def blocks() -> Iterable[SampleBlock]:  # offline filters need the whole recording
+        return [read_recording(path).sample_block(calibration)]
+
+    return StreamSource(label or str(path), blocks, applied, None, scoring, pieces)
 
 
 def recording_score_mask(recording: Any) -> np.ndarray | None:
@@ -237,62 +260,6 @@ def recording_score_mask(recording: Any) -> np.ndarray | None:
 
 
 # -- scoring ---------------------------------------------------------------------------------
-def scoring_rows(
-    reference: np.ndarray, t_s: np.ndarray, skip_s: float = DEFAULT_SKIP_S,
-    score_mask: np.ndarray | None = None,
-) -> np.ndarray:
-    """(N,) bool: the rows that count, before any estimate is looked at.
-
-    With ``score_mask``, the rows it marks; else those from ``skip_s`` seconds after the first
-    sample on. Either way only rows with a known (finite) reference.
-    """
-    known = np.all(np.isfinite(reference), axis=1)
-    if score_mask is not None:
-        mask = np.asarray(score_mask, dtype=bool)
-        if mask.shape != t_s.shape:
-            raise ValueError(f"the score mask has shape {mask.shape}, the stream {t_s.shape}")
-        return mask & known
-    if len(t_s) == 0:
-        return known
-    return (t_s >= t_s[0] + skip_s) & known
-
-
-def error_statistics(
-    quat: np.ndarray, reference: np.ndarray, t_s: np.ndarray, skip_s: float = DEFAULT_SKIP_S,
-    score_mask: np.ndarray | None = None,
-) -> dict[str, Any]:
-    """RMSE and maximum inclination error (degrees) over the scored rows.
-
-    The scored rows are those ``score_mask`` (N,) marks, or without one those after the first
-    ``skip_s`` seconds (:func:`scoring_rows`); rows without a known reference never count.
-
-    Returns ``rmse_deg``, ``max_deg``, ``scored`` (samples scored), ``nan`` (samples whose
-    estimate is not finite, counted over the whole stream) and ``diverged`` (see the module
-    docstring). Non-finite estimates are left out of RMSE and maximum.
-    """
-    finite = np.all(np.isfinite(quat), axis=1)
-    nan_count = int(np.count_nonzero(~finite))
-    if len(t_s) == 0:
-        return {"rmse_deg": math.nan, "max_deg": math.nan, "scored": 0, "nan": 0,
-                "diverged": False}
-    scored = scoring_rows(reference, t_s, skip_s, score_mask) & finite
-    errors = inclination_error_deg(quat[scored], reference[scored])
-    if len(errors) == 0:
-        return {"rmse_deg": math.nan, "max_deg": math.nan, "scored": 0, "nan": nan_count,
-                "diverged": False}
-    late_count = max(1, int(len(errors) * LATE_FRACTION))
-    late = float(np.sqrt(np.mean(errors[-late_count:] ** 2)))
-    early_errors = errors[:-late_count]
-    early = float(np.sqrt(np.mean(early_errors**2))) if len(early_errors) else 0.0
-    return {
-        "rmse_deg": float(np.sqrt(np.mean(errors**2))),
-        "max_deg": float(errors.max()),
-        "scored": len(errors),
-        "nan": nan_count,
-        "diverged": late > DIVERGED_DEG and late > DIVERGED_RATIO * early,
-    }
-
-
 def _resolve(spec: FilterSpec) -> type[OrientationFilter]:
     if isinstance(spec, str):
         try:
@@ -408,6 +375,9 @@ def evaluate_source(
     ``repeats`` None: one run for a stream of :data:`LARGE_STREAM` samples or more, else
     :data:`DEFAULT_REPEATS` (only the throughput depends on it).
     """
+    if source.pieces is not None:
+        return _evaluate_pieces(source, filters, skip_s=skip_s, block=block, repeats=repeats,
+                                parameters=parameters)
     stream = concatenate_blocks(source.blocks())
     if stream.reference_quat is None:
         raise ValueError(f"{source.label}: the stream has no reference orientation")
@@ -427,6 +397,174 @@ def evaluate_source(
     result.scores = evaluate(stream, filters, skip_s=skip_s, block=block, repeats=repeats,
                              score_mask=mask, parameters=parameters)
     return result
+
+
+def rebatch(pieces: Iterable[tuple[SampleBlock, np.ndarray | None]], size: int
+            ) -> Iterator[tuple[SampleBlock, np.ndarray | None]]:
+    """The pieces again as blocks of exactly ``size`` rows (the last may be shorter), so a
+    filter sees the same blocks as when the whole stream is split (:func:`split_block`)."""
+    held: list[tuple[SampleBlock, np.ndarray | None]] = []
+    count = 0
+    for piece, mask in pieces:
+        held.append((piece, mask))
+        count += len(piece)
+        if count < size:
+            continue
+        joined, joined_mask = _join_pieces(held)
+        whole = count // size * size
+        for start in range(0, whole, size):
+            yield (next(split_block(_rows(joined, start, start + size), size)),
+                   None if joined_mask is None else joined_mask[start:start + size])
+        held = [(_rows(joined, whole, count),
+                 None if joined_mask is None else joined_mask[whole:])] if whole < count else []
+        count -= whole
+    if held and count:
+        yield _join_pieces(held)
+
+
+def _join_pieces(held: list[tuple[SampleBlock, np.ndarray | None]]
+                 ) -> tuple[SampleBlock, np.ndarray | None]:
+    if len(held) == 1:
+        return held[0]
+    masks = [m for _, m in held]
+    mask = None if any(m is None for m in masks) else np.concatenate(masks)  # type: ignore[arg-type]
+    return concatenate_blocks(b for b, _ in held), mask
+
+
+def _rows(block: SampleBlock, start: int, stop: int) -> SampleBlock:
+    ref = block.reference_quat
+    return SampleBlock(block.t_s[start:stop], block.accel_m_s2[start:stop],
+                       block.gyro_rad_s[start:stop], block.temp_degc[start:stop],
+                       block.gap[start:stop], None if ref is None else ref[start:stop])
+
+
+def _evaluate_pieces(
+    source: StreamSource, filters: Sequence[FilterSpec] | None, *, skip_s: float, block: int,
+    repeats: int | None, parameters: Mapping[str, Mapping[str, Any]] | None,
+) -> SourceResult:
+    """:func:`evaluate_source` over ``source.pieces``, in memory that does not grow with the
+    stream: one pass feeds every online filter each block in turn (more passes only to time
+    them when ``repeats`` > 1); offline filters get the stream whole."""
+    assert source.pieces is not None
+    names: Sequence[FilterSpec] = list(FILTERS) if filters is None else filters
+    chosen = parameters or {}
+    classes = [_resolve(spec) for spec in names]
+    runs = [_OnlineRun(cls, dict(chosen.get(cls.name, {}))) for cls in classes
+            if not cls.offline]
+    figures = _StreamFigures()
+    for repeat in range(1 if repeats is None else max(1, repeats)):
+        for run in runs:
+            run.start()
+        t0: float | None = None
+        for piece, mask in rebatch(source.pieces(), block):
+            if t0 is None:
+                t0 = float(piece.t_s[0])
+            rows = None
+            if repeat == 0:
+                if piece.reference_quat is None:
+                    raise ValueError(f"{source.label}: the stream has no reference orientation")
+                rows = (mask if mask is not None else piece.t_s >= t0 + skip_s) & np.all(
+                    np.isfinite(piece.reference_quat), axis=1)
+                figures.add(piece, rows, mask is not None)
+            for run in runs:
+                run.process(piece, rows)
+        for run in runs:
+            run.finish()
+    scores = []
+    for cls in classes:
+        if cls.offline:
+            stream, mask = _join_pieces(list(source.pieces()))
+            scores.append(evaluate_filter(cls, stream, skip_s=skip_s, block=block,
+                                          repeats=1 if repeats is None else repeats,
+                                          score_mask=mask, **dict(chosen.get(cls.name, {}))))
+        else:
+            scores.append(next(r for r in runs if r.cls is cls).score(figures.samples))
+    scoring = ((source.scoring or "rows marked by the score mask") if figures.masked
+               else f"after the first {skip_s:g} s")
+    result = SourceResult(source.label, source.description, figures.duration_s,
+                          figures.samples, figures.rate_hz, figures.gaps, figures.scored,
+                          scoring, figures.masked)
+    result.scores = scores
+    return result
+
+
+class _StreamFigures:
+    """Duration, samples, rate, gaps and scored rows of a stream seen in pieces."""
+
+    def __init__(self) -> None:
+        self.samples = self.gaps = self.scored = 0
+        self.first = self.last = self.rate_hz = math.nan
+        self.masked = False
+
+    def add(self, piece: SampleBlock, rows: np.ndarray, masked: bool) -> None:
+        self.masked = self.masked or masked
+        self.samples += len(piece)
+        self.gaps += int(np.count_nonzero(piece.gap))
+        self.scored += int(np.count_nonzero(rows))
+        if math.isnan(self.first):
+            self.first = float(piece.t_s[0])
+        self.last = float(piece.t_s[-1])
+        if math.isnan(self.rate_hz) and len(piece) > 1:  # the first block's median step
+            self.rate_hz = 1.0 / float(np.median(np.diff(piece.t_s)))
+
+    @property
+    def duration_s(self) -> float:
+        return self.last - self.first if self.samples > 1 else 0.0
+
+
+class _OnlineRun:
+    """One online filter over a stream in pieces: its errors (first run) and fastest time."""
+
+    def __init__(self, cls: type[OrientationFilter], values: dict[str, Any]) -> None:
+        self.cls = cls
+        self.values = values
+        self.errors = ErrorAccumulator()
+        self.best = math.inf
+        self.failure = ""
+        self.filter: OrientationFilter | None = None
+        self.elapsed = 0.0
+
+    def start(self) -> None:
+        self.elapsed = 0.0
+        if self.failure:
+            return
+        try:  # one broken filter must not end the evaluation
+            self.filter = self.cls(**self.values)
+            self.filter.warm_up()
+        except Exception as exc:
+            self.failure = f"{type(exc).__name__}: {exc}"
+
+    def process(self, piece: SampleBlock, rows: np.ndarray | None) -> None:
+        if self.failure or self.filter is None:
+            return
+        start = time.perf_counter()
+        try:
+            result = self.filter.process(piece)
+        except Exception as exc:
+            self.failure = f"{type(exc).__name__}: {exc}"
+            return
+        self.elapsed += time.perf_counter() - start
+        if rows is not None:
+            self.errors.add(result.quat, piece.reference_quat, rows)
+
+    def finish(self) -> None:
+        if not self.failure:
+            self.best = min(self.best, self.elapsed)
+
+    def score(self, samples: int) -> FilterScore:
+        score = FilterScore(self.cls.name, self.cls.title or self.cls.name, samples=samples)
+        if self.failure:
+            score.flag, score.message = "error", self.failure
+            return score
+        stats = self.errors.result()
+        score.rmse_deg, score.max_deg = stats["rmse_deg"], stats["max_deg"]
+        score.scored_samples, score.nan_samples = stats["scored"], stats["nan"]
+        score.samples_per_s = samples / self.best if self.best > 0.0 else math.inf
+        if score.nan_samples:
+            score.flag = "NaN"
+        elif stats["diverged"]:
+            score.flag = "diverged"
+        return score
 
 
 def summarize(results: Sequence[SourceResult]) -> dict[str, dict[str, float | int]]:

@@ -15,9 +15,10 @@ starts with ``# inclinometer-angles 1`` and ``# key: <JSON>`` lines like a recor
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -29,13 +30,16 @@ from app.core.orientation import angles_from_quaternion, inclination_error_deg
 from app.core.recording.format import (
     KEY_COMPARISONS,
     KEY_FILTER,
+    REFERENCE_COLUMNS,
     calibration_to_json,
     metadata_line,
     utc_timestamp,
 )
 from app.core.recording.reader import Recording
-from app.core.recording.writer import format_table
+from app.core.recording.stream import RecordingStream, device_blocks
+from app.core.recording.writer import format_table_bytes
 from app.core.samples import convert_raw_block
+from app.core.scoring import DEFAULT_SKIP_S, SCORE_COLUMN, ErrorAccumulator
 
 ANGLES_MAGIC = "# inclinometer-angles 1"
 ANGLE_NAMES = ("roll", "pitch", "tilt", "direction")
@@ -167,7 +171,155 @@ def write_angles_csv(
         for output in outputs:
             names.append(f"{output.name}.inclination_error")
             columns.append(inclination_error_deg(output.quat, reference))
-    metadata = {
+    metadata = _angles_metadata(recording, outputs, calibration)
+    head = [ANGLES_MAGIC, *(metadata_line(k, v) for k, v in metadata.items()), ",".join(names)]
+    n = len(recording)
+    with open(path, "wb" if overwrite else "xb") as out:
+        out.write(("\n".join(head) + "\n").encode("utf-8"))
+        for start in range(0, n, EXPORT_ROWS):
+            out.write(format_table_bytes([c[start:start + EXPORT_ROWS] for c in columns]))
+    return n
+
+
+@dataclass(slots=True)
+class StreamedFilter:
+    """One filter's result over a streamed replay: its last angles and its error figures."""
+
+    name: str
+    title: str
+    parameters: dict[str, Any]
+    final_roll_deg: float = math.nan
+    final_pitch_deg: float = math.nan
+    errors: ErrorAccumulator = field(default_factory=ErrorAccumulator)
+
+
+@dataclass(slots=True)
+class StreamedReplay:
+    """What :func:`replay_streamed` did: rows, span, which rows were scored, each filter."""
+
+    rows: int
+    first_t_s: float
+    last_t_s: float
+    reference: bool
+    """The recording has reference columns (the angles file then has reference columns)."""
+    masked: bool
+    """A ``movement`` column chose the scored rows (else: after the first ``skip_s``)."""
+    scored_rows: int
+    filters: list[StreamedFilter]
+
+    @property
+    def duration_s(self) -> float:
+        return self.last_t_s - self.first_t_s if self.rows > 1 else 0.0
+
+
+def replay_streamed(
+    stream: RecordingStream,
+    filters: Sequence[str],
+    out_path: str | os.PathLike[str],
+    *,
+    calibration: CalibrationChoice = "recorded",
+    parameters: Mapping[str, Mapping[str, Any]] | None = None,
+    block: int | None = None,
+    skip_s: float = DEFAULT_SKIP_S,
+    overwrite: bool = True,
+) -> StreamedReplay:
+    """:func:`run_filters` and :func:`write_angles_csv` in one pass over a streamed recording.
+
+    Memory does not grow with the recording: rows are read in chunks, run through the online
+    filters block by block as the device delivered them (or in blocks of ``block``), and
+    written ``EXPORT_ROWS`` at a time. The inclination error is scored as ``replay`` prints it
+    (:class:`~app.core.scoring.ErrorAccumulator`). Offline filters need the whole
+    recording: run them with :func:`run_filters` (ValueError here).
+    """
+    offline = [name for name in filters if FILTERS[name].offline]
+    if offline:
+        raise ValueError(f"{offline[0]} is an offline filter: it needs the whole recording")
+    head = Recording(metadata=stream.metadata, header=stream.header, columns={},
+                     path=stream.path)
+    cal = resolve_calibration(head, calibration)
+    recorded = recorded_filter_parameters(head)
+    chosen = dict(parameters or {})
+    objects = [create_filter(name, **dict(chosen.get(name, recorded.get(name, {}))))
+               for name in filters]
+    results = [StreamedFilter(f.name, f.title or f.name, f.parameter_values()) for f in objects]
+    reference = all(name in stream.header for name in REFERENCE_COLUMNS)
+    masked = SCORE_COLUMN in stream.header
+    names = _angle_columns([r.name for r in results], reference)
+    metadata = _angles_metadata(head, results, calibration=cal if calibration is not None
+                                else None)
+    summary = StreamedReplay(0, math.nan, math.nan, reference, masked, 0, results)
+    pending: list[list[np.ndarray]] = []
+    pending_rows = 0
+    t0: float | None = None
+    path = Path(out_path)
+    with open(path, "wb" if overwrite else "xb") as out:
+        head_lines = [ANGLES_MAGIC, *(metadata_line(k, v) for k, v in metadata.items()),
+                      ",".join(names)]
+        out.write(("\n".join(head_lines) + "\n").encode("utf-8"))
+        for raw, extra in device_blocks(stream.chunks(), block, extra=(SCORE_COLUMN,)):
+            samples = cal.apply(convert_raw_block(raw))
+            n = len(samples)
+            if t0 is None:
+                t0 = float(samples.t_s[0])
+                summary.first_t_s = t0
+            summary.last_t_s = float(samples.t_s[-1])
+            summary.rows += n
+            columns: list[np.ndarray] = [samples.t_s]
+            ref = samples.reference_quat if reference else None
+            if ref is not None:
+                movement = extra.get(SCORE_COLUMN)
+                if movement is not None and movement.dtype == object:
+                    raise ValueError(f"{stream.path}: the {SCORE_COLUMN!r} column holds text; it "
+                                     "must be a flag (1 = score this row, 0 or empty = do not)")
+                scored = (np.asarray(movement) == 1.0 if masked and movement is not None
+                          else samples.t_s >= t0 + skip_s)
+                scored &= np.all(np.isfinite(ref), axis=1)
+                summary.scored_rows += int(np.count_nonzero(scored))
+            outputs = []
+            for result, orientation_filter in zip(results, objects, strict=True):
+                output = orientation_filter.process(samples)
+                outputs.append(output)
+                angles = output.angles
+                columns += [angles.roll_deg, angles.pitch_deg, angles.tilt_deg,
+                            angles.direction_deg, *output.quat.T]
+                result.final_roll_deg = float(angles.roll_deg[-1])
+                result.final_pitch_deg = float(angles.pitch_deg[-1])
+                if ref is not None:
+                    result.errors.add(output.quat, ref, scored)
+            if ref is not None:
+                ref_angles = angles_from_quaternion(ref)
+                columns += [ref_angles.roll_deg, ref_angles.pitch_deg, ref_angles.tilt_deg,
+                            ref_angles.direction_deg]
+                columns += [inclination_error_deg(o.quat, ref) for o in outputs]
+            pending.append(columns)
+            pending_rows += n
+            if pending_rows >= EXPORT_ROWS:
+                _write_pending(out, pending)
+                pending, pending_rows = [], 0
+        _write_pending(out, pending)
+    return summary
+
+
+def _write_pending(out: Any, pending: list[list[np.ndarray]]) -> None:
+    if pending:
+        joined = [np.concatenate(parts) for parts in zip(*pending, strict=True)]
+        out.write(format_table_bytes(joined))
+
+
+def _angle_columns(filters: Sequence[str], reference: bool) -> list[str]:
+    names = ["t"]
+    for name in filters:
+        names += [f"{name}.{a}" for a in ANGLE_NAMES] + [f"{name}.{q}" for q in
+                                                         QUATERNION_NAMES]
+    if reference:
+        names += [f"reference.{a}" for a in ANGLE_NAMES]
+        names += [f"{name}.inclination_error" for name in filters]
+    return names
+
+
+def _angles_metadata(recording: Recording, outputs: Sequence[Any],
+                     calibration: SensorCalibration | None) -> dict[str, Any]:
+    return {
         "source": str(recording.path) if recording.path is not None else None,
         "source_start_time": recording.metadata.get("start_time"),
         "exported": utc_timestamp(),
@@ -176,10 +328,3 @@ def write_angles_csv(
         "calibration": calibration_to_json(calibration) if calibration is not None else None,
         "units": {"t": "s", "angles": "deg", "quaternions": "1 (w, x, y, z), sensor-to-earth"},
     }
-    head = [ANGLES_MAGIC, *(metadata_line(k, v) for k, v in metadata.items()), ",".join(names)]
-    n = len(recording)
-    with open(path, "w" if overwrite else "x", encoding="utf-8", newline="") as out:
-        out.write("\n".join(head) + "\n")
-        for start in range(0, n, EXPORT_ROWS):
-            out.write(format_table([c[start:start + EXPORT_ROWS] for c in columns]))
-    return n

@@ -22,10 +22,10 @@ from __future__ import annotations
 import itertools
 import os
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO, overload
 
 import numpy as np
 
@@ -163,10 +163,10 @@ class RecordingStream:
                 continue
             data = b"".join([*pending, more])
             pending = []
-            if not more:
+            cut = data.rfind(b"\n") + 1
+            if not more and not cut:  # the end: only an unfinished row, if anything, is left
                 self._end(data, line)
                 return
-            cut = data.rfind(b"\n") + 1
             body = data[:cut]
             parse = _parse_slow if b'"' in body else _parse_fast
             columns, rows, error = parse(body, 0, cut, self.head.header, self._kinds)
@@ -187,6 +187,9 @@ class RecordingStream:
             row += rows
             offset += cut
             tail = data[cut:]
+            if not more:
+                self._end(tail, line)
+                return
             if tail:
                 pending.append(tail)
 
@@ -259,14 +262,34 @@ def _join(first: RawBlock, second: RawBlock) -> RawBlock:
     )
 
 
-def device_blocks(chunks: Iterator[Chunk], size: int | None = None) -> Iterator[RawBlock]:
+@overload
+def device_blocks(chunks: Iterator[Chunk], size: int | None = None) -> Iterator[RawBlock]: ...
+
+
+@overload
+def device_blocks(chunks: Iterator[Chunk], size: int | None,
+                  extra: Sequence[str]) -> Iterator[tuple[RawBlock, dict[str, np.ndarray]]]: ...
+
+
+def device_blocks(chunks: Iterator[Chunk], size: int | None = None,
+                  extra: Sequence[str] | None = None) -> Iterator[Any]:
     """The rows as device blocks, exactly as :meth:`Recording.raw_blocks` cuts a whole file.
 
     ``size=None``: the blocks the device delivered (``block_start``), else blocks of ``size``
     rows counted from the file's first row. A block cut by a chunk's end is completed from
-    the next chunk.
+    the next chunk. With ``extra`` (column names), each block comes with those columns'
+    values for its rows (a name the file lacks is left out).
     """
-    carry: RawBlock | None = None
+    if extra is None:
+        for block, _ in _device_blocks(chunks, size, ()):
+            yield block
+    else:
+        yield from _device_blocks(chunks, size, tuple(extra))
+
+
+def _device_blocks(chunks: Iterator[Chunk], size: int | None,
+                   extra: tuple[str, ...]) -> Iterator[tuple[RawBlock, dict[str, np.ndarray]]]:
+    carry: tuple[RawBlock, dict[str, np.ndarray]] | None = None
     for chunk in chunks:
         rows = chunk.rows
         n = len(rows)
@@ -277,10 +300,14 @@ def device_blocks(chunks: Iterator[Chunk], size: int | None = None) -> Iterator[
             starts = list(range((-chunk.first_row) % step, n, step))
         continues = not starts or starts[0] != 0
         bounds = ([0] if continues else []) + starts + [n]
-        blocks = [rows.raw_block(a, b) for a, b in itertools.pairwise(bounds) if b > a]
+        blocks = [(rows.raw_block(a, b),
+                   {k: rows.columns[k][a:b] for k in extra if k in rows.columns})
+                  for a, b in itertools.pairwise(bounds) if b > a]
         if carry is not None:
             if continues and blocks:
-                blocks[0] = _join(carry, blocks[0])
+                blocks[0] = (_join(carry[0], blocks[0][0]),
+                             {k: np.concatenate([carry[1][k], v]) for k, v in blocks[0][1].items()
+                              if k in carry[1]})
             else:
                 yield carry
             carry = None
