@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: run test lint bench clean
+.PHONY: run test lint bench clean bundle dist install-desktop uninstall-desktop
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,5 +25,32 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/pipeline_throughput.py
 
+# Distribution (packaging/README.md). The extras' tools go into the same venv on first use.
+$(VENV)/.extra-%: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[test,$*]"
+	touch $@
+
+# The standalone one-folder app: dist/inclinometer/inclinometer (about 1 min; then check it
+# with `dist/inclinometer/inclinometer --smoke-test`).
+bundle: $(VENV)/.extra-bundle
+	rm -rf dist/inclinometer
+	$(BIN)/pyinstaller packaging/inclinometer.spec --noconfirm --log-level WARN \
+		--distpath dist --workpath build/pyinstaller
+	@du -sh dist/inclinometer
+
+# The wheel and sdist in dist/, checked with `twine check --strict`.
+dist: $(VENV)/.extra-dist
+	rm -f dist/inclinometer-*.whl dist/inclinometer-*.tar.gz
+	$(BIN)/python -m build --outdir dist .
+	$(BIN)/twine check --strict dist/inclinometer-*.whl dist/inclinometer-*.tar.gz
+
+# Menu entry, icons and AppStream data for the current user (~/.local/share); the command it
+# starts: the bundle if built, else this venv's. The udev rule needs root: the script says how.
+install-desktop:
+	packaging/linux/install-desktop.sh "$(or $(INCLINOMETER),$(if $(wildcard dist/inclinometer/inclinometer),$(abspath dist/inclinometer/inclinometer),$(abspath $(BIN)/inclinometer)))"
+
+uninstall-desktop:
+	packaging/linux/install-desktop.sh --uninstall
+
 clean:
-	rm -rf $(VENV) test-artifacts .pytest_cache
+	rm -rf $(VENV) test-artifacts .pytest_cache build dist

@@ -52,6 +52,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="device to connect at start (default: the last one used, or sim://interactive)",
     )
     parser.add_argument("--filter", metavar="NAME", help="orientation filter to start with")
+    parser.add_argument(
+        "--smoke-test", nargs="?", const="", metavar="PNG",
+        help="check the GUI end to end (simulator, views, a sample replay, the compiled "
+        "filters; offscreen without a screen), print one line and exit 0, or 1 with the "
+        "reason; PNG: also save a screenshot",
+    )
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
     commands.add_parser("devices", help="list the devices that can be connected")
     add_evaluate_parser(commands)
@@ -421,6 +427,10 @@ def scheme_of_recording(source: str) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.smoke_test is not None:
+        from app.gui.smoke_test import run_smoke_test
+
+        return run_smoke_test(args.smoke_test or None)
     if args.command == "devices":
         return list_devices()
     if args.command == "evaluate":
