@@ -56,6 +56,7 @@ import numpy as np
 from app.core.calibration import SensorCalibration
 from app.core.recording.errors import RecordingError
 from app.core.recording.format import KEY_BOOKMARKS
+from app.core.recording.index import Overview
 from app.core.recording.reader import (
     UNIT_SCALE,
     Bookmark,
@@ -63,9 +64,11 @@ from app.core.recording.reader import (
     read_metadata,
     read_recording,
 )
+from app.core.recording.stream import RecordingStream
 from app.core.samples import RawBlock
-from drivers.base import Device, DeviceDescriptor, DeviceInfo
+from drivers.base import Device, DeviceDescriptor, DeviceInfo, DeviceMessage
 from drivers.errors import DeviceOpenError, DeviceUrlError
+from drivers.replay_rows import MemoryRows, StreamedRows
 
 __all__ = [
     "HOLE_LIMIT_S", "ReplayDevice", "is_recording_path", "parse_speed", "recording_path",
@@ -81,6 +84,8 @@ MIN_BLOCK_S = 0.020
 """Paced reads without recorded blocks wait for at least this much data (as the simulator)."""
 MAX_BLOCK_S = 1.0
 """A reader that fell behind gets at most this much recorded time per block."""
+STREAMED_MIN_BYTES = 64 << 20
+"""Recordings at least this large are replayed a chunk at a time, the rest from memory."""
 HOLE_LIMIT_S = 1.0
 """A hole in the recorded time is waited for at most this long (at speed 1)."""
 _OPTIONS = ("speed", "loop", "start", "paused", "exact", "block")
@@ -215,9 +220,8 @@ class ReplayDevice(Device):
         self._last_block_generation = 0
         self._closed = False
         self._bookmarks: list[Bookmark] = []
-        self._t = np.empty(0)
-        self._gap_rows = np.empty(0, dtype=np.int64)
-        self._bounds: np.ndarray | None = None
+        self._rows: MemoryRows | StreamedRows | None = None
+        self._told = ""
 
     # -- Device template -----------------------------------------------------------------------
     @classmethod
@@ -238,23 +242,37 @@ class ReplayDevice(Device):
 
     def _open(self) -> DeviceInfo:
         recording = self._given
-        if recording is None:
-            try:
-                recording = read_recording(self.path)
-            except RecordingError as exc:
-                raise DeviceOpenError(str(exc)) from exc
-        if len(recording) == 0:
-            raise DeviceOpenError(f"{self.path}: the recording holds no samples")
-        with self._cond:
-            self._reset_state()
-            self.recording = recording
-            self._load(recording)
-            self._bookmarks = list(recording.bookmarks)
-            if self._start_s > 0:
-                self._seek_index(self._index_at(self._start_s))
-                self._discontinuity = False
-            self._anchor()
-        return self._device_info(recording)
+        stream = None
+        try:
+            if recording is None:
+                stream = RecordingStream(self.path)
+                if stream.file_size() < STREAMED_MIN_BYTES:  # small: all of it in memory
+                    stream.close()
+                    stream = None
+                    recording = read_recording(self.path)
+            if recording is not None and len(recording) == 0:
+                raise DeviceOpenError(f"{self.path}: the recording holds no samples")
+            with self._cond:
+                self._reset_state()
+                if stream is not None:
+                    rows: MemoryRows | StreamedRows = StreamedRows(stream, self._cond)
+                    recording = Recording(stream.metadata, stream.header, {}, self.path)
+                    recording._known_reference = rows.has_reference
+                else:
+                    assert recording is not None
+                    rows = MemoryRows(recording, _rate(recording))
+                self.recording = recording
+                self._rows = rows
+                self._bookmarks = list(recording.bookmarks)
+                if self._start_s > 0:
+                    self._seek_index(self._index_at(self._start_s))
+                    self._discontinuity = False
+                self._anchor()
+                return self._device_info(recording)
+        except RecordingError as exc:
+            if stream is not None:
+                stream.close()
+            raise DeviceOpenError(str(exc)) from exc
 
     def _read(self, timeout_s: float) -> RawBlock | None:
         with self._cond:
@@ -270,14 +288,45 @@ class ReplayDevice(Device):
     def _close(self) -> None:
         with self._cond:
             self._closed = True
+            if self._rows is not None:
+                self._rows.close()
             self._cond.notify_all()
 
     # -- what a GUI uses (thread-safe) -------------------------------------------------------
     @property
     def duration_s(self) -> float:
-        """Time from the first to the last sample, s."""
+        """Time from the first to the last sample, s (estimated until a long recording is
+        indexed: :attr:`indexed`)."""
         with self._cond:
-            return float(self._t[-1] - self._t[0]) if self._n else 0.0
+            rows = self._rows
+            return float(rows.last_t - rows.first_t) if rows is not None else 0.0
+
+    @property
+    def indexed(self) -> bool:
+        """True once the whole recording was read: length, gaps and overview are final."""
+        with self._cond:
+            return self._rows is not None and self._rows.complete()
+
+    @property
+    def streamed(self) -> bool:
+        """True for a long recording read a chunk at a time (memory does not grow with it)."""
+        with self._cond:
+            return bool(self._rows is not None and self._rows.streamed)
+
+    def overview(self) -> Overview | None:
+        """Minimum and maximum of each axis over the session (long recordings only; it grows
+        while the background index reads the file)."""
+        with self._cond:
+            return None if self._rows is None else self._rows.overview()
+
+    def take_messages(self) -> list[DeviceMessage]:
+        """A problem the background reading of a long recording met (a corrupt row)."""
+        with self._cond:
+            problem = "" if self._rows is None else self._rows.problem()
+            if not problem or problem == self._told:
+                return []
+            self._told = problem
+        return [DeviceMessage(2, f"{problem}; the replay ends there")]
 
     @property
     def position_s(self) -> float:
@@ -293,20 +342,21 @@ class ReplayDevice(Device):
 
     @property
     def sample_count(self) -> int:
+        """Rows in the recording (estimated until a long one is indexed)."""
         with self._cond:
-            return self._n
+            return 0 if self._rows is None else self._rows.count
 
     @property
     def start_t_s(self) -> float:
         """Device time of the first sample (positions count from it)."""
         with self._cond:
-            return float(self._t[0]) if self._n else 0.0
+            return 0.0 if self._rows is None else self._rows.first_t
 
     @property
     def at_end(self) -> bool:
         """True when every sample was delivered and the replay does not loop."""
         with self._cond:
-            return self._n > 0 and self._pos >= self._n and not self._loop
+            return self._rows is not None and self._ended() and not self._loop
 
     @property
     def playing(self) -> bool:
@@ -334,7 +384,7 @@ class ReplayDevice(Device):
     def exact_blocks(self) -> bool:
         """True when blocks are cut as the device delivered them while recording."""
         with self._cond:
-            return self._bounds is not None
+            return self._exact_blocks()
 
     @property
     def generation(self) -> int:
@@ -356,7 +406,7 @@ class ReplayDevice(Device):
     def play(self) -> None:
         """Play from the current position (from the start again when at the end)."""
         with self._cond:
-            if self._n and self._pos >= self._n:
+            if self._rows is not None and self._ended():
                 self._seek_index(0)
             self._playing = True
             self._step_samples = 0
@@ -400,7 +450,12 @@ class ReplayDevice(Device):
     def next_gap(self) -> float | None:
         """Seek to the next sample after lost data; None (and no move) when there is none."""
         with self._cond:
-            later = self._gap_rows[self._gap_rows > self._pos]
+            later = self._gap_rows()[0]
+            later = later[later > self._pos]
+            if len(later) == 0 and isinstance(self._rows, StreamedRows):
+                self._rows.wait_for_index()  # the gaps further on are not indexed yet
+                later = self._gap_rows()[0]
+                later = later[later > self._pos]
             if len(later) == 0:
                 return None
             self._seek_index(int(later[0]))
@@ -410,7 +465,8 @@ class ReplayDevice(Device):
     def previous_gap(self) -> float | None:
         """Seek to the last gap before the current position; None when there is none."""
         with self._cond:
-            earlier = self._gap_rows[self._gap_rows < self._pos]
+            earlier = self._gap_rows()[0]
+            earlier = earlier[earlier < self._pos]
             if len(earlier) == 0:
                 return None
             self._seek_index(int(earlier[-1]))
@@ -419,9 +475,12 @@ class ReplayDevice(Device):
 
     @property
     def gap_positions_s(self) -> list[float]:
-        """Where gaps are, s from the start (for marks on a slider)."""
+        """Where gaps are, s from the start (for marks on a slider; a long recording's grow
+        while it is indexed)."""
         with self._cond:
-            return (self._t[self._gap_rows] - self._t[0]).tolist() if self._n else []
+            if self._rows is None:
+                return []
+            return (self._gap_rows()[1] - self._rows.first_t).tolist()
 
     @property
     def bookmarks(self) -> list[Bookmark]:
@@ -436,14 +495,15 @@ class ReplayDevice(Device):
         """
         with self._cond:
             offset = self._position_s() if position_s is None else float(position_s)
-            mark = Bookmark(float(self._t[0]) + offset if self._n else offset, label)
+            start = 0.0 if self._rows is None else self._rows.first_t
+            mark = Bookmark(start + offset, label)
             self._bookmarks = sorted([*self._bookmarks, mark], key=lambda b: b.t_s)
             return mark
 
     def bookmark_position_s(self, bookmark: Bookmark) -> float:
         """A bookmark's position in s from the start."""
         with self._cond:
-            return bookmark.t_s - (float(self._t[0]) if self._n else 0.0)
+            return bookmark.t_s - (0.0 if self._rows is None else self._rows.first_t)
 
     def next_bookmark(self) -> Bookmark | None:
         """Seek to the first bookmark after the current position."""
@@ -455,11 +515,12 @@ class ReplayDevice(Device):
 
     def _jump_to_bookmark(self, *, forward: bool) -> Bookmark | None:
         with self._cond:
-            if not self._n:
+            rows = self._rows
+            if rows is None:
                 return None
-            indices = [(int(np.searchsorted(self._t, b.t_s, "left")), b) for b in self._bookmarks]
+            indices = [(rows.index_at_t(b.t_s, "left"), b) for b in self._bookmarks]
             if forward:
-                candidates = [(i, b) for i, b in indices if i > self._pos and i < self._n]
+                candidates = [(i, b) for i, b in indices if i > self._pos and rows.exists(i)]
                 chosen = candidates[0] if candidates else None
             else:
                 candidates = [(i, b) for i, b in indices if i < self._pos]
@@ -471,40 +532,34 @@ class ReplayDevice(Device):
             return chosen[1]
 
     # -- internals (called with the condition held) ------------------------------------------
-    def _load(self, recording: Recording) -> None:
-        self._n = len(recording)
-        self._t = np.ascontiguousarray(recording.t_s)
-        self._accel = np.ascontiguousarray(recording.accel_m_s2)
-        self._gyro = np.ascontiguousarray(recording.gyro_rad_s)
-        self._temp = np.ascontiguousarray(recording.temp_degc)
-        self._gap = recording.gap
-        self._gap_rows = np.flatnonzero(self._gap)
-        reference = recording.reference_quat
-        self._reference = None if reference is None else np.ascontiguousarray(reference)
-        starts = recording.block_start
-        self._bounds = recording.block_bounds() if (self._exact and starts is not None) else None
-        rate = recording.rate_hz
-        self._rate_hz = rate if math.isfinite(rate) and rate > 0 else 100.0
-        lost = np.zeros(self._n, dtype=np.int64)
-        if len(self._gap_rows) and self._n > 1:
-            rows = self._gap_rows[self._gap_rows > 0]
-            steps = (self._t[rows] - self._t[rows - 1]) * self._rate_hz
-            lost[rows] = np.maximum(0, np.rint(steps).astype(np.int64) - 1)
-        self._lost = lost
+    def _ended(self) -> bool:
+        """No sample left at the current position (reads on to find out, for a long file)."""
+        return self._rows is None or not self._rows.exists(self._pos)
+
+    def _exact_blocks(self) -> bool:
+        return self._exact and self._rows is not None and self._rows.has_block_start
+
+    def _gap_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._rows is None:
+            return np.empty(0, dtype=np.int64), np.empty(0)
+        return self._rows.gaps()
 
     def _device_info(self, recording: Recording) -> DeviceInfo:
         device = recording.device
+        rows = self._rows
+        assert rows is not None
 
         def number(key: str, default: float) -> float:
             value = device.get(key)
             return float(value) if isinstance(value, int | float) and value > 0 else default
 
-        odr = number("odr_hz", self._rate_hz)
+        odr = number("odr_hz", rows.rate_hz)
         extra = dict(device.get("extra") or {})
         extra["replay"] = {
             "path": str(self.path), "recorded_url": device.get("url"),
             "start_time": recording.metadata.get("start_time"), "note": recording.note,
-            "samples": len(recording), "duration_s": recording.duration_s,
+            "samples": rows.count, "duration_s": rows.last_t - rows.first_t,
+            "streamed": rows.streamed,
         }
         return DeviceInfo(
             url=self.url,
@@ -520,17 +575,22 @@ class ReplayDevice(Device):
         )
 
     def _position_s(self) -> float:
-        if not self._n:
+        rows = self._rows
+        if rows is None:
             return 0.0
-        if self._pos >= self._n:
-            return float(self._t[-1] - self._t[0])
-        return float(self._t[self._pos] - self._t[0])
+        if not rows.exists(self._pos):
+            return float(rows.last_t - rows.first_t)
+        return float(rows.t(self._pos) - rows.first_t)
 
     def _index_at(self, position_s: float) -> int:
         if not math.isfinite(position_s):
             raise ValueError(f"cannot seek to {position_s!r}")
-        target = float(self._t[0]) + max(0.0, position_s)
-        return min(int(np.searchsorted(self._t, target, "left")), self._n - 1)
+        rows = self._rows
+        assert rows is not None
+        index = rows.index_at_t(rows.first_t + max(0.0, position_s), "left")
+        while index > 0 and not rows.exists(index):  # past the end: the last sample
+            index = min(index - 1, rows.count - 1)
+        return index
 
     def _seek_index(self, index: int) -> None:
         if index != self._pos:
@@ -542,17 +602,20 @@ class ReplayDevice(Device):
     def _anchor(self) -> None:
         """Pace from here: the next sample is due now."""
         self._anchor_wall = self._clock()
-        if self._n:
-            self._anchor_t = float(self._t[min(self._pos, self._n - 1)])
+        rows = self._rows
+        if rows is not None:
+            self._anchor_t = rows.t(self._pos) if rows.exists(self._pos) else rows.last_t
 
     def _due_wall(self, index: int) -> float:
-        return self._anchor_wall + (float(self._t[index]) - self._anchor_t) / self._speed
+        assert self._rows is not None
+        return self._anchor_wall + (self._rows.t(index) - self._anchor_t) / self._speed
 
     def _take(self) -> tuple[RawBlock | None, float | None]:
         """The next block if one is due, else (None, seconds until one is, or None: no idea)."""
-        if self._closed or not self._n:
+        rows = self._rows
+        if self._closed or rows is None:
             return None, None
-        if self._pos >= self._n:
+        if self._ended():
             if not self._loop:
                 return None, None
             self._pos = 0
@@ -562,62 +625,64 @@ class ReplayDevice(Device):
         if self._step_samples:
             count = self._step_samples
             self._step_samples = 0
-            stop = self._block_end() if count < 0 else min(self._n, self._pos + count)
+            stop = self._block_end() if count < 0 else self._pos + count
             return self._deliver(stop), None
         if not self._playing:
             return None, None
-        if self._bounds is not None:
+        if self._exact_blocks():
             stop = self._block_end()
             if self._speed == math.inf:
                 return self._deliver(stop), None
             wait = self._due_wall(stop - 1) - self._clock()
             return (self._deliver(stop), None) if wait <= 0.0 else (None, wait)
         if self._speed == math.inf:
-            return self._deliver(min(self._n, self._pos + self._block)), None
+            return self._deliver(self._pos + self._block), None
         now = self._clock()
         reached = self._anchor_t + (now - self._anchor_wall) * self._speed
-        stop = int(np.searchsorted(self._t, reached, "right"))
-        wanted = max(1, math.ceil(MIN_BLOCK_S * self._rate_hz))
-        limit = min(self._n, self._pos + max(wanted, math.ceil(MAX_BLOCK_S * self._rate_hz)))
-        stop = min(stop, limit)
-        if stop >= min(self._n, self._pos + wanted):
+        wanted = max(1, math.ceil(MIN_BLOCK_S * rows.rate_hz))
+        ahead = rows.rows(self._pos, self._pos + max(wanted, math.ceil(MAX_BLOCK_S *
+                                                                       rows.rate_hz)))
+        stop = self._pos + int(np.searchsorted(ahead.t, reached, "right"))
+        if stop >= self._pos + min(wanted, len(ahead)):
             return self._deliver(stop), None
-        ready = min(self._n, self._pos + wanted) - 1
+        ready = self._pos + min(wanted, len(ahead)) - 1
         return None, max(0.0, self._due_wall(ready) - now)
 
     def _block_end(self) -> int:
         """End of the block that starts at the current position."""
-        if self._bounds is None:
-            return min(self._n, self._pos + self._block)
-        k = int(np.searchsorted(self._bounds, self._pos, "right"))
-        return int(self._bounds[min(k, len(self._bounds) - 1)])
+        if not self._exact_blocks():
+            return self._pos + self._block
+        assert self._rows is not None
+        return self._rows.block_end(self._pos)
 
     def _deliver(self, stop: int) -> RawBlock:
+        rows = self._rows
+        assert rows is not None
         start = self._pos
-        stop = max(stop, start + 1)
-        rows = slice(start, stop)
-        gap = self._gap[rows].copy()
-        lost = int(self._lost[rows].sum())
+        part = rows.rows(start, max(stop, start + 1))
+        stop = start + len(part)
+        gap = part.gap.copy()
+        lost = sum(rows.lost_at(start + int(k)) for k in np.flatnonzero(gap))
         if self._discontinuity:
             gap[0] = True
-            lost -= int(self._lost[start])
+            lost -= rows.lost_at(start)
             self._discontinuity = False
         self._last_block_generation = self._generation
         self._pos = stop
-        if self._speed != math.inf and 0 < stop < self._n:
-            hole = float(self._t[stop] - self._t[stop - 1])
+        if self._speed != math.inf and stop > 0 and rows.exists(stop):
+            hole = rows.t(stop) - float(part.t[-1])
             if hole > HOLE_LIMIT_S:  # wait at most HOLE_LIMIT_S for the next sample
                 due = self._due_wall(stop - 1) + HOLE_LIMIT_S / self._speed
-                self._anchor_wall, self._anchor_t = due, float(self._t[stop])
+                self._anchor_wall, self._anchor_t = due, rows.t(stop)
         return RawBlock(
-            t_s=self._t[rows],
-            accel_raw=self._accel[rows],
-            gyro_raw=self._gyro[rows],
-            temp_raw=self._temp[rows],
+            t_s=part.t,
+            accel_raw=part.accel,
+            gyro_raw=part.gyro,
+            temp_raw=part.temp,
             scale=UNIT_SCALE,
             gap=gap,
             lost_samples=max(0, lost),
-            reference_quat=None if self._reference is None else self._reference[rows],
+            reference_quat=part.reference,
         )
 
     # -- bookmarks for the file ---------------------------------------------------------------
@@ -625,3 +690,8 @@ class ReplayDevice(Device):
         """``{"bookmarks": [...]}``, the metadata entry that stores the current bookmarks."""
         with self._cond:
             return {KEY_BOOKMARKS: [{"t": b.t_s, "label": b.label} for b in self._bookmarks]}
+
+
+def _rate(recording: Recording) -> float:
+    rate = recording.rate_hz
+    return rate if math.isfinite(rate) and rate > 0 else 100.0

@@ -76,9 +76,9 @@ class RecordingStream:
     of rows before it.
     """
 
-    def __init__(self, path: str | os.PathLike[str], *, chunk_bytes: int = CHUNK_BYTES) -> None:
+    def __init__(self, path: str | os.PathLike[str], *, chunk_bytes: int | None = None) -> None:
         self.path = Path(path)
-        self.chunk_bytes = int(chunk_bytes)
+        self.chunk_bytes = int(CHUNK_BYTES if chunk_bytes is None else chunk_bytes)
         try:
             self._handle: BinaryIO = open(self.path, "rb")  # noqa: SIM115 (closed in close())
         except OSError as exc:
