@@ -41,7 +41,7 @@ bundle: $(VENV)/.extra-bundle
 # The wheel and sdist in dist/, checked with `twine check --strict`.
 dist: $(VENV)/.extra-dist
 	rm -f dist/inclinometer-*.whl dist/inclinometer-*.tar.gz
-	$(BIN)/python -m build --outdir dist .
+	$(BIN)/python -m build --quiet --outdir dist .
 	$(BIN)/twine check --strict dist/inclinometer-*.whl dist/inclinometer-*.tar.gz
 
 # Menu entry, icons and AppStream data for the current user (~/.local/share); the command it
