@@ -8,7 +8,8 @@
 ``inclinometer replay IN.csv ...``  run filters over a recording, export their angles
 ``inclinometer simulate --pty``     an emulated NUCLEO board on a pseudo-terminal
 ``inclinometer check-board PORT``   put a NUCLEO board through its paces (app/cli_check.py)
-``inclinometer calibrate|allan ...`` the calibration lab, headless (app/cli_calibration.py)
+``inclinometer calibrate|allan|calibrate-temperature ...``
+                                    the calibration lab, headless (app/cli_calibration.py)
 ``inclinometer --version``
 """
 

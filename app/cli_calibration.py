@@ -8,6 +8,10 @@
 ``inclinometer allan RECORDING [--json OUT]``
     Allan deviation of a static recording: noise density, bias instability and random walk
     per axis of the gyroscope and the accelerometer.
+``inclinometer calibrate-temperature RECORDING [--out FILE.json] [--save] [--report FILE]``
+    gyroscope and accelerometer bias against die temperature, fitted on a recording of the
+    board resting while it warms up (linear, or quadratic when the span and the AICc say
+    so); merged with the device's profile (or ``--base FILE.json``) when there is one.
 
 Exit status: 0 done, 1 the data does not calibrate (the message says why), 2 bad usage or a
 file that cannot be read.
@@ -28,7 +32,7 @@ if TYPE_CHECKING:
     from app.core.calibration_procedures.offline import OfflineCalibration
     from app.services.calibration_runs import CapturedStream
 
-CALIBRATION_COMMANDS = ("calibrate", "allan")
+CALIBRATION_COMMANDS = ("calibrate", "allan", "calibrate-temperature")
 EXIT_FAILED = 1
 EXIT_USAGE = 2
 DEFAULT_ACCEL_FS_G = 4
@@ -94,6 +98,41 @@ def add_calibration_parsers(commands: argparse._SubParsersAction) -> None:
     allan.add_argument("--seconds", type=float, metavar="N", help="with --device: how long")
     allan.add_argument("--keep-temperature", action="store_true",
                        help="do not regress the temperature out before the analysis")
+
+    temperature = commands.add_parser(
+        "calibrate-temperature",
+        help="fit gyro and accelerometer bias against temperature (a warm-up recording)",
+        description=(
+            "Fit the gyroscope and accelerometer biases against the die temperature, "
+            "b(T) = b0 + k1 (T - T0) + k2 (T - T0)^2, on a recording of the board resting "
+            "while its temperature moves (from power-up, in a chamber, or still poses at "
+            "several temperatures; still stretches are found by the wizard's stillness "
+            "detection). The quadratic term is used only with a span of 10 degC or more and "
+            "a clear AICc gain. The terms are added to the device's profile (or to --base "
+            "FILE.json from 'inclinometer calibrate --out'), whose biases stay as b0 at its "
+            "own temperature; without one, the gyro bias comes from the fit."
+        ),
+    )
+    temperature.add_argument("recording", nargs="?", metavar="RECORDING",
+                             help="a recording (format v1) of the board at rest, warming")
+    temperature.add_argument("--out", metavar="FILE.json",
+                             help="write the calibration JSON (binding keys plus the "
+                             "temperature terms)")
+    temperature.add_argument("--save", action="store_true",
+                             help="store the result as the device's calibration profile")
+    temperature.add_argument("--report", metavar="FILE.html|FILE.pdf",
+                             help="write a report with the coefficients and a plot")
+    temperature.add_argument("--base", metavar="FILE.json",
+                             help="merge with this calibration JSON instead of the profile")
+    temperature.add_argument("--no-merge", action="store_true",
+                             help="ignore the device's profile: temperature terms alone")
+    temperature.add_argument("--reference-temp", type=float, metavar="DEGC",
+                             help="T0 of a calibration without a base (default: mid-span)")
+    temperature.add_argument("--min-span", type=float, default=3.0, metavar="DEGC",
+                             help="refuse narrower temperature spans (default %(default)g)")
+    temperature.add_argument("--device", metavar="URL", help="read a live device instead")
+    temperature.add_argument("--seconds", type=float, metavar="N", help="with --device: how long")
+    temperature.add_argument("--profile-dir", metavar="DIR", help=argparse.SUPPRESS)
 
 
 # -- input -------------------------------------------------------------------------------------
@@ -315,6 +354,8 @@ def calibration_command(args: argparse.Namespace) -> int:
     """Run the calibration-lab sub-command ``args.command`` names."""
     if args.command == "allan":
         return allan_command(args)
+    if args.command == "calibrate-temperature":
+        return temperature_command(args)
     return calibrate_command(args)
 
 
@@ -424,3 +465,250 @@ def allan_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             print(f"wrote {args.json}", file=out)
     out.flush()
     return 0
+
+
+# -- calibrate-temperature -------------------------------------------------------------------------
+MDPS_PER_RAD_S = 180.0 / math.pi * 1e3
+
+
+def _read_base(path: str):
+    """(calibration, its temperature or None) from a calibration JSON file."""
+    from app.core.recording.format import calibration_from_json
+
+    file = Path(path)
+    try:
+        document = json.loads(file.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise _Usage(f"--base {path}: no such file") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise _Usage(f"--base {path}: not a calibration JSON file ({exc})") from None
+    try:
+        calibration = calibration_from_json(document)
+    except ValueError as exc:
+        raise _Usage(f"--base {path}: {exc}") from None
+    temp = document.get("temperature_degc")
+    temp = float(temp) if isinstance(temp, int | float) and math.isfinite(temp) else None
+    return calibration, temp
+
+
+def _bias_errors(fit, calibration) -> dict[str, tuple[float, float]]:
+    """Worst bias error over the fitted bins, (uncompensated, compensated), per sensor in
+    mdps and mg. The gyro's is absolute (it reads zero at rest); the accelerometer's is the
+    change from the first pose's reading at T0 (gravity is in the reading)."""
+    from app.core.samples import STANDARD_GRAVITY_M_S2
+
+    temps = fit.bin_temp_degc
+    accel_b, gyro_b = calibration.biases_at(temps)
+    gyro_flat = np.broadcast_to(calibration.gyro_bias_rad_s, gyro_b.shape)
+    first = fit.bin_pose == 0
+    accel_meas = fit.bin_accel_m_s2[first]
+    t0_reading = accel_meas - (accel_b[first] - calibration.accel_bias_m_s2)  # at T0
+    reference = np.median(t0_reading, axis=0)
+    accel_before = np.abs(accel_meas - reference).max()
+    accel_after = np.abs(t0_reading - reference).max()
+    mg = 1e3 / STANDARD_GRAVITY_M_S2
+    return {
+        "gyro": (float(np.abs(fit.bin_gyro_rad_s - gyro_flat).max() * MDPS_PER_RAD_S),
+                 float(np.abs(fit.bin_gyro_rad_s - gyro_b).max() * MDPS_PER_RAD_S)),
+        "accel": (float(accel_before * mg), float(accel_after * mg)),
+    }
+
+
+def print_temperature(fit, calibration, how: str, label: str, stream: CapturedStream,
+                      out: TextIO) -> list[str]:
+    """The summary of a temperature fit; returns its key lines for the report."""
+    from app.core.calibration_procedures.temperature import QUADRATIC, truth_of
+    from app.core.samples import STANDARD_GRAVITY_M_S2
+
+    mg = 1e3 / STANDARD_GRAVITY_M_S2
+    s = fit.settings
+    print(f"{label}: {fit.duration_s:.1f} s, {fit.samples} samples at {s.odr_hz:.4g} Hz, "
+          f"{fit.still_s:.1f} s still in {fit.segments} segment(s), {fit.poses} pose(s)",
+          file=out)
+    if stream.unique_id:
+        print(f"device {stream.unique_id}", file=out)
+    print(f"temperature {fit.temp_min_degc:.2f} to {fit.temp_max_degc:.2f} degC (span "
+          f"{fit.span_degc:.2f}), {len(fit.bin_temp_degc)} bins; T0 = "
+          f"{calibration.temperature.reference_temp_degc:.2f} degC", file=out)
+    model = calibration.temperature
+    lines = []
+    for name, sensor, k1, k2, scale, unit in (
+        ("gyro", fit.gyro, model.gyro_k1, model.gyro_k2, MDPS_PER_RAD_S, "mdps"),
+        ("accel", fit.accel, model.accel_k1, model.accel_k2, mg, "mg"),
+    ):
+        chosen = "quadratic" if sensor.degree == QUADRATIC else "linear"
+        aicc = sensor.aicc
+        gain = aicc[1] - aicc[2] if math.isfinite(aicc.get(2, math.nan)) else math.nan
+        why = (f"AICc gain of the quadratic {gain:.1f}" if math.isfinite(gain)
+               else "span too narrow for a quadratic")
+        print(f"{name}: {chosen} ({why}); residual RMS {_vec(sensor.rms * scale, '.4f', 8)} "
+              f"{unit}", file=out)
+        print(f"  k1 ({unit}/degC)   {_vec(k1 * scale, '+.5f', 11)}   +- "
+              f"{_vec(sensor.k1_std * scale, '.5f', 8)}", file=out)
+        if sensor.degree == QUADRATIC:
+            print(f"  k2 ({unit}/degC2)  {_vec(k2 * scale, '+.6f', 11)}   +- "
+                  f"{_vec(sensor.k2_std * scale, '.6f', 10)}", file=out)
+        lines.append(f"{name}: {chosen}, k1 = [{', '.join(f'{v:+.4g}' for v in k1 * scale)}]"
+                     f" {unit}/degC")
+    print(f"b0 at T0: gyro (dps) {_vec(np.degrees(calibration.gyro_bias_rad_s), '+.4f')}, "
+          f"accel (mg) {_vec(calibration.accel_bias_m_s2 * mg, '+.3f')}", file=out)
+    print(f"calibration: {how}", file=out)
+    errors = _bias_errors(fit, calibration)
+    for name, unit in (("gyro", "mdps"), ("accel", "mg")):
+        before, after = errors[name]
+        line = (f"worst {name} bias error over the data: {before:.3f} {unit} uncompensated, "
+                f"{after:.3f} {unit} compensated")
+        print(line, file=out)
+        lines.append(line)
+    for note in fit.notes:
+        print(f"note: {note}", file=out)
+    if stream.unit_errors:
+        truth = truth_of(fit, stream.unit_errors)
+        print("against the simulator's truth (fitted / truth):", file=out)
+        print(f"  gyro k1 (mdps/degC)      {_vec(model.gyro_k1 * MDPS_PER_RAD_S, '+.4f')}",
+              file=out)
+        print(f"    truth                  {_vec(truth.gyro_k1 * MDPS_PER_RAD_S, '+.4f')}",
+              file=out)
+        print(f"  accel k1 (mg/degC)       {_vec(model.accel_k1 * mg, '+.4f')}", file=out)
+        print(f"    truth in this pose     {_vec(truth.accel_k1 * mg, '+.4f')}", file=out)
+        print(f"    bias coefficient alone {_vec(truth.accel_bias_k1 * mg, '+.4f')}", file=out)
+    return lines
+
+
+def temperature_json(fit, calibration, how: str, device_unique_id: str, source: str,
+                     created_utc: str) -> dict[str, Any]:
+    """The binding calibration keys, the temperature terms and descriptive extras."""
+    from app.core.calibration import temperature_to_json
+    from app.core.calibration_procedures.offline import JSON_FORMAT, JSON_VERSION
+
+    return {
+        "accel_bias_m_s2": np.asarray(calibration.accel_bias_m_s2, float).tolist(),
+        "accel_matrix": np.asarray(calibration.accel_matrix, float).tolist(),
+        "gyro_bias_rad_s": np.asarray(calibration.gyro_bias_rad_s, float).tolist(),
+        "gyro_matrix": np.asarray(calibration.gyro_matrix, float).tolist(),
+        **temperature_to_json(calibration.temperature),
+        "format": JSON_FORMAT,
+        "format_version": JSON_VERSION,
+        "convention": ("a_cal = A (a_raw - b_a(T)), w_cal = G (w_raw - b_g(T)), b(T) = b + "
+                       "tc1 (T - T0) + tc2 (T - T0)^2 (T: die temperature, NaN: b); SI units"),
+        "name": calibration.name,
+        "method": "temperature",
+        "device_unique_id": device_unique_id,
+        "source": source,
+        "created_utc": created_utc,
+        "merged": how,
+        "temperature_fit": fit.summary(),
+    }
+
+
+def temperature_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """The ``calibrate-temperature`` sub-command."""
+    from dataclasses import replace
+
+    from app.core.calibration_procedures.profiles import (
+        ProfileError,
+        ProfileStore,
+        make_profile,
+        utc_now_iso,
+        write_bytes_atomic,
+    )
+    from app.core.calibration_procedures.temperature import (
+        TemperatureFitError,
+        fit_temperature,
+        merge_temperature,
+    )
+
+    out = sys.stdout if out is None else out
+    try:
+        if args.out is None and not args.save and args.report is None:
+            raise _Usage("say what to do with the result: --out FILE.json, --save and/or "
+                         "--report FILE")
+        for option, value in (("--out", args.out), ("--report", args.report)):
+            if value is not None and not Path(value).resolve().parent.is_dir():
+                raise _Usage(f"{option} {value}: no such directory")
+        if args.report is not None and Path(args.report).suffix.lower() not in (
+                ".html", ".htm", ".pdf"):
+            raise _Usage(f"--report {args.report}: name an .html or a .pdf file")
+        if not math.isfinite(args.min_span) or args.min_span <= 0:
+            raise _Usage("--min-span must be a positive number of degC")
+        base = base_temp = None
+        base_label = ""
+        if args.base is not None:
+            base, base_temp = _read_base(args.base)
+            base_label = args.base
+        stream, label = load_stream(args, out)
+        if args.save and not stream.unique_id:
+            raise _Usage(f"{label}: the device has no unique id, so --save cannot name its "
+                         "profile; use --out FILE.json")
+        store = ProfileStore(args.profile_dir)
+        existing = None
+        if stream.unique_id and not args.no_merge:
+            try:
+                existing = store.load_for_device(stream.unique_id)
+            except ProfileError as exc:
+                raise _Usage(f"the device's profile cannot be read ({exc}); use --no-merge "
+                             "or --base FILE.json") from None
+        if base is None and existing is not None:
+            base, base_temp = existing.calibration, existing.temperature_degc
+            base_label = f"the profile of device {stream.unique_id}"
+        try:
+            fit = fit_temperature(stream.block, stream.settings,
+                                  reference_temp_degc=args.reference_temp,
+                                  min_span_degc=args.min_span)
+        except TemperatureFitError as exc:
+            raise _Failed(f"{label}: cannot fit the temperature dependence: {exc}") from None
+    except _Usage as exc:
+        print(f"inclinometer calibrate-temperature: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except _Failed as exc:
+        print(f"inclinometer calibrate-temperature: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    name = None if base is None or base.is_identity else f"{base.name} + temperature"
+    calibration, how = merge_temperature(fit, base, base_temp, name=name)
+    if base_label and base is not None and not base.is_identity:
+        how += f" (from {base_label})"
+    lines = print_temperature(fit, calibration, how, label, stream, out)
+    created = utc_now_iso()
+    if args.out is not None:
+        document = temperature_json(fit, calibration, how, stream.unique_id, label, created)
+        text = json.dumps(document, indent=2, allow_nan=False) + "\n"
+        write_bytes_atomic(Path(args.out), text.encode("utf-8"))
+        print(f"wrote {args.out}", file=out)
+    residuals = {"temperature_fit": fit.summary()}
+    if existing is not None and calibration.name == name:
+        profile = replace(existing, calibration=calibration, created_utc=created,
+                          method=f"{existing.method} + temperature".strip(" +"),
+                          residuals={**existing.residuals, **residuals},
+                          notes=f"{existing.notes}; inclinometer calibrate-temperature {label}")
+    else:
+        profile = make_profile(
+            stream.unique_id or "unknown", calibration, fit.settings, method="temperature",
+            temperature_degc=calibration.temperature.reference_temp_degc,
+            residuals=residuals, created_utc=created,
+            notes=f"inclinometer calibrate-temperature {label}")
+    if args.save:
+        path = store.save(profile)
+        print(f"saved as the profile of device {stream.unique_id}: {path}", file=out)
+    if args.report is not None:
+        write_temperature_report(fit, calibration, profile, stream, label, lines,
+                                 Path(args.report))
+        print(f"wrote the report {args.report}", file=out)
+    out.flush()
+    return 0
+
+
+def write_temperature_report(fit, calibration, profile, stream, label: str, lines,
+                             path: Path) -> None:
+    import os
+
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                 or os.environ.get("WAYLAND_DISPLAY")):
+        os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    from PySide6.QtGui import QGuiApplication
+
+    from app.gui.calibration_report import report_from_temperature, write_report
+
+    _app = QGuiApplication.instance() or QGuiApplication(["inclinometer"])
+    report = report_from_temperature(fit, calibration, profile, stream.device, label,
+                                     stream.unit_errors, lines)
+    write_report(report, path)

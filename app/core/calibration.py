@@ -3,11 +3,25 @@
 ``a_cal = A (a_raw - b_a)`` and ``w_cal = G (w_raw - b_g)``, with biases in SI units and
 3x3 matrices that hold scale and misalignment. The identity calibration leaves data unchanged.
 The calibration wizard (a later stage of the project) fills these from measurements.
+
+Optional temperature compensation (:class:`TemperatureCompensation`) makes both biases
+functions of the die temperature of each sample::
+
+    b(T) = b0 + k1 (T - T0) + k2 (T - T0)^2
+
+with ``b0`` the calibration's bias (valid at ``T0``). A sample whose temperature is unknown
+(NaN) gets ``b0``. The correction is elementwise per sample, so the result does not depend on
+how a stream is cut into blocks: a replay reproduces the live run bit for bit.
+:func:`temperature_to_json` and :func:`temperature_from_json` give the optional JSON keys
+that profiles, recordings and ``inclinometer calibrate-temperature`` share.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -22,15 +36,111 @@ def _eye3() -> np.ndarray:
     return np.eye(3)
 
 
+# The optional JSON keys of the temperature terms (flat, beside the binding bias/matrix keys).
+KEY_TEMP_REFERENCE = "temperature_reference_degc"
+TEMPERATURE_KEYS: dict[str, str] = {
+    "accel_k1": "accel_bias_tc1_m_s2_per_degc",
+    "accel_k2": "accel_bias_tc2_m_s2_per_degc2",
+    "gyro_k1": "gyro_bias_tc1_rad_s_per_degc",
+    "gyro_k2": "gyro_bias_tc2_rad_s_per_degc2",
+}
+"""Attribute of :class:`TemperatureCompensation` -> its JSON key ([3] numbers each)."""
+
+
+@dataclass(frozen=True)
+class TemperatureCompensation:
+    """Bias against die temperature: ``b(T) = b0 + k1 (T - T0) + k2 (T - T0)^2`` per axis.
+
+    ``reference_temp_degc`` is ``T0``; the ``k`` vectors are (3,), per sensor axis, in
+    m/s^2/degC and m/s^2/degC^2 (accelerometer) or rad/s/degC and rad/s/degC^2 (gyroscope).
+    """
+
+    reference_temp_degc: float
+    accel_k1: np.ndarray = field(default_factory=_zeros3)
+    accel_k2: np.ndarray = field(default_factory=_zeros3)
+    gyro_k1: np.ndarray = field(default_factory=_zeros3)
+    gyro_k2: np.ndarray = field(default_factory=_zeros3)
+
+    @property
+    def is_zero(self) -> bool:
+        return not any(np.any(getattr(self, name)) for name in TEMPERATURE_KEYS)
+
+    def offsets(self, temp_degc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(accel, gyro)`` bias changes (N, 3) at temperatures (N,); zero where NaN."""
+        delta = np.asarray(temp_degc, dtype=np.float64).reshape(-1, 1) - self.reference_temp_degc
+        delta = np.where(np.isfinite(delta), delta, 0.0)
+        square = delta * delta
+        accel = delta * self.accel_k1 + square * self.accel_k2
+        gyro = delta * self.gyro_k1 + square * self.gyro_k2
+        return accel, gyro
+
+    def recentred(self, reference_temp_degc: float) -> TemperatureCompensation:
+        """The same curve's shape about another ``T0`` (its value at the new ``T0`` is 0).
+
+        ``k1' = k1 + 2 k2 (T0' - T0)``, ``k2' = k2``: only the bias *change* is kept, so a
+        bias measured at ``T0'`` (e.g. a six-position calibration's) can take the place of b0.
+        """
+        shift = float(reference_temp_degc) - self.reference_temp_degc
+        return TemperatureCompensation(
+            reference_temp_degc=float(reference_temp_degc),
+            accel_k1=self.accel_k1 + 2.0 * shift * self.accel_k2, accel_k2=self.accel_k2.copy(),
+            gyro_k1=self.gyro_k1 + 2.0 * shift * self.gyro_k2, gyro_k2=self.gyro_k2.copy(),
+        )
+
+
+def temperature_to_json(model: TemperatureCompensation | None) -> dict[str, Any]:
+    """The optional keys (empty without a model): ``temperature_reference_degc`` and the
+    four ``[3]`` coefficient vectors of :data:`TEMPERATURE_KEYS`."""
+    if model is None:
+        return {}
+    out: dict[str, Any] = {KEY_TEMP_REFERENCE: float(model.reference_temp_degc)}
+    for attribute, key in TEMPERATURE_KEYS.items():
+        out[key] = np.asarray(getattr(model, attribute), float).tolist()
+    return out
+
+
+def temperature_from_json(value: Mapping[str, Any]) -> TemperatureCompensation | None:
+    """The model from the keys of :func:`temperature_to_json` (None when there is no
+    ``temperature_reference_degc``; a missing coefficient vector is zero).
+
+    Raises ValueError, naming the key, for a malformed value.
+    """
+    reference = value.get(KEY_TEMP_REFERENCE)
+    if reference is None:
+        return None
+    if (isinstance(reference, bool) or not isinstance(reference, int | float)
+            or not math.isfinite(reference)):
+        raise ValueError(f"{KEY_TEMP_REFERENCE!r} must be a finite number, not {reference!r}")
+    vectors = {}
+    for attribute, key in TEMPERATURE_KEYS.items():
+        raw = value.get(key)
+        if raw is None:
+            vectors[attribute] = np.zeros(3)
+            continue
+        try:
+            array = np.asarray(raw, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"{key!r} is not numbers") from None
+        if array.shape != (3,) or not np.all(np.isfinite(array)):
+            raise ValueError(f"{key!r} is not 3 finite numbers")
+        vectors[attribute] = array
+    return TemperatureCompensation(float(reference), **vectors)
+
+
 @dataclass(frozen=True)
 class SensorCalibration:
-    """Accelerometer and gyroscope correction; ``name`` labels the active profile."""
+    """Accelerometer and gyroscope correction; ``name`` labels the active profile.
+
+    ``temperature`` (optional) makes the biases follow the die temperature; the biases here
+    are then their values at its ``reference_temp_degc``.
+    """
 
     accel_bias_m_s2: np.ndarray = field(default_factory=_zeros3)
     accel_matrix: np.ndarray = field(default_factory=_eye3)
     gyro_bias_rad_s: np.ndarray = field(default_factory=_zeros3)
     gyro_matrix: np.ndarray = field(default_factory=_eye3)
     name: str = "uncalibrated"
+    temperature: TemperatureCompensation | None = None
 
     @property
     def is_identity(self) -> bool:
@@ -39,15 +149,35 @@ class SensorCalibration:
             and not np.any(self.gyro_bias_rad_s)
             and np.array_equal(self.accel_matrix, np.eye(3))
             and np.array_equal(self.gyro_matrix, np.eye(3))
+            and (self.temperature is None or self.temperature.is_zero)
         )
+
+    def biases_at(self, temp_degc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(accel, gyro)`` biases (N, 3) at temperatures (N,) (b0 without a model or at NaN)."""
+        n = np.asarray(temp_degc).reshape(-1).shape[0]
+        if self.temperature is None:
+            return (np.broadcast_to(self.accel_bias_m_s2, (n, 3)),
+                    np.broadcast_to(self.gyro_bias_rad_s, (n, 3)))
+        accel, gyro = self.temperature.offsets(temp_degc)
+        accel += self.accel_bias_m_s2
+        gyro += self.gyro_bias_rad_s
+        return accel, gyro
 
     def apply(self, block: SampleBlock) -> SampleBlock:
         """A calibrated copy of ``block`` (the block itself when this is the identity)."""
         if self.is_identity:
             return block
-        accel = (block.accel_m_s2 - self.accel_bias_m_s2) @ self.accel_matrix.T
-        gyro = (block.gyro_rad_s - self.gyro_bias_rad_s) @ self.gyro_matrix.T
+        if self.temperature is None or self.temperature.is_zero:
+            accel_bias, gyro_bias = self.accel_bias_m_s2, self.gyro_bias_rad_s
+        else:
+            accel_bias, gyro_bias = self.biases_at(block.temp_degc)
+        accel = (block.accel_m_s2 - accel_bias) @ self.accel_matrix.T
+        gyro = (block.gyro_rad_s - gyro_bias) @ self.gyro_matrix.T
         return replace(block, accel_m_s2=accel, gyro_rad_s=gyro)
+
+    def with_temperature(self, model: TemperatureCompensation | None) -> SensorCalibration:
+        """This calibration with ``model`` as its temperature terms (None removes them)."""
+        return replace(self, temperature=model)
 
 
 IDENTITY_CALIBRATION = SensorCalibration()

@@ -13,6 +13,8 @@ interactive. Options every scenario accepts:
 - ``errors`` 0: an ideal chip; ``noise`` 0: no white noise (quantisation stays)
 - ``fail_after`` seconds of device time, after which reads raise ``DeviceIOError`` as if the
   cable had been unplugged
+- ``warmup=RISE[:TAU]``: the die warms by RISE degC with time constant TAU s (default 300)
+  after power-up instead of the unit's own 1.5-4 degC (a temperature-compensation run)
 - ``fault=KIND:CHANNEL[:SIZE]@START[-END]``, repeatable: an injected sensor fault
   (:mod:`app.core.faults.injection`, :mod:`drivers.sim.faults`), e.g. ``fault=stuck:gx@10``
 
@@ -31,6 +33,7 @@ import math
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import ClassVar
 
 import numpy as np
@@ -90,6 +93,9 @@ class SimulatedDevice(Device):
         super().__init__(url)
         self.options: SimOptions = parse_sim_url(url, overrides)
         unit = UnitErrors.draw(self.options.seed)
+        if self.options.warmup is not None:
+            rise, tau = self.options.warmup
+            unit = replace(unit, self_heating_degc=rise, self_heating_time_constant_s=tau)
         self.unit_errors: UnitErrors = unit if self.options.errors else unit.without_errors()
         self.unique_id = unique_id_for_seed(self.options.seed)
         self.scenario: Scenario = self._new_scenario()

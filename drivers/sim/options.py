@@ -17,6 +17,7 @@ DEFAULT_ACCEL_FS_G = 4
 DEFAULT_GYRO_FS_DPS = 250
 DEFAULT_SEED = 1
 DEFAULT_BLOCK = 256
+DEFAULT_WARMUP_TAU_S = 300.0
 MAX_BLOCK = 1_000_000
 
 GENERAL_OPTIONS: dict[str, str] = {
@@ -31,6 +32,8 @@ GENERAL_OPTIONS: dict[str, str] = {
     "errors": "0: an ideal chip (no bias, scale, cross-axis, drift or clock error)",
     "noise": "0: no white noise (quantisation stays)",
     "fail_after": "seconds of device time after which reads fail like an unplugged cable",
+    "warmup": "RISE[:TAU]: the die warms by RISE degC (0 ... 60) with time constant TAU s "
+              "(1 ... 36000, default 300) after power-up, instead of the unit's own 1.5-4 degC",
     "fault": "inject a fault, KIND:CHANNEL[:SIZE]@START[-END] (repeatable), KIND one of "
              "noise, stuck, dead, spike, bias, scale; SIZE in g (ax..az) or dps (gx..gz)",
 }
@@ -58,6 +61,8 @@ class SimOptions:
     scenario_params: dict[str, float | int | bool] = field(default_factory=dict)
     faults: tuple[FaultSpec, ...] = ()
     """Injected faults (``fault=...``, repeatable), in URL order."""
+    warmup: tuple[float, float] | None = None
+    """``warmup=RISE[:TAU]``: self-heating rise (degC) and time constant (s), None: the unit's."""
 
 
 def _fail(url: str, message: str) -> DeviceUrlError:
@@ -107,6 +112,16 @@ def _param(url: str, key: str, text: str, spec: Param) -> float | int | bool:
     if not spec.minimum <= value <= spec.maximum:
         raise _fail(url, f"{key}={text!r} is out of range [{spec.minimum:g}, {spec.maximum:g}]")
     return value
+
+
+def _warmup(url: str, text: str) -> tuple[float, float]:
+    rise_text, _, tau_text = text.partition(":")
+    rise = _number(url, "warmup", rise_text)
+    tau = _number(url, "warmup", tau_text) if tau_text else DEFAULT_WARMUP_TAU_S
+    if not 0.0 <= rise <= 60.0 or not 1.0 <= tau <= 36000.0:
+        raise _fail(url, f"warmup={text!r}: expected RISE[:TAU], RISE 0 ... 60 degC, "
+                         "TAU 1 ... 36000 s")
+    return rise, tau
 
 
 def _query(
@@ -190,6 +205,8 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
         if seconds <= 0.0:
             raise _fail(url, f"fail_after={raw['fail_after']!r} must be a positive time in s")
         options["fail_after_s"] = seconds
+    if "warmup" in raw:
+        options["warmup"] = _warmup(url, raw["warmup"])
     options["scenario_params"] = {
         key: _param(url, key, raw[key], spec[key]) for key in spec if key in raw
     }

@@ -7,7 +7,10 @@ Layout (``base`` defaults to ``platformdirs.user_data_dir("Inclinometer") / "pro
 
 A profile holds the calibration parameters, its creation time (UTC, ISO 8601), the die
 temperature, the sensor settings (ODR, full scales), the fit residuals, an optional tare, the
-app version and a format version. Safety rules:
+app version and a format version. The ``parameters`` may also hold temperature terms
+(``temperature_reference_degc`` and four coefficient vectors, see
+:func:`app.core.calibration.temperature_to_json`): optional keys within format 1, so profiles
+without them read as before and an older reader ignores them. Safety rules:
 
 - writes are atomic: a temporary file in the same directory, flushed and fsynced, then
   ``os.replace`` (a crash leaves the old file or the new one, never half a file);
@@ -37,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from app.core.calibration import SensorCalibration
+from app.core.calibration import SensorCalibration, temperature_from_json, temperature_to_json
 from app.core.calibration_procedures.level_reference import TareReference
 from app.core.version import __version__
 
@@ -165,6 +168,8 @@ class CalibrationProfile:
                 "accel_matrix": np.asarray(cal.accel_matrix, float).tolist(),
                 "gyro_bias_rad_s": np.asarray(cal.gyro_bias_rad_s, float).tolist(),
                 "gyro_matrix": np.asarray(cal.gyro_matrix, float).tolist(),
+                # Optional, within format 1: the temperature terms when there are some.
+                **temperature_to_json(cal.temperature),
             },
             "tare_quaternion": None if self.tare is None else self.tare.to_list(),
             "residuals": _jsonable(self.residuals),
@@ -205,6 +210,10 @@ class CalibrationProfile:
             accel_matrix = _array(params["accel_matrix"], (3, 3), "accel_matrix", corrupt)
             gyro_bias = _array(params["gyro_bias_rad_s"], (3,), "gyro_bias_rad_s", corrupt)
             gyro_matrix = _array(params["gyro_matrix"], (3, 3), "gyro_matrix", corrupt)
+            try:
+                temperature_terms = temperature_from_json(params)
+            except ValueError as exc:
+                raise corrupt(f"the temperature terms: {exc}") from None
             for name, matrix in (("accel_matrix", accel_matrix), ("gyro_matrix", gyro_matrix)):
                 if abs(np.linalg.det(matrix)) < 1e-6:
                     raise corrupt(f"'{name}' is singular")
@@ -244,6 +253,7 @@ class CalibrationProfile:
                     gyro_bias_rad_s=gyro_bias,
                     gyro_matrix=gyro_matrix,
                     name=str(name),
+                    temperature=temperature_terms,
                 ),
                 settings=settings,
                 created_utc=created,

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from app.core.calibration import SensorCalibration
+from app.core.calibration import SensorCalibration, temperature_from_json, temperature_to_json
 from app.core.version import __version__
 
 MAGIC = "inclinometer-recording"
@@ -130,6 +130,8 @@ def calibration_to_json(calibration: SensorCalibration) -> dict[str, Any]:
         "accel_matrix": np.asarray(calibration.accel_matrix, float).tolist(),
         "gyro_bias_rad_s": np.asarray(calibration.gyro_bias_rad_s, float).tolist(),
         "gyro_matrix": np.asarray(calibration.gyro_matrix, float).tolist(),
+        # Optional (a v1 extension): the temperature terms, only when there are some.
+        **temperature_to_json(calibration.temperature),
     }
 
 
@@ -149,12 +151,17 @@ def calibration_from_json(value: Any) -> SensorCalibration:
             raise ValueError(f"the calibration's {name!r} is not {shape} finite numbers")
         return result
 
+    try:
+        temperature = temperature_from_json(value)
+    except ValueError as exc:
+        raise ValueError(f"the calibration's temperature terms: {exc}") from None
     return SensorCalibration(
         accel_bias_m_s2=array("accel_bias_m_s2", (3,)),
         accel_matrix=array("accel_matrix", (3, 3)),
         gyro_bias_rad_s=array("gyro_bias_rad_s", (3,)),
         gyro_matrix=array("gyro_matrix", (3, 3)),
         name=str(value.get("name", "recorded")),
+        temperature=temperature,
     )
 
 
