@@ -30,6 +30,7 @@ from app import __version__
 from app.cli_calibration import CALIBRATION_COMMANDS, add_calibration_parsers, calibration_command
 from app.cli_check import add_check_parser, check_command
 from app.cli_diagnose import add_diagnose_parser, diagnose_command
+from app.cli_faults import add_evaluate_faults_parser, evaluate_faults_command
 from app.cli_recording import (
     add_param_argument,
     add_recording_parsers,
@@ -66,6 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_simulate_parser(commands)
     add_check_parser(commands)
     add_diagnose_parser(commands)
+    add_evaluate_faults_parser(commands)
     add_calibration_parsers(commands)
     return parser
 
@@ -446,6 +448,8 @@ def main(argv: list[str] | None = None) -> int:
         return check_command(args)
     if args.command == "diagnose":
         return diagnose_command(args)
+    if args.command == "evaluate-faults":
+        return evaluate_faults_command(args)
     if args.command in CALIBRATION_COMMANDS:
         return calibration_command(args)
     if args.filter is not None:

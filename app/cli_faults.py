@@ -1,0 +1,239 @@
+"""``inclinometer evaluate-faults [SOURCE ...]``: the fault detector measured as in the thesis.
+
+Gaussian noise of sigma = multiples of each channel's own noise is injected into one channel at
+a time of clean simulator scenarios and recordings; printed are NDR(sigma) (fraction of samples
+flagged, on the injected channel and on the clean ones, and the whole matrix), FDI(sigma, theta)
+(samples until the cumulative count of flagged samples reaches theta) and the false-alarm rate
+on the clean sources (events per hour). ``--json OUT`` writes the same, ``--png DIR`` the
+curves (docs/fault-detection.md#evaluation).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
+
+if TYPE_CHECKING:
+    from app.core.faults.evaluation import GroupSummary, SourceSweep
+    from app.services.fault_evaluation import FaultEvaluation
+
+
+def _numbers(kind: type, name: str):
+    def parse(text: str) -> list:
+        try:
+            values = [kind(part) for part in text.split(",") if part.strip()]
+        except ValueError:
+            what = "whole numbers" if kind is int else "numbers"
+            raise argparse.ArgumentTypeError(
+                f"{name}: {text!r} is not a comma-separated list of {what}") from None
+        if not values:
+            raise argparse.ArgumentTypeError(f"{name}: give at least one value")
+        return values
+    return parse
+
+
+def add_evaluate_faults_parser(commands: argparse._SubParsersAction) -> None:
+    """Register ``evaluate-faults``."""
+    from app.core.faults.evaluation import NOISE_MULTIPLES, THETAS
+
+    parser = commands.add_parser(
+        "evaluate-faults",
+        help="measure the fault detector as in the thesis: NDR and FDI with noise injected "
+             "into one channel at a time, false alarms on clean data",
+        description=(
+            "Inject Gaussian noise of growing sigma (multiples of each channel's own noise per "
+            "sample: the datasheet's for a known sensor, else estimated at rest) into one "
+            "channel at a time of clean sources, from --onset to the end, and print NDR(sigma) "
+            "(the fraction of samples the detector flags, on the injected channel and on the "
+            "other five), FDI(sigma, theta) (samples until the cumulative count of samples "
+            "flagged on the injected channel reaches theta; the median over the sources) and "
+            "the false alarms on the clean sources (detector events per hour). Sources are "
+            "grouped: 'simulator' and each recording folder. Exit status 2 when a source "
+            "cannot be read."),
+    )
+    parser.add_argument(
+        "sources", metavar="SOURCE", nargs="*", default=["scenarios"],
+        help="'scenarios' (every simulator scenario but the interactive one; the default), "
+             "sim:// URLs, recordings or globs of them (e.g. '../shared/datasets/broad/*.csv')")
+    parser.add_argument("--seconds", type=float, default=60.0, metavar="S",
+                        help="simulator stream the noise is injected into (default %(default)g; "
+                             "recordings: whole)")
+    parser.add_argument("--onset", type=float, default=10.0, metavar="S",
+                        help="noise from S seconds after the start (the detector learns the "
+                             "clean noise first; default %(default)g)")
+    parser.add_argument("--clean-seconds", type=float, default=600.0, metavar="S",
+                        help="clean simulator stream for the false alarms (default %(default)g; "
+                             "3600 for the hour of the goal)")
+    parser.add_argument("--sigma", type=_numbers(float, "--sigma"),
+                        default=list(NOISE_MULTIPLES), metavar="M,M,...",
+                        help="sigma as multiples of the channel's own noise (default "
+                             f"{','.join(f'{m:g}' for m in NOISE_MULTIPLES)})")
+    parser.add_argument("--theta", type=_numbers(int, "--theta"), default=list(THETAS),
+                        metavar="N,N,...",
+                        help="FDI thresholds on the cumulative flagged count (default "
+                             f"{','.join(map(str, THETAS))})")
+    parser.add_argument("--channels", type=lambda text: [c.strip().lower() for c in
+                                                        text.split(",") if c.strip()],
+                        default=None, metavar="CH,CH,...",
+                        help="channels to inject into (default all: ax,ay,az,gx,gy,gz)")
+    parser.add_argument("--seed", type=int, default=0, help="picks the injected noise")
+    parser.add_argument("--json", metavar="OUT",
+                        help="write every figure as JSON to OUT ('-': stdout, the tables then "
+                             "go to stderr)")
+    parser.add_argument("--png", metavar="DIR",
+                        help="save the NDR and FDI curves as ndr_GROUP.png and fdi_GROUP.png")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+
+
+def evaluate_faults_command(args: argparse.Namespace) -> int:
+    """Run ``evaluate-faults``; returns the exit status."""
+    from app.core.faults.events import CHANNELS
+    from app.core.recording.errors import RecordingError
+    from app.services.fault_evaluation import (
+        FaultEvaluationSettings,
+        resolve_fault_sources,
+        run_fault_evaluation,
+    )
+    from drivers.errors import DeviceError
+
+    settings = FaultEvaluationSettings(
+        seconds=args.seconds, onset_s=args.onset, clean_seconds=args.clean_seconds,
+        multiples=tuple(args.sigma), channels=tuple(args.channels or CHANNELS),
+        thetas=tuple(args.theta), seed=args.seed)
+    out: TextIO = sys.stderr if args.json == "-" else sys.stdout
+    try:
+        settings.check()
+        if args.json not in (None, "-") and not Path(args.json).resolve().parent.is_dir():
+            raise ValueError(f"--json {args.json}: no such directory")
+        sources = resolve_fault_sources(args.sources)
+        if not sources:
+            raise ValueError("no sources")
+
+        def progress(line: str) -> None:
+            if not args.quiet:
+                print(line, file=sys.stderr, flush=True)
+
+        result = run_fault_evaluation(sources, settings, progress)
+    except (ValueError, RecordingError, DeviceError, OSError) as exc:
+        print(f"inclinometer evaluate-faults: {exc}", file=sys.stderr)
+        return 2
+    print_evaluation(result, out)
+    document = result.as_json()
+    if args.json is not None:
+        text = json.dumps(document, indent=1) + "\n"
+        if args.json == "-":
+            sys.stdout.write(text)
+            sys.stdout.flush()
+        else:
+            Path(args.json).write_text(text, encoding="utf-8")
+    if args.png is not None:
+        for path in save_curves(document, Path(args.png)):
+            print(f"wrote {path}", file=out)
+    return 0
+
+
+def save_curves(document: dict, directory: Path) -> list[Path]:
+    """The curves through Qt (a QGuiApplication is made when none runs, offscreen is fine)."""
+    import os
+
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                 or os.environ.get("WAYLAND_DISPLAY")):
+        os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")  # no screen needed
+    from app.gui.fault_plots import save_fault_curves
+
+    return save_fault_curves(document, directory)
+
+
+# -- tables ----------------------------------------------------------------------------------------
+def print_evaluation(result: FaultEvaluation, out: TextIO) -> None:
+    """Every group's NDR, full matrix, FDI and false-alarm tables."""
+    s = result.settings
+    print(f"Fault detector evaluation (thesis measures): Gaussian noise injected into one "
+          f"channel at a time from {s.onset_s:g} s to the end; sigma in multiples of the "
+          f"channel's own noise per sample", file=out)
+    for group in result.groups:
+        members = [w for w in result.sweeps if w.group == group.name]
+        print_group(group, members, out)
+
+
+def print_group(group: GroupSummary, sweeps: Sequence[SourceSweep], out: TextIO) -> None:
+    from app.core.faults.evaluation import to_user_units, unit_of
+    from app.core.faults.events import CHANNELS
+
+    rates = "/".join(f"{r:.4g}" for r in sorted(set(group.rates_hz)))
+    swept = sum(w.duration_s for w in sweeps)
+    print(f"\n== {group.name}: {len(sweeps)} source(s), {swept / 60:.1f} min swept at "
+          f"{rates} Hz ==", file=out)
+    basis = sorted({w.noise_basis for w in sweeps})
+    own = []
+    for c, name in enumerate(CHANNELS):
+        values = [to_user_units(c, float(w.noise_si[c])) for w in sweeps]
+        scale, unit = (1e3, "mg") if unit_of(c) == "g" else (1.0, "dps")
+        own.append(f"{name} {_mean(values) * scale:.3g} {unit}")
+    print(f"own noise per sample ({', '.join(basis)}; mean over sources): {', '.join(own)}",
+          file=out)
+    header = "".join(f"{_mult(m):>8}" for m in group.multiples)
+    print("\nNDR on the injected channel (fraction of samples flagged from the onset)", file=out)
+    print(f"  {'noise on':<9}{header}{'clean':>9}", file=out)
+    for c in group.channels:
+        cells = "".join(f"{v:8.3f}" for v in group.ndr_injected(c))
+        print(f"  {CHANNELS[c]:<9}{cells}{group.clean_ndr[c]:9.4f}", file=out)
+    print("\nNDR on the other five channels, largest (should stay near 0)", file=out)
+    print(f"  {'noise on':<9}{header}", file=out)
+    for c in group.channels:
+        cells = "".join(f"{v:8.3f}" for v in group.ndr_others_max(c))
+        print(f"  {CHANNELS[c]:<9}{cells}", file=out)
+    print("\nNDR on the injected channel per source (mean over the channels)", file=out)
+    width = max(8, *(len(w.label) for w in sweeps))
+    print(f"  {'source':<{width}}{header}", file=out)
+    for w in sweeps:
+        cells = []
+        for m in group.multiples:
+            values = [r.ndr[r.channel] for r in w.runs if r.multiple == m]
+            cells.append(f"{_mean(values):8.3f}")
+        print(f"  {w.label:<{width}}{''.join(cells)}", file=out)
+    print("\nNDR matrix: noise on (rows) x flagged channel (columns), per sigma", file=out)
+    for k, m in enumerate(group.multiples):
+        print(f"  sigma = {_mult(m)}  " + "".join(f"{name:>7}" for name in CHANNELS),
+              file=out)
+        for c in group.channels:
+            row = group.ndr[c][k]
+            print(f"    {CHANNELS[c]:<11}" + "".join(f"{v:7.3f}" for v in row), file=out)
+    print(f"\nFDI: samples from the onset until the count of samples flagged on the injected "
+          f"channel reaches theta (median over the sources where reached; [n]: reached in n "
+          f"of the {len(sweeps)} when not all; '-': in none)", file=out)
+    wide = "".join(f"{_mult(m):>10}" for m in group.multiples)
+    for th in group.thetas:
+        print(f"  theta = {th:<4}{wide}", file=out)
+        for c in group.channels:
+            cells = []
+            for value, hits in zip(group.fdi[th][c], group.detected[th][c], strict=True):
+                text = "-" if value is None else f"{value:g}"
+                if 0 < hits < len(sweeps):
+                    text += f"[{hits}]"
+                cells.append(f"{text:>10}")
+            print(f"    {CHANNELS[c]:<9}{''.join(cells)}", file=out)
+    hours = group.clean_seconds / 3600.0
+    rate = group.false_alarms_per_hour
+    per = f" = {rate:.2f} per hour" if math.isfinite(rate) else ""
+    print(f"\nFalse alarms on the clean sources: {group.false_alarms} event(s) in {hours:.2f} h"
+          f"{per}", file=out)
+    for w in sweeps:
+        kinds = ", ".join(sorted({f"{e.channel} {e.kind}" for e in w.clean_events
+                                  if e.channel != "link"}))
+        print(f"  {w.label:<{width}} {w.clean_seconds / 60:7.1f} min {w.false_alarms:4d}"
+              + (f"  ({kinds})" if kinds else ""), file=out)
+    out.flush()
+
+
+def _mult(m: float) -> str:
+    return f"{m:g}x"
+
+
+def _mean(values: Sequence[float]) -> float:
+    return sum(values) / len(values) if values else math.nan

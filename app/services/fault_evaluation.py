@@ -1,0 +1,257 @@
+"""``evaluate-faults``: the thesis's NDR / FDI / false-alarm sweep over simulator scenarios and
+recordings (runs simulated devices, reads recordings; the measures are
+:mod:`app.core.faults.evaluation`).
+
+Each source is read clean once: a simulator URL for ``clean_seconds`` (the false alarms) of
+which the first ``seconds`` take the injected noise, a recording whole for both. The noise is
+added to those samples (:class:`~app.core.faults.injection.FaultInjector`), one channel and one
+sigma at a time; the simulator's are rounded to the chip's LSB again. Sources are grouped for
+the tables: ``simulator`` for ``sim://`` URLs, a recording's folder name otherwise (``broad``).
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.core.faults import SensorSpec
+from app.core.faults.evaluation import (
+    NOISE_MULTIPLES,
+    THETAS,
+    GroupSummary,
+    SourceSweep,
+    evaluation_json,
+    sample_rows,
+    summarize_group,
+    sweep_samples,
+)
+from app.core.faults.events import CHANNELS
+from app.core.recording.reader import read_recording
+from app.core.samples import SampleBlock, convert_raw_block
+from app.services.diagnosis import recording_spec
+
+SIMULATOR_GROUP = "simulator"
+DEFAULT_SEED = 1
+"""The simulated unit of ``scenarios`` (``sim://NAME?seed=1``)."""
+NOT_SWEPT = ("interactive",)
+"""Scenarios that need a user (they stand still without one)."""
+GLOB_CHARACTERS = "*?["
+
+
+@dataclass(slots=True)
+class FaultEvaluationSettings:
+    """How long, where and what to inject (see ``inclinometer evaluate-faults --help``)."""
+
+    seconds: float = 60.0
+    """Simulator streams the noise is injected into (recordings: whole)."""
+    onset_s: float = 10.0
+    """Noise from this many seconds after the first sample to the end."""
+    clean_seconds: float = 600.0
+    """Clean simulator streams for the false-alarm rate (at least ``seconds``)."""
+    multiples: tuple[float, ...] = NOISE_MULTIPLES
+    channels: tuple[str, ...] = CHANNELS
+    thetas: tuple[int, ...] = THETAS
+    seed: int = 0
+    """Picks the injected noise."""
+
+    def check(self) -> None:
+        """Raises ValueError with the reason for settings that cannot run."""
+        if not self.seconds > 0:
+            raise ValueError("--seconds must be positive")
+        if not 0 <= self.onset_s < self.seconds:
+            raise ValueError(f"--onset must be at least 0 and below --seconds ({self.seconds:g})")
+        if not self.multiples or any(not m > 0 for m in self.multiples):
+            raise ValueError("the sigma multiples must be positive numbers")
+        if not self.thetas or any(th < 1 for th in self.thetas):
+            raise ValueError("theta must be whole numbers >= 1")
+        unknown = [c for c in self.channels if c not in CHANNELS]
+        if unknown or not self.channels:
+            raise ValueError(f"unknown channel {unknown[0] if unknown else ''!r}; use some of "
+                             f"{', '.join(CHANNELS)}")
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"seconds": self.seconds, "onset_s": self.onset_s,
+                "clean_seconds": max(self.clean_seconds, self.seconds),
+                "sigma_multiples": list(self.multiples), "channels": list(self.channels),
+                "thetas": list(self.thetas), "seed": self.seed}
+
+
+@dataclass(slots=True)
+class CleanStream:
+    """A source read clean: what takes the noise, the longer stream for false alarms."""
+
+    sweep: SampleBlock
+    clean: SampleBlock
+    spec: SensorSpec
+    lsb: np.ndarray | None
+
+
+@dataclass(slots=True)
+class FaultSource:
+    """A source named on the command line, checked but not read yet."""
+
+    label: str
+    group: str
+    load: Callable[[FaultEvaluationSettings], CleanStream]
+
+
+@dataclass(slots=True)
+class FaultEvaluation:
+    """The sweeps of every source and their group summaries."""
+
+    settings: FaultEvaluationSettings
+    sweeps: list[SourceSweep] = field(default_factory=list)
+    groups: list[GroupSummary] = field(default_factory=list)
+
+    def as_json(self) -> dict[str, Any]:
+        """The ``--json`` document."""
+        return evaluation_json(self.groups, self.sweeps, self.settings.as_dict())
+
+
+# -- sources ---------------------------------------------------------------------------------------
+def scenario_urls(seed: int = DEFAULT_SEED) -> list[str]:
+    """Every simulator scenario but the interactive one, as ``sim://NAME?seed=SEED``."""
+    from drivers.sim.scenarios import SCENARIOS
+
+    return [f"sim://{name}?seed={seed}" for name in SCENARIOS if name not in NOT_SWEPT]
+
+
+def resolve_fault_sources(items: Sequence[str]) -> list[FaultSource]:
+    """``scenarios``, ``sim://`` URLs, recordings and globs of them, in order (each file once).
+
+    Raises
+    ------
+    ValueError
+        For a URL that is not a simulator (a live device cannot be made clean at will), a bad
+        simulator URL, a missing file or a glob that matches nothing.
+    """
+    from drivers.errors import DeviceUrlError
+    from drivers.sim.options import parse_sim_url
+
+    sources: list[FaultSource] = []
+    seen: set[Path] = set()
+
+    def add_file(path: Path) -> None:
+        if not path.is_file():
+            raise ValueError(f"{path}: no such file")
+        key = path.resolve()
+        if key not in seen:
+            seen.add(key)
+            sources.append(FaultSource(path.stem, key.parent.name or "recordings",
+                                       lambda settings, path=path: _recording_stream(path)))
+
+    for item in items:
+        if item == "scenarios":
+            items_here = scenario_urls()
+        elif "://" in item:
+            items_here = [item]
+        elif any(c in item for c in GLOB_CHARACTERS) and not Path(item).exists():
+            matches = sorted(glob.glob(os.path.expanduser(item)))
+            if not matches:
+                raise ValueError(f"{item}: no file matches")
+            for match in matches:
+                add_file(Path(match))
+            continue
+        else:
+            add_file(Path(item))
+            continue
+        for url in items_here:
+            if not url.lower().startswith("sim://"):
+                raise ValueError(f"{url}: only simulator URLs (sim://...) and recordings can be "
+                                 "swept; a live device cannot be made clean at will")
+            try:
+                parse_sim_url(url)
+            except DeviceUrlError as exc:
+                raise ValueError(str(exc)) from None
+            sources.append(FaultSource(url.removeprefix("sim://"), SIMULATOR_GROUP,
+                                       lambda settings, url=url: _simulator_stream(url, settings)))
+    return sources
+
+
+def _simulator_stream(url: str, settings: FaultEvaluationSettings) -> CleanStream:
+    """The scenario's raw samples (no calibration: the detector sees what the chip says)."""
+    from drivers.errors import DeviceIOError
+    from drivers.sim.device import SimulatedDevice
+
+    device = SimulatedDevice(url, realtime=False, block=65536)
+    info = device.open()
+    blocks: list[SampleBlock] = []
+    scale = device.scale
+    try:
+        wanted = max(1, round(max(settings.clean_seconds, settings.seconds) * device.odr_hz))
+        got = 0
+        while got < wanted:
+            try:
+                raw = device.read(1.0)
+            except DeviceIOError:  # fail_after: the stream ends there
+                break
+            if raw is None or len(raw) == 0:
+                break
+            scale = raw.scale or scale
+            blocks.append(convert_raw_block(raw))
+            got += len(raw)
+    finally:
+        device.close()
+    clean = _join(blocks)
+    clean = sample_rows(clean, 0, min(len(clean), wanted))
+    sweep_n = min(len(clean), max(1, round(settings.seconds * device.odr_hz)))
+    spec = SensorSpec.from_device_info(info, scale)
+    lsb = np.array([scale.accel_m_s2_per_lsb] * 3 + [scale.gyro_rad_s_per_lsb] * 3)
+    return CleanStream(sample_rows(clean, 0, sweep_n), clean, spec, lsb)
+
+
+def _recording_stream(path: Path) -> CleanStream:
+    recording = read_recording(path)
+    samples = recording.sample_block(None)
+    return CleanStream(samples, samples, recording_spec(recording), None)
+
+
+def _join(blocks: list[SampleBlock]) -> SampleBlock:
+    if not blocks:
+        raise ValueError("the simulator gave no samples")
+    return SampleBlock(
+        np.concatenate([b.t_s for b in blocks]), np.concatenate([b.accel_m_s2 for b in blocks]),
+        np.concatenate([b.gyro_rad_s for b in blocks]),
+        np.concatenate([b.temp_degc for b in blocks]), np.concatenate([b.gap for b in blocks]))
+
+
+# -- the run ---------------------------------------------------------------------------------------
+def run_fault_evaluation(
+    sources: Sequence[FaultSource], settings: FaultEvaluationSettings,
+    progress: Callable[[str], None] | None = None,
+) -> FaultEvaluation:
+    """Sweep every source (one at a time, memory stays one source) and pool them per group.
+
+    Raises
+    ------
+    ValueError, RecordingError, DeviceError
+        When a source cannot be read or is shorter than the onset.
+    """
+    settings.check()
+    result = FaultEvaluation(settings)
+    channels = [CHANNELS.index(c) for c in settings.channels]
+    for source in sources:
+        started = time.perf_counter()
+        stream = source.load(settings)
+        sweep = sweep_samples(
+            stream.sweep, stream.spec, label=source.label, group=source.group,
+            onset_s=settings.onset_s, channels=channels, multiples=settings.multiples,
+            thetas=settings.thetas, seed=settings.seed, lsb=stream.lsb, clean=stream.clean)
+        result.sweeps.append(sweep)
+        if progress is not None:
+            progress(f"{source.group}/{source.label}: {sweep.duration_s:.0f} s swept, "
+                     f"{sweep.clean_seconds:.0f} s clean, {len(sweep.runs)} injections, "
+                     f"{sweep.false_alarms} false alarm(s), "
+                     f"{time.perf_counter() - started:.1f} s")
+    groups: dict[str, list[SourceSweep]] = {}
+    for sweep in result.sweeps:
+        groups.setdefault(sweep.group, []).append(sweep)
+    result.groups = [summarize_group(name, members) for name, members in groups.items()]
+    return result
