@@ -111,9 +111,12 @@ def _paint_fdi(image: QImage, name: str, group: dict[str, Any]) -> None:
         _title(p, f"FDI: samples until a fault is declared (cumulative flagged samples reach "
                   f"theta), median over the sources ({name}, {rates} Hz)")
         _note(p, "median over the sources where declared; hollow: declared in only some of "
-                 "them, missing: in none")
+                 "them, missing: in none; channels that agree draw on top of each other")
         panels = _panel_rects(len(thetas))
-        ticks = [10.0 ** k for k in range(round(math.log10(lo)), round(math.log10(hi)) + 1)]
+        decades = range(round(math.log10(lo)), round(math.log10(hi)) + 1)
+        steps = (1.0, 2.0, 5.0) if len(decades) <= 3 else (1.0,)
+        ticks = [step * 10.0 ** k for k in decades for step in steps
+                 if step * 10.0 ** k <= hi * 1.0001]
         for rect, th in zip(panels, thetas, strict=True):
             axes = _Axes(rect, _x_range(multiples), (lo, hi), y_log=True)
             _frame(p, axes, f"theta = {th}", multiples, ticks, lambda v: f"{v:g}",
