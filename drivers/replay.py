@@ -314,8 +314,8 @@ class ReplayDevice(Device):
             return bool(self._rows is not None and self._rows.streamed)
 
     def overview(self) -> Overview | None:
-        """Minimum and maximum of each axis over the session (long recordings only; it grows
-        while the background index reads the file)."""
+        """Minimum and maximum of each axis over the session, in about 2000 bins (a long
+        recording's grows while the background index reads the file)."""
         with self._cond:
             return None if self._rows is None else self._rows.overview()
 

@@ -95,6 +95,8 @@ class MemoryRows:
     streamed = False
 
     def __init__(self, recording: Recording, rate_hz: float) -> None:
+        self._recording = recording
+        self._overview: Overview | None = None
         self._rows = rows_of(recording)
         self.rate_hz = rate_hz
         self.count = len(self._rows)
@@ -135,8 +137,14 @@ class MemoryRows:
         """(gap rows, their times) found so far."""
         return self.gap_rows, self._rows.t[self.gap_rows]
 
-    def overview(self) -> Overview | None:
-        return None
+    def overview(self) -> Overview:
+        """The whole session's envelope (made once, on first asking)."""
+        if self._overview is None:
+            index = RecordingIndex(self.count)
+            index.add(self._recording, 0, 0, 0)
+            index.finish()
+            self._overview = index.overview()
+        return self._overview
 
     def problem(self) -> str:
         return ""

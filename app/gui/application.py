@@ -28,6 +28,7 @@ def run_gui(device_url: str | None = None, filter_name: str | None = None) -> in
     app.setOrganizationName(ORGANIZATION)
     app.setApplicationName(APPLICATION)
     app.setApplicationVersion(__version__)
+    app.setDesktopFileName("org.inclinometer.Inclinometer")  # Wayland finds the icon by it
     theme.apply_theme(app)
     session = DeviceSession()
     window = MainWindow(session, create_settings(), device_url, filter_name)

@@ -41,6 +41,7 @@ from app.gui.calibration_wizard import CalibrationWizard
 from app.gui.device_bar import DeviceBar
 from app.gui.device_panel import DevicePanel
 from app.gui.filter_panel import FilterPanel
+from app.gui.health_lights import HealthLights
 from app.gui.measure_panel import MeasurePanel
 from app.gui.plots import LivePlots
 from app.gui.presenter import UNIT_LABELS, LivePresenter
@@ -193,7 +194,11 @@ class MainWindow(QMainWindow):
             self.status_tare, self.status_recording,
         ):
             self.statusBar().addWidget(widget)
+        self.health_lights = HealthLights()
+        self.health_lights.resetRequested.connect(self._reset_health)
+        self.statusBar().addPermanentWidget(self.health_lights)
         self.statusBar().addPermanentWidget(self.status_fps)
+        self._fault_shown = ""
 
         self._build_menus()
 
@@ -229,6 +234,7 @@ class MainWindow(QMainWindow):
         self.device_panel.selfTestRequested.connect(session.requestSelfTest)
         session.selfTestAvailable.connect(self.device_panel.set_self_test_available)
         session.selfTestFinished.connect(self._on_self_test_finished)
+        session.faultEvents.connect(self._on_fault_events)
         session.status.connect(self._on_status)
         session.filterChanged.connect(self._on_filter_changed)
 
@@ -516,6 +522,26 @@ class MainWindow(QMainWindow):
             prefix = "warning: " if level == DEVICE_MESSAGE_WARNING else ""
             self.log(f"{source}: {prefix}{text}")
 
+    def _on_fault_events(self, events: list) -> None:
+        """The detector's events go to Messages (faults in red)."""
+        for event in events:
+            self.log(f"sensor {event.channel} {event.kind} at {event.t:.2f} s: {event.message}",
+                     error=event.severity == "fault")
+
+    def _show_health(self, health: dict[str, str] | None, fault: str) -> None:
+        """Lights, and the banner while the reading cannot be trusted."""
+        self.health_lights.show_health(health)
+        if fault and fault != self._fault_shown and not self._awaiting_board:
+            self.banner.show_message(f"The reading cannot be trusted: {fault}. Click the "
+                                     "channel lights in the status bar to reset latched faults.")
+        elif not fault and self._fault_shown and not self._awaiting_board:
+            self.banner.hide()
+        self._fault_shown = fault
+
+    def _reset_health(self) -> None:
+        self.session.requestHealthReset.emit()
+        self.log("Fault detection reset: latched faults cleared, noise levels learnt afresh")
+
     def _on_reconnecting(self, message: str) -> None:
         self._awaiting_board = True
         self.device_bar.set_state("stalled", "Unplugged — waiting for the board…")
@@ -549,6 +575,7 @@ class MainWindow(QMainWindow):
             self.device_bar.set_state("disconnected", "Disconnected")
         self.status_device.setText("No device")
         self.status_rate.setText("")
+        self._show_health(None, "")
         self.simulator_panel.set_interactive(False)
         self.log("Disconnected" + (f": {reason}" if reason else ""))
 
@@ -557,6 +584,9 @@ class MainWindow(QMainWindow):
             self.show_range_statistics()
         if status.replay is not None:
             self.replay_bar.show_position(*status.replay)
+        self._show_health(status.health, status.fault)
+        if status.overview is not None:
+            self.replay_bar.show_overview(status.overview, status.gaps_s or ())
         stalled = status.measured_rate_hz <= 0.0 and status.samples > 0
         lost = f"  ·  lost {status.lost_samples:,}" if status.lost_samples else ""
         text = f"{status.measured_rate_hz:.1f} Hz{lost}"

@@ -18,6 +18,9 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from app.core.recording.index import Overview
+from app.gui.replay_overview import ReplayOverview
+
 SPEEDS = (("0.1×", 0.1), ("0.25×", 0.25), ("0.5×", 0.5), ("1×", 1.0), ("2×", 2.0),
           ("5×", 5.0), ("10×", 10.0), ("max", 0.0))
 SLIDER_STEPS = 1000
@@ -86,6 +89,9 @@ class ReplayBar(QToolBar):
         )
         self.addWidget(QLabel(" Go to "))
         self.addWidget(self.goto_spin)
+        self.overview = ReplayOverview()
+        self.overview.seekRequested.connect(lambda s: self.control.emit("seek", s))
+        self.addWidget(self.overview)
         self._duration_s = 0.0
 
     def _on_play_toggled(self, playing: bool) -> None:
@@ -103,8 +109,14 @@ class ReplayBar(QToolBar):
         if not self.slider.isSliderDown() and duration_s > 0:
             self.slider.setValue(round(SLIDER_STEPS * position_s / duration_s))
         self.position_label.setText(f" {position_s:.1f} / {duration_s:.1f} s ")
+        self.overview.set_duration(duration_s)
+        self.overview.show_position(position_s)
         if self.play_button.isChecked() != playing:
             self.play_button.blockSignals(True)
             self.play_button.setChecked(playing)
             self.play_button.setText("Pause" if playing else "Play")
             self.play_button.blockSignals(False)
+
+    def show_overview(self, overview: Overview, gaps_s: tuple[float, ...]) -> None:
+        """Draw the session's envelope (sent when the replay's index grew)."""
+        self.overview.show_overview(overview, self._duration_s, gaps_s)

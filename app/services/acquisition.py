@@ -8,8 +8,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from app.core.faults import FaultEvent
 from app.core.pipeline import Pipeline
 from app.services.connection import Connection
+from app.services.health import HealthMonitor
 from app.services.recording_control import RecordingControl
 
 READ_TIMEOUT_S = 0.05
@@ -18,15 +20,20 @@ READ_TIMEOUT_S = 0.05
 class Acquisition:
     """Moves one block at a time from the connection's device into the pipeline.
 
-    ``on_message(level, text)`` gets the device's own messages (a board's LOG packets).
+    ``on_message(level, text)`` gets the device's own messages (a board's LOG packets);
+    ``on_events(events)`` the fault detector's events (``health``), when a block has some.
     """
 
     def __init__(self, connection: Connection, pipeline: Pipeline, recording: RecordingControl,
-                 on_message: Callable[[int, str], None]) -> None:
+                 on_message: Callable[[int, str], None],
+                 health: HealthMonitor | None = None,
+                 on_events: Callable[[list[FaultEvent]], None] | None = None) -> None:
         self.connection = connection
         self.pipeline = pipeline
         self.recording = recording
+        self.health = health or HealthMonitor()
         self._on_message = on_message
+        self._on_events = on_events
 
     def step(self, timeout_s: float = READ_TIMEOUT_S) -> int:
         """Read at most one block (waiting up to ``timeout_s``); returns its samples.
@@ -45,6 +52,9 @@ class Acquisition:
         self.connection.continue_time_axis(raw)
         self.pipeline.process(raw)
         self.recording.write(raw)
+        events = self.health.update(raw)
+        if events and self._on_events is not None:
+            self._on_events(events)
         return len(raw)
 
     def last_sample_time(self) -> float | None:

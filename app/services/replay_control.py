@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from app.core.filters import known_parameters
 from app.core.filters.base import OrientationFilter
 from app.core.pipeline import Pipeline
+from app.core.recording.index import Overview
 from drivers.base import Device
 
 COMMANDS = ("play", "pause", "step", "speed", "loop", "seek", "next_gap", "next_bookmark",
@@ -108,3 +109,26 @@ def restore_recorded_filter(device: Device | None, pipeline: Pipeline) -> Restor
     warning = (f"The recording's {name} parameters {', '.join(dropped)} are from an older "
                "version and are ignored") if dropped else ""
     return RestoredFilter(new_filter, warning=warning)
+
+
+class OverviewTracker:
+    """Hands out a replay's overview when it changed (the index grew or finished), else None."""
+
+    def __init__(self) -> None:
+        self._seen: tuple[int, int, bool] | None = None
+
+    def reset(self) -> None:
+        self._seen = None
+
+    def changed(self, device: Device | None) -> tuple[Overview, tuple[float, ...]] | None:
+        """(overview, gap positions in s) when new since the last call; None otherwise."""
+        if not is_replay(device):
+            return None
+        overview = device.overview()  # type: ignore[union-attr]
+        if overview is None:
+            return None
+        key = (id(device), overview.rows, overview.complete)
+        if key == self._seen:
+            return None
+        self._seen = key
+        return overview, tuple(device.gap_positions_s)  # type: ignore[union-attr]

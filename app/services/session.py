@@ -34,6 +34,7 @@ class DeviceSession(QObject):
     deviceMessage = Signal(int, str)
     selfTestAvailable = Signal(bool)
     selfTestFinished = Signal(object, str)
+    faultEvents = Signal(list)  # FaultEvents, as the detector declares them
 
     requestConnect = Signal(str)
     requestDisconnect = Signal()
@@ -50,6 +51,7 @@ class DeviceSession(QObject):
     requestStopRecording = Signal()
     requestReplayControl = Signal(str, object)
     requestSelfTest = Signal()
+    requestHealthReset = Signal()
 
     def __init__(
         self,
@@ -80,6 +82,7 @@ class DeviceSession(QObject):
         self.requestStopRecording.connect(self.worker.stop_recording)
         self.requestReplayControl.connect(self.worker.replay_control)
         self.requestSelfTest.connect(self.worker.run_self_test)
+        self.requestHealthReset.connect(self.worker.reset_health)
         self.device_info: DeviceInfo | None = None
         # Queued into the GUI thread (this object lives there).
         self.worker.connected.connect(self.connected)
@@ -95,6 +98,7 @@ class DeviceSession(QObject):
         self.worker.deviceMessage.connect(self.deviceMessage)
         self.worker.selfTestAvailable.connect(self.selfTestAvailable)
         self.worker.selfTestFinished.connect(self.selfTestFinished)
+        self.worker.faultEvents.connect(self.faultEvents)
         self.connected.connect(self._on_connected)
         self.disconnected.connect(self._on_disconnected)
         self.thread.start()

@@ -7,6 +7,8 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from app.core.recording.index import Overview
+
 RATE_WINDOW_S = 2.0
 
 
@@ -23,6 +25,14 @@ class StreamStatus:
     """Fraction of one core the pipeline used over the last interval."""
     replay: tuple[float, float, bool] | None = None
     """For a replay: position (s), duration (s), playing."""
+    overview: Overview | None = None
+    """For a replay, when it changed since the last status: the session's envelope."""
+    gaps_s: tuple[float, ...] | None = None
+    """For a replay, with a new overview: where the gaps are, s from the start."""
+    health: dict[str, str] | None = None
+    """The fault detector's state per channel (ax..gz, accel, gyro, link): ok, warning, fault."""
+    fault: str = ""
+    """Why the reading cannot be trusted now ("" when every channel is ok or a warning)."""
 
 
 class StatusMeter:

@@ -23,8 +23,11 @@ from app.core.recording import RecordingError
 from app.services.acquisition import Acquisition
 from app.services.calibration_state import CalibrationState
 from app.services.connection import Connection
+from app.services.health import HealthMonitor, recorded_events_note
 from app.services.recording_control import RecordingControl
 from app.services.replay_control import (
+    OverviewTracker,
+    is_replay,
     replay_command,
     replay_position,
     restore_recorded_filter,
@@ -54,6 +57,7 @@ class DeviceWorker(QObject):
     deviceMessage = Signal(int, str)  # level (0 debug .. 3 error), text: the device's own LOG
     selfTestAvailable = Signal(bool)  # the connected device can run the sensor's self-test
     selfTestFinished = Signal(object, str)  # SelfTestReport or None, and an error message
+    faultEvents = Signal(list)  # FaultEvents the detector declared in a block
 
     def __init__(self, pipeline: Pipeline, profile_store: ProfileStore | None = None,
                  connection: Connection | None = None) -> None:
@@ -63,9 +67,12 @@ class DeviceWorker(QObject):
         self.calibration = CalibrationState(pipeline, profile_store or ProfileStore())
         self.recording = RecordingControl(on_error=self.error.emit,
                                           on_status=self.recordingChanged.emit)
+        self.health = HealthMonitor()
         self.acquisition = Acquisition(self.connection, pipeline, self.recording,
-                                       on_message=self.deviceMessage.emit)
+                                       on_message=self.deviceMessage.emit, health=self.health,
+                                       on_events=self.faultEvents.emit)
         self.meter = StatusMeter()
+        self.overviews = OverviewTracker()
         self._poll_timer: QTimer | None = None
         self._status_timer: QTimer | None = None
         self._reconnect_timer: QTimer | None = None
@@ -129,6 +136,12 @@ class DeviceWorker(QObject):
         self.calibrationChanged.emit(self.calibration.profile)
         self.tareChanged.emit(None)
         self.meter.reset(self.pipeline.counters.filter_cpu_s)
+        self.overviews.reset()
+        self.health.start(info)
+        note = recorded_events_note(getattr(self.connection.device.recording, "metadata", {})
+                                    if is_replay(self.connection.device) else {})
+        if note:
+            self.deviceMessage.emit(1, note)
         self._streaming(True)
         self.connected.emit(info)
         self.selfTestAvailable.emit(bool(device and device.supports_self_test))
@@ -165,6 +178,7 @@ class DeviceWorker(QObject):
 
     def _close_device(self, reason: str) -> None:
         self.stop_recording()
+        self.health.stop()
         was_open, was_waiting = self.connection.close()
         self._streaming(False)
         if self._reconnect_timer is not None:
@@ -223,11 +237,23 @@ class DeviceWorker(QObject):
             return
         counters = self.pipeline.counters
         rate, load = self.meter.measure(counters.samples, counters.filter_cpu_s)
+        update = self.overviews.changed(device)
+        health = self.health.health()
+        latest = self.health.latest_fault() if health and "fault" in health.values() else None
         self.status.emit(StreamStatus(
             url=device.url, measured_rate_hz=rate, samples=counters.samples,
             lost_samples=counters.lost_samples, gaps=counters.gaps, pipeline_load=load,
             replay=replay_position(device),
+            overview=None if update is None else update[0],
+            gaps_s=None if update is None else update[1],
+            health=health,
+            fault="" if latest is None else f"{latest.channel} {latest.kind}: {latest.message}",
         ))
+
+    @Slot()
+    def reset_health(self) -> None:
+        """Forget latched faults (bias, gravity) and what the detector learnt."""
+        self.health.reset()
 
     # -- filters ----------------------------------------------------------------------------
     def _emit_filter(self) -> None:
@@ -320,6 +346,7 @@ class DeviceWorker(QObject):
         except (ValueError, RecordingError) as exc:
             self.error.emit(str(exc))
             return
+        self.health.begin_recording()
         self.recordingChanged.emit(status)
 
     @Slot()
@@ -330,3 +357,8 @@ class DeviceWorker(QObject):
             self.recordingChanged.emit(None)
             if status.error:
                 self.error.emit(status.error)
+            stored = self.health.end_recording(status.path if status.rows_written else None,
+                                               self.error.emit)
+            if stored:
+                self.deviceMessage.emit(1, f"{stored} fault event(s) stored in "
+                                           f"{status.path.name}")

@@ -53,6 +53,10 @@ class Overview:
     complete: bool
     rows: int
 
+    def since_start(self, start_t_s: float) -> np.ndarray:
+        """Bin times in s from ``start_t_s`` (the recording's first sample)."""
+        return self.t_s - start_t_s
+
 
 class RecordingIndex:
     """Chunk entries, gaps and the overview of one recording (see the module docstring).

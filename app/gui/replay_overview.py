@@ -1,0 +1,89 @@
+"""The whole replayed session at a glance: each accelerometer axis's min-max band over time.
+
+Built from the replay's :class:`~app.core.recording.index.Overview` (a long recording's grows
+while it is indexed in the background). A line marks the position, ticks mark gaps; a click
+asks to go there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import QWidget
+
+from app.core.recording.index import Overview
+from app.gui import theme
+
+HEIGHT_PX = 46
+
+
+class ReplayOverview(pg.PlotWidget):
+    """Min-max bands of ax, ay, az over the session; ``seekRequested(s)`` on a click."""
+
+    seekRequested = Signal(float)
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setFixedHeight(HEIGHT_PX)
+        self.setMinimumWidth(260)
+        self.setToolTip("The whole recording: accelerometer x, y, z (min to max). "
+                        "Click to go there.")
+        self.setMenuEnabled(False)
+        self.setMouseEnabled(x=False, y=False)
+        self.hideButtons()
+        plot = self.getPlotItem()
+        plot.hideAxis("left")
+        plot.hideAxis("bottom")
+        plot.setContentsMargins(0, 0, 0, 0)
+        self._bands: list[pg.FillBetweenItem] = []
+        self._curves: list[tuple[pg.PlotDataItem, pg.PlotDataItem]] = []
+        for colour in theme.AXIS_COLORS:
+            low, high = pg.PlotDataItem(pen=pg.mkPen(colour)), pg.PlotDataItem(pen=pg.mkPen(colour))
+            band = pg.FillBetweenItem(low, high, brush=pg.mkBrush(pg.mkColor(colour).lighter(60)))
+            for item in (low, high, band):
+                self.addItem(item)
+            self._curves.append((low, high))
+            self._bands.append(band)
+        self.position = pg.InfiniteLine(angle=90, movable=False,
+                                        pen=pg.mkPen(theme.TEXT, width=2))
+        self.addItem(self.position)
+        self._gaps: list[pg.InfiniteLine] = []
+        self._duration_s = 0.0
+        self.scene().sigMouseClicked.connect(self._on_click)
+
+    def show_overview(self, overview: Overview, duration_s: float,
+                      gaps_s: tuple[float, ...] = ()) -> None:
+        """Draw the bands over ``duration_s`` (times from the first bin: the first sample)."""
+        if not len(overview.t_s):
+            return
+        x = overview.since_start(float(overview.t_s[0]))
+        for axis, (low, high) in enumerate(self._curves):
+            low.setData(x, overview.low[:, axis])
+            high.setData(x, overview.high[:, axis])
+        for line in self._gaps:
+            self.removeItem(line)
+        self._gaps = []
+        for gap in gaps_s[:200]:  # a few hundred marks read as a solid bar anyway
+            line = pg.InfiniteLine(gap, angle=90, pen=pg.mkPen(theme.ALARM_RED))
+            self.addItem(line)
+            self._gaps.append(line)
+        self.set_duration(duration_s)
+        finite = overview.low[np.isfinite(overview.low)], overview.high[np.isfinite(
+            overview.high)]
+        if len(finite[0]) and len(finite[1]):
+            self.setYRange(float(finite[0].min()), float(finite[1].max()), padding=0.05)
+
+    def set_duration(self, duration_s: float) -> None:
+        if duration_s > 0 and duration_s != self._duration_s:
+            self._duration_s = duration_s
+            self.setXRange(0.0, duration_s, padding=0.0)
+
+    def show_position(self, position_s: float) -> None:
+        self.position.setValue(position_s)
+
+    def _on_click(self, event) -> None:
+        if event.button() != Qt.MouseButton.LeftButton or self._duration_s <= 0:
+            return
+        point = self.getPlotItem().vb.mapSceneToView(event.scenePos())
+        self.seekRequested.emit(min(max(float(point.x()), 0.0), self._duration_s))

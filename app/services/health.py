@@ -1,0 +1,95 @@
+"""The sensor's health while streaming: the fault detector on the live samples (no Qt).
+
+:class:`HealthMonitor` runs :class:`~app.core.faults.FaultDetector` on every block as the
+device delivered it (SI, before calibration: the detector judges the sensor, not the
+calibration), keeps the events a recording is collecting, and stores them into the finished
+file's ``fault_events`` metadata (docs/recording-format.md) so a replay shows them.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from app.core.devices import DeviceInfo
+from app.core.faults import FaultDetector, FaultEvent, SensorSpec
+from app.core.faults.recording import recorded_fault_events, save_fault_events
+from app.core.recording.errors import RecordingError
+from app.core.samples import RawBlock, convert_raw_block
+
+OK_STATE = "ok"
+
+
+class HealthMonitor:
+    """The detector for the connected device, and the events of the recording under way."""
+
+    def __init__(self) -> None:
+        self.detector: FaultDetector | None = None
+        self._recording: list[FaultEvent] | None = None
+
+    def start(self, info: DeviceInfo) -> None:
+        """A new device: a fresh detector that knows its sensor settings."""
+        self.detector = FaultDetector(SensorSpec.from_device_info(info))
+
+    def stop(self) -> None:
+        self.detector = None
+
+    def reset(self) -> None:
+        """Forget what was learnt and every latched fault (the user's reset)."""
+        if self.detector is not None:
+            self.detector.reset()
+
+    def update(self, raw: RawBlock) -> list[FaultEvent]:
+        """The events declared in this block (``raw`` as the device delivered it)."""
+        if self.detector is None or not len(raw):
+            return []
+        counts = np.issubdtype(np.asarray(raw.accel_raw).dtype, np.integer)
+        events = self.detector.update(convert_raw_block(raw), raw if counts else None)
+        if self._recording is not None:
+            self._recording.extend(events)
+        return events
+
+    def health(self) -> dict[str, str] | None:
+        """``ok``/``warning``/``fault`` per channel (ax..gz, accel, gyro, link); None without a
+        device."""
+        return None if self.detector is None else self.detector.health()
+
+    def latest_fault(self) -> FaultEvent | None:
+        """The newest event of severity ``fault`` (the banner's reason)."""
+        if self.detector is None:
+            return None
+        return next((e for e in reversed(self.detector.events) if e.severity == "fault"), None)
+
+    # -- recording --------------------------------------------------------------------------
+    def begin_recording(self) -> None:
+        self._recording = []
+
+    def end_recording(self, path: Path | None, on_error: Callable[[str], None]) -> int:
+        """Store the recording's events into ``path`` (in a thread: the whole file is
+        rewritten, which takes a while for a long one); returns how many there are."""
+        events, self._recording = self._recording or [], None
+        if path is None or not events:
+            return 0
+
+        def save() -> None:
+            try:
+                save_fault_events(path, events)
+            except (OSError, RecordingError) as exc:
+                on_error(f"The {len(events)} fault events could not be stored in {path}: {exc}")
+
+        threading.Thread(target=save, name="save-fault-events", daemon=True).start()
+        return len(events)
+
+
+def recorded_events_note(metadata: dict) -> str:
+    """A replay's note on the fault events its recording holds ("" when none)."""
+    events = recorded_fault_events(metadata)
+    if not events:
+        return ""
+    kinds = sorted({f"{e.channel} {e.kind}" for e in events})
+    shown = ", ".join(kinds[:6]) + (f" and {len(kinds) - 6} more" if len(kinds) > 6 else "")
+    return (f"This recording holds {len(events)} fault event(s) found while recording "
+            f"({shown}); the detector finds them again as the replay runs.")
