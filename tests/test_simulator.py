@@ -698,3 +698,14 @@ def test_speed_option_runs_the_device_clock_faster_than_the_wall_clock():
         device.close()
     with pytest.raises(DeviceUrlError, match="speed"):
         SimulatedDevice("sim://static?speed=1000").open()
+
+
+def test_a_simulator_url_without_a_scenario_starts_the_interactive_one():
+    device = SimulatedDevice("sim://?odr=52")
+    try:
+        info = device.open()
+        assert "interactive" in info.name and info.odr_nominal_hz == 52.0
+        assert device.is_interactive
+        assert len(device.read(1.0)) > 0
+    finally:
+        device.close()

@@ -12,6 +12,8 @@ from drivers import lsm6dsox
 from drivers.errors import DeviceUrlError
 from drivers.sim.scenarios import SCENARIOS, Param
 
+DEFAULT_SCENARIO = "interactive"
+"""The scenario of a URL that names none (``sim://``, ``sim://?odr=52``)."""
 DEFAULT_ODR_HZ = 104.0
 DEFAULT_ACCEL_FS_G = 4
 DEFAULT_GYRO_FS_DPS = 250
@@ -161,6 +163,8 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
     if parts.scheme.lower() != "sim" or "://" not in url:
         raise _fail(url, "not a simulator URL; expected sim://SCENARIO?option=value&...")
     name = (parts.netloc + parts.path).strip("/").lower().replace("_", "-")
+    if not name:  # sim:// alone: the interactive simulator, as the app starts with
+        name = DEFAULT_SCENARIO
     if name not in SCENARIOS:
         names = ", ".join(SCENARIOS)
         raise _fail(url, f"unknown simulator scenario {name!r}; choose one of: {names}")
