@@ -141,6 +141,10 @@ def add_recording_parsers(commands: argparse._SubParsersAction) -> None:
     add_param_argument(replay)
 
 
+WHOLE_FILE_OFFLINE_BYTES = 64 << 20
+"""From this size on, ``replay --filter all`` leaves the offline smoothers out (memory)."""
+
+
 def _error(message: str) -> None:
     print(f"inclinometer: {message}", file=sys.stderr)
 
@@ -305,6 +309,13 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     with head:
         recorded_name = Recording(head.metadata, head.header, {}).filter_name
         names = args.filters or [recorded_name or DEFAULT_FILTER]
+        if "all" in names and head.file_size() >= WHOLE_FILE_OFFLINE_BYTES:
+            left_out = [n for n in FILTERS if FILTERS[n].offline]
+            names = [n for n in dict.fromkeys([*FILTERS, *names]) if n != "all"
+                     and (n not in left_out or n in names)]
+            print(f"'all' leaves out {', '.join(left_out)} on a recording this long: offline "
+                  "smoothers hold the whole session in memory (name them with --filter to run "
+                  "them anyway)", file=out)
         if "all" not in names and all(n in FILTERS and not FILTERS[n].offline for n in names):
             return _replay_streamed(args, head, list(dict.fromkeys(names)), cli_parameters,
                                     source_path, out)

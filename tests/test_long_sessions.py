@@ -84,3 +84,21 @@ def test_streamed_replay_writes_what_the_whole_file_replay_writes(wobble, tmp_pa
     assert a.shape[0] == b.shape[0] == 54_000
     np.testing.assert_array_equal(a[:, :9], b[:, :9])  # t and vqf's angles and quaternion
     assert "54000 rows" in printed and "vqf" in printed
+
+
+def test_replay_all_leaves_the_offline_smoothers_out_of_a_long_recording(wobble, tmp_path,
+                                                                        capsys, monkeypatch):
+    import app.cli_recording as cli_recording
+
+    monkeypatch.setattr(cli_recording, "WHOLE_FILE_OFFLINE_BYTES", 0)
+    target = tmp_path / "all.csv"
+    assert main(["replay", str(wobble), "--filter", "all", "--out", str(target)]) == 0
+    printed = capsys.readouterr().out
+    assert "'all' leaves out ekf-smoother, vqf-offline" in printed
+    header = next(line for line in target.read_text().splitlines() if not line.startswith("#"))
+    assert "vqf.roll" in header and "gyro.roll" in header
+    assert "ekf-smoother" not in header
+    # Named explicitly, a smoother still runs (whole file in memory).
+    assert main(["replay", str(wobble), "--filter", "ekf-smoother", "--out",
+                 str(target)]) == 0
+    assert "ekf-smoother.roll" in target.read_text()

@@ -46,6 +46,8 @@ ANGLE_NAMES = ("roll", "pitch", "tilt", "direction")
 QUATERNION_NAMES = ("qw", "qx", "qy", "qz")
 EXPORT_ROWS = 65536
 """Rows formatted and written at a time."""
+EXPORT_CELLS = 500_000
+"""A streamed replay writes when this many numbers wait (about 10 MB of text)."""
 
 CalibrationChoice = SensorCalibration | None | Literal["recorded"]
 
@@ -293,7 +295,7 @@ def replay_streamed(
                 columns += [inclination_error_deg(o.quat, ref) for o in outputs]
             pending.append(columns)
             pending_rows += n
-            if pending_rows >= EXPORT_ROWS:
+            if pending_rows * len(columns) >= EXPORT_CELLS:
                 _write_pending(out, pending)
                 pending, pending_rows = [], 0
         _write_pending(out, pending)
