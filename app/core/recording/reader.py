@@ -29,6 +29,7 @@ import math
 import mmap
 import os
 import re
+import threading
 import warnings
 from collections import Counter
 from collections.abc import Iterator, Sequence
@@ -609,13 +610,26 @@ def _parse_fast(
     """Parse with the compiled kernel, in parallel pieces; compact around blank lines."""
     buf = np.frombuffer(data, dtype=np.uint8)
     pieces = _chunks(data, start, stop)
-    pool = ThreadPoolExecutor(len(pieces)) if len(pieces) > 1 else None
+    pool = _parser_pool() if len(pieces) > 1 else None
     try:
         return _parse_pieces(data, buf, pieces, pool, header, kinds)
     finally:
         del buf  # a memory map cannot close while an array points into it
-        if pool is not None:
-            pool.shutdown()
+
+
+_POOL: ThreadPoolExecutor | None = None
+_POOL_LOCK = threading.Lock()
+
+
+def _parser_pool() -> ThreadPoolExecutor:
+    """One pool of parser threads for the process (a streamed read parses hundreds of
+    chunks: starting threads for each cost more than some chunks take)."""
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None:
+            _POOL = ThreadPoolExecutor(max(1, min(os.cpu_count() or 1, 8)),
+                                       thread_name_prefix="recording-parser")
+        return _POOL
 
 
 def _parse_pieces(
