@@ -87,8 +87,11 @@ def add_calibration_parsers(commands: argparse._SubParsersAction) -> None:
             "recording of the sensor at rest, and the noise model fitted to it: noise density "
             "(dps/sqrt(Hz), ug/sqrt(Hz)), bias instability (deg/h, ug) and bias random walk "
             "(deg/h/sqrt(h), ug/sqrt(h)). A temperature that moves is regressed out first "
-            "(--keep-temperature keeps it). Record at least 30 minutes; the random walk needs "
-            "an hour or more."
+            "(--keep-temperature keeps it). Noise density and random walk come from the "
+            "time series' likelihood (white noise + bias random walk, the walk as the posterior "
+            "median, its relative 1-sigma uncertainty printed); --method allan-fit reads them "
+            "off the Allan curve instead. Record at least 30 minutes; the gyroscope's random "
+            "walk needs an hour or more (30 minutes leave it uncertain by about 50 %)."
         ),
     )
     allan.add_argument("recording", nargs="?", metavar="RECORDING",
@@ -98,6 +101,8 @@ def add_calibration_parsers(commands: argparse._SubParsersAction) -> None:
     allan.add_argument("--seconds", type=float, metavar="N", help="with --device: how long")
     allan.add_argument("--keep-temperature", action="store_true",
                        help="do not regress the temperature out before the analysis")
+    allan.add_argument("--method", choices=("likelihood", "allan-fit"), default="likelihood",
+                       help="estimator of noise density and random walk (default %(default)s)")
 
     temperature = commands.add_parser(
         "calibrate-temperature",
@@ -423,6 +428,12 @@ def print_allan(result, label: str, stream: CapturedStream, out: TextIO) -> None
         cells = "".join(f"{v * factor:11.4g}" for v in values)
         extra = f"  {truth[sensor][figure] * factor:11.4g}" if truth else ""
         print(f"  {sensor:<6}{figure:<18}{unit:<10}{cells}{extra}", file=out)
+    if result.method == "likelihood":
+        spread = [f"{sensor} " + "/".join(f"{100 * v:.0f}" if math.isfinite(v) else "?"
+                                          for v in figures.random_walk_log_sd)
+                  for sensor, figures in (("gyro", result.gyro), ("accel", result.accel))]
+        print(f"random walk uncertainty (1 sigma, x/y/z, %): {', '.join(spread)}; noise "
+              "density and random walk by likelihood (white noise + random walk)", file=out)
     if result.duration_s < 1800:
         print("note: under 30 minutes of data; the random walk and the bias instability are "
               "rough", file=out)
@@ -443,7 +454,8 @@ def allan_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
         try:
             result = analyse_static(block.gyro_rad_s, block.accel_m_s2, stream.settings.odr_hz,
                                     block.temp_degc,
-                                    remove_temperature=not args.keep_temperature)
+                                    remove_temperature=not args.keep_temperature,
+                                    method=args.method)
         except ValueError as exc:
             raise _Failed(f"{label}: {exc}") from None
     except _Usage as exc:

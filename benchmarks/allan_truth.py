@@ -8,12 +8,19 @@ error of the noise density (truth: the datasheet density the simulator adds) and
 random walk (truth: the unit's walk), and at the end how many axes meet the goals of issue 16
 (noise density within 10 %, random walk within 35 %).
 
-    .venv/bin/python benchmarks/allan_truth.py --minutes 30 60 --seeds 8
+    .venv/bin/python benchmarks/allan_truth.py --minutes 30 60 --seeds 8 --synthetic 20
+
+``--method`` picks the estimator of N and K (default ``likelihood``, the time-domain fit;
+``allan-fit`` the older fit of the Allan curve). After each summary, ``bound`` is the Cramer-Rao
+limit for the units' walks (the least scatter of ln K any unbiased estimator reaches from that
+much data, with N unknown too) and the share of axes within 35 % that such an estimator would
+get: what the data allow, whatever the method.
 
 A walk shows only where it rises above the white noise: from tau ~ 1.2 N / K, 25-100 s for
 the simulated accelerometer but 200-500 s for the gyroscope, so 30 or 60 minutes hold only a
 few independent clusters of gyro walk. ``--synthetic`` repeats the check on numpy white noise
-plus a random walk with the same figures: the estimator's own scatter, with no simulator.
+plus a random walk with the same figures: the estimators' own scatter (the likelihood's
+posterior median, its maximum, and the Allan fit), with no simulator.
 """
 
 from __future__ import annotations
@@ -27,7 +34,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from app.core.allan import analyse_static, axis_noise
+from app.core.allan import (
+    METHODS,
+    analyse_static,
+    axis_noise,
+    fit_white_and_walk,
+    random_walk_bound,
+)
 from app.core.samples import STANDARD_GRAVITY_M_S2
 from app.services.calibration_runs import capture_device
 
@@ -37,9 +50,20 @@ NOISE_GOAL = 0.10
 WALK_GOAL = 0.35
 
 
-def run(minutes: float, seeds: int, odr: float, warmup: float) -> dict[str, np.ndarray]:
+def within_goal_share(log_sd: float, goal: float = WALK_GOAL) -> float:
+    """P(|K_hat / K - 1| <= goal) for ln K_hat ~ normal(ln K, log_sd)."""
+    def phi(v: float) -> float:
+        return 0.5 * (1.0 + math.erf(v / math.sqrt(2.0)))
+
+    return phi(math.log1p(goal) / log_sd) - phi(math.log1p(-goal) / log_sd)
+
+
+def run(minutes: float, seeds: int, odr: float, warmup: float, method: str
+        ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     errors: dict[str, list[float]] = {"gyro N": [], "accel N": [], "gyro K": [], "accel K": []}
-    print(f"\n{minutes:g} min static at {odr:g} Hz, after {warmup:g} min of warm-up")
+    bounds: dict[str, list[float]] = {"gyro K": [], "accel K": []}
+    print(f"\n{minutes:g} min static at {odr:g} Hz, after {warmup:g} min of warm-up "
+          f"(method: {method})")
     print(f"{'seed':>4}  {'dT degC':>7}  {'gyro N err %':>20}  {'accel N err %':>20}  "
           f"{'gyro K err %':>22}  {'accel K err %':>22}")
     for seed in range(1, seeds + 1):
@@ -49,7 +73,8 @@ def run(minutes: float, seeds: int, odr: float, warmup: float) -> dict[str, np.n
         block = stream.block
         start = round(warmup * 60.0 * stream.settings.odr_hz)
         result = analyse_static(block.gyro_rad_s[start:], block.accel_m_s2[start:],
-                                stream.settings.odr_hz, block.temp_degc[start:])
+                                stream.settings.odr_hz, block.temp_degc[start:],
+                                method=method)
         rows = {
             "gyro N": result.gyro.noise_density / GYRO_DENSITY - 1.0,
             "accel N": result.accel.noise_density / ACCEL_DENSITY - 1.0,
@@ -58,6 +83,11 @@ def run(minutes: float, seeds: int, odr: float, warmup: float) -> dict[str, np.n
         }
         for key, value in rows.items():
             errors[key].extend(value.tolist())
+        for key, density, walk in (
+                ("gyro K", GYRO_DENSITY, unit["gyro_bias_walk_rad_s_per_sqrt_s"]),
+                ("accel K", ACCEL_DENSITY, unit["accel_bias_walk_m_s2_per_sqrt_s"])):
+            bounds[key].extend([random_walk_bound(density, walk, stream.settings.odr_hz,
+                                                  minutes * 60.0)] * 3)
 
         def cells(values: np.ndarray, width: int) -> str:
             return f"{' '.join(f'{100 * v:+6.1f}' for v in values):>{width}}"
@@ -65,33 +95,46 @@ def run(minutes: float, seeds: int, odr: float, warmup: float) -> dict[str, np.n
         print(f"{seed:>4}  {result.temperature_span_degc:7.2f}  {cells(rows['gyro N'], 20)}  "
               f"{cells(rows['accel N'], 20)}  {cells(rows['gyro K'], 22)}  "
               f"{cells(rows['accel K'], 22)}")
-    return {key: np.array(values) for key, values in errors.items()}
+    return ({key: np.array(values) for key, values in errors.items()},
+            {key: np.array(values) for key, values in bounds.items()})
 
 
-def summary(errors: dict[str, np.ndarray]) -> None:
+def summary(errors: dict[str, np.ndarray], bounds: dict[str, np.ndarray]) -> None:
     for key, values in errors.items():
         goal = NOISE_GOAL if key.endswith("N") else WALK_GOAL
         inside = np.mean(np.abs(values) <= goal)
         worst = values[np.argmax(np.abs(values))]
         print(f"  {key:<8} within {100 * goal:.0f} %: {100 * inside:5.1f} % of axes; median "
               f"error {100 * np.median(values):+.1f} %, worst {100 * worst:+.1f} %")
+    for key, sd in bounds.items():
+        share = np.mean([within_goal_share(v) for v in sd])
+        print(f"  {key:<8} bound: sd(ln K) >= {sd.min():.2f}..{sd.max():.2f} (Cramer-Rao); an "
+              f"efficient unbiased estimator gets {100 * share:.0f} % of these axes within 35 %")
 
 
 def synthetic(minutes: float, repeats: int, odr: float) -> None:
-    """The estimator alone: white noise + random walk with the simulator's gyro figures."""
+    """The estimators alone: white noise + random walk with the simulator's gyro figures."""
     rng = np.random.default_rng(1)
     n = round(minutes * 60.0 * odr)
     for walk_deg_h in (2.0, 5.0):
         k = math.radians(walk_deg_h / 3600.0) / 60.0
-        errors = []
+        errors: dict[str, list[float]] = {"likelihood": [], "its maximum": [], "allan-fit": []}
         for _ in range(repeats):
             x = (rng.standard_normal(n) * GYRO_DENSITY * math.sqrt(odr / 2.0)
                  + np.cumsum(rng.standard_normal(n)) * k / math.sqrt(odr))
-            errors.append(axis_noise(x, odr).random_walk / k - 1.0)
-        e = np.array(errors)
-        print(f"  synthetic gyro walk {walk_deg_h:g} deg/h/sqrt(h), {minutes:g} min: within 35 % "
-              f"in {100 * np.mean(np.abs(e) <= WALK_GOAL):.0f} % of {repeats}; median "
-              f"{100 * np.median(e):+.1f} %")
+            fit = fit_white_and_walk(x, odr)
+            errors["likelihood"].append(fit.random_walk / k - 1.0)
+            errors["its maximum"].append(fit.random_walk_ml / k - 1.0)
+            errors["allan-fit"].append(axis_noise(x, odr, method="allan-fit").random_walk / k
+                                       - 1.0)
+        bound = random_walk_bound(GYRO_DENSITY, k, odr, minutes * 60.0)
+        print(f"  synthetic gyro walk {walk_deg_h:g} deg/h/sqrt(h), {minutes:g} min, {repeats} "
+              f"records; bound sd(ln K) {bound:.2f}, {100 * within_goal_share(bound):.0f} % "
+              "within 35 %:")
+        for name, values in errors.items():
+            e = np.array(values)
+            print(f"    {name:<12} within 35 % in {100 * np.mean(np.abs(e) <= WALK_GOAL):3.0f} %;"
+                  f" median {100 * np.median(e):+6.1f} %, zero in {np.sum(e == -1.0)}")
 
 
 def main() -> int:
@@ -101,11 +144,13 @@ def main() -> int:
     parser.add_argument("--odr", type=float, default=104.0)
     parser.add_argument("--warmup", type=float, default=0.0, help="minutes skipped first")
     parser.add_argument("--synthetic", type=int, default=0, metavar="REPEATS",
-                        help="also check the estimator on synthetic gyro data")
+                        help="also check the estimators on synthetic gyro data")
+    parser.add_argument("--method", choices=METHODS, default="likelihood",
+                        help="estimator of N and K (default %(default)s)")
     args = parser.parse_args()
     for minutes in args.minutes:
-        errors = run(minutes, args.seeds, args.odr, args.warmup)
-        summary(errors)
+        errors, bounds = run(minutes, args.seeds, args.odr, args.warmup, args.method)
+        summary(errors, bounds)
         if args.synthetic:
             synthetic(minutes, args.synthetic, args.odr)
     return 0

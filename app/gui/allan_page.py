@@ -146,8 +146,9 @@ class AllanPage(QWidget):
                            + (", regressed out" if result.temperature_removed else ""))
         self.summary.setText(
             f"{source}: {result.duration_s / 60:.1f} min at {result.rate_hz:.4g} Hz"
-            f"{temperature}. Solid: measured; dashed: fitted model; dotted: white noise "
-            "(slope −½) and random walk (slope +½) of x.")
+            f"{temperature}. Solid: measured; dashed: model (noise density and random walk "
+            "from the time series' likelihood, bias instability from the curve); dotted: white "
+            "noise (slope −½) and random walk (slope +½) of x.")
         self._plot(self.gyro_plot, result.gyro, DEG_H)
         self._plot(self.accel_plot, result.accel, UG)
         rows = figure_rows(result)
