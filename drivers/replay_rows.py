@@ -203,6 +203,7 @@ class StreamedRows:
                         return
                     with self._cond:
                         self.index.add(chunk.rows, chunk.first_row, chunk.offset, chunk.line)
+                        self._stream.adopt_members(s.members)  # compressed: seek points
                         self._cond.notify_all()
         except (RecordingError, OSError) as exc:
             with self._cond:

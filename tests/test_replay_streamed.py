@@ -138,3 +138,33 @@ def test_the_overview_covers_the_whole_session(recording, monkeypatch):
         assert np.all(np.diff(overview.t_s) > 0)
     finally:
         streamed.close()
+
+
+def test_a_compressed_long_recording_seeks_from_the_nearest_gzip_member(recording, tmp_path,
+                                                                        monkeypatch):
+    import gzip
+
+    from app.core.recording.compressed import gzip_member
+
+    packed = tmp_path / "long.csv.gz"
+    data = recording.read_bytes()
+    lines = data.splitlines(keepends=True)
+    body = next(k for k, line in enumerate(lines) if not line.startswith(b"#")) + 1
+    members = [gzip_member(b"".join(lines[:body]))]
+    members += [gzip_member(b"".join(lines[k:k + 500])) for k in range(body, len(lines), 500)]
+    packed.write_bytes(b"".join(members))
+    assert gzip.decompress(packed.read_bytes()) == data
+    memory = open_device(recording, False, monkeypatch, exact=0, block=64)
+    streamed = open_device(packed, True, monkeypatch, exact=0, block=64)
+    try:
+        streamed.seek(1e6)  # waits for the index: every member start is known then
+        rows = streamed._rows
+        assert isinstance(rows, StreamedRows)
+        assert len(rows._stream.members) >= len(members) - 1
+        for position in (20.0, 3.3, 17.7):
+            assert streamed.seek(position) == pytest.approx(memory.seek(position))
+            same_blocks([streamed.read(0.0) for _ in range(3)],
+                        [memory.read(0.0) for _ in range(3)])
+    finally:
+        memory.close()
+        streamed.close()

@@ -128,6 +128,12 @@ class RecordingStream:
         """Gzip members seen so far: (compressed offset, decompressed offset); [] when plain."""
         return list(self._bytes.members) if isinstance(self._bytes, GzipBytes) else []
 
+    def adopt_members(self, members: list[tuple[int, int]]) -> None:
+        """Learn gzip member starts another reader of the same file found (its index), so a
+        seek decompresses from the nearest one instead of from the last one this reader saw."""
+        if isinstance(self._bytes, GzipBytes) and len(members) > len(self._bytes.members):
+            self._bytes.members = sorted(set(self._bytes.members) | set(members))
+
     def file_size(self) -> int:
         return os.fstat(self._handle.fileno()).st_size
 
