@@ -172,7 +172,6 @@ def test_odr_snaps_to_nearest_chip_rate(asked: float) -> None:
         ("sim://static?colour=red", ["colour", "allowed", "odr", "roll"]),
         ("sim://static?jitter=1", ["jitter", "allowed", "yaw"]),
         ("sim://nowhere", ["nowhere", ", ".join(SCENARIOS)]),
-        ("sim://", ["scenario", "static"]),
         ("sim://static?seed=-1", ["seed", "-1"]),
         ("sim://static?seed=1.5", ["seed", "whole number"]),
         ("sim://static?realtime=maybe", ["realtime", "maybe", "1 or 0"]),
