@@ -4,6 +4,8 @@ binding line format and recordings carry what was injected."""
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import json
 import math
 
@@ -55,6 +57,68 @@ def test_injected_fault_found_on_its_channel_in_time(
     # a bias on the axis that carries gravity may first show as |a| != g, on the same axis
     assert first.kind == kind or (kind, first.kind) == ("bias", "gravity")
     assert all(e.channel == channel for e in events), events
+
+
+NOISE_MULTIPLES = (5, 20, 100, 1000)
+"""Noise sizes in multiples of the sensor's own white noise (0.51 mg, 0.027 dps at 104 Hz)."""
+NEAR_FULL_SCALE = {"a": 2.0, "g": 125.0}
+"""Noise of half the full scale (4 g, 250 dps): 5 % of the samples read at the int16 limit."""
+
+
+def _noise_size(channel: str, size: float | str) -> float:
+    if size == "fs/2":
+        return NEAR_FULL_SCALE[channel[0]]
+    return float(size) * NOISE_5X[channel[0]] / 5
+
+
+@pytest.mark.parametrize("channel", ["ax", "gy"])
+@pytest.mark.parametrize("size", [*NOISE_MULTIPLES, "fs/2"])
+def test_noise_of_any_size_found_on_its_channel_at_rest(channel: str, size: float | str) -> None:
+    """Gross noise is found as surely as 5x: the noise test must not saturate (issue 15)."""
+    sigma = _noise_size(channel, size)
+    url = f"sim://static?fault=noise:{channel}:{sigma:.6g}@{ONSET_S:g}&seed=3"
+    events = list(diagnose_events(url, seconds=ONSET_S + 4))
+    noise = [e for e in events if e.kind == "noise"]
+    assert noise and ONSET_S <= noise[0].t <= ONSET_S + 2.0, events
+    assert noise[0].channel == channel
+    # the onset of gross noise may also read as a spike, and clip at full scale: same channel
+    assert all(e.channel == channel and e.kind in ("noise", "spike", "saturation")
+               for e in events), events
+
+
+@pytest.mark.parametrize("channel", ["ax", "gy"])
+def test_noise_detection_never_worse_for_bigger_noise(channel: str) -> None:
+    delays = []
+    for size in [*NOISE_MULTIPLES, "fs/2"]:
+        url = (f"sim://static?fault=noise:{channel}:{_noise_size(channel, size):.6g}"
+               f"@{ONSET_S:g}&seed=3")
+        noise = [e for e in diagnose_events(url, seconds=ONSET_S + 4) if e.kind == "noise"]
+        delays.append(noise[0].t - ONSET_S if noise else math.inf)
+    assert all(b <= a + 1e-9 for a, b in itertools.pairwise(delays)), delays
+
+
+def test_a_vibration_tone_on_one_axis_is_not_noise() -> None:
+    """A machine shaking one axis at one frequency (with a harmonic) is not white noise, at any
+    amplitude or frequency: the samples are correlated, white noise is not."""
+    device = SimulatedDevice("sim://static?realtime=0&seed=2")
+    info = device.open()
+    from app.core.samples import convert_raw_block
+
+    blocks = [convert_raw_block(device.read(0.1)) for _ in range(110)]
+    sigma = SPEC_104.accel_noise_rms_m_s2
+    for channel in (0, 2):
+        for f_rel in (0.17, 0.3, 0.48):
+            for size in (20, 2000):
+                detector = FaultDetector(SensorSpec.from_device_info(info, device.scale))
+                events = []
+                for block in blocks:
+                    accel = block.accel_m_s2.copy()
+                    w = 2 * math.pi * f_rel * info.odr_hz * block.t_s
+                    on = block.t_s >= 5.0
+                    accel[on, channel] += size * sigma * (np.sin(w) + 0.3 * np.sin(2 * w + 1))[on]
+                    events += detector.update(dataclasses.replace(block, accel_m_s2=accel))
+                # (its abrupt start may read as a spike: the tone starts at full amplitude)
+                assert [e for e in events if e.kind != "spike"] == [], (channel, f_rel, size)
 
 
 @pytest.mark.parametrize("kind", ["stuck", "dead", "spike"])

@@ -29,7 +29,13 @@ Per channel (ax .. gz)
     (sigma ratio; a noise of 5x the sensor's own gives 5.1). A window counts only when the
     channel is flat but for its noise (spread within 3x its own 4th-difference noise), and only
     while the rotation rate stays under 30 dps: hand motion puts broadband content into the
-    4th difference (up to 50x the noise on BROAD's gyro).
+    4th difference (up to 50x the noise on BROAD's gyro). The window's noise sigma for that is
+    the larger of the clipped mean |d4| (which stops at D4_CLIP x the floor: alone it made
+    noise above ~40x never look flat, so gross noise went unseen while 5x was found) and the
+    median |d4| (not clipped, robust to a few outliers); and the window must be white - its
+    autocorrelation at lags 1-3, trend removed, within 3 standard errors of 0 - which a
+    vibration tone on one axis is not, at any frequency or amplitude. ``rho`` itself stays
+    clipped (at 15 it is far over the 3.5 threshold); the event reports the unclipped level.
 
     *saturation.* Output at the int16 limit (or at full scale when only that is known).
 
@@ -69,6 +75,8 @@ G = STANDARD_GRAVITY_M_S2
 WINDOW_S = 0.25
 D4_GAIN = math.sqrt(70.0) * math.sqrt(2.0 / math.pi)
 """Mean |4th difference| of unit white noise."""
+D4_MEDIAN_GAIN = math.sqrt(70.0) * 0.6744897501960817
+"""Median |4th difference| of unit white noise (the normal's quartile 0.674 x sqrt(70))."""
 STUCK_FALSE_ALARM = 1e-9
 STUCK_MIN_S = 0.25
 STUCK_MAX_S = 2.0
@@ -89,6 +97,8 @@ NOISE_FLAT = 3.0
 """A window counts for the noise test when its spread is within 3x its own white noise
 (the channel is flat but for noise; motion of any kind has a spread far above)."""
 NOISE_ARM_RATE_RAD_S = math.radians(30.0)
+WHITE_CORR_MAX = 0.6
+"""Largest |autocorrelation| at lags 1-3 of a window taken as white (a tone has >= 0.707)."""
 REST_SIGMA = 3.0
 REST_WINDOWS = 4
 GYRO_BIAS_STEP_RAD_S = math.radians(2.5)
@@ -114,12 +124,15 @@ LATCHED_KINDS = ("bias", "gravity", "consistency")
 
 @njit(cache=True)
 def _scan(t, x, gap, hist, ints, run_val, run_len, sums, quat, local, peak, peak_decay,
-          stuck_len, spike_scale, d4_clip, sat_level, gyro_ref, flags):  # pragma: no cover
+          stuck_len, spike_scale, d4_clip, sat_level, gyro_ref, window_x, d4_abs,
+          flags):  # pragma: no cover
     """Per-sample tests over one chunk; updates the state arrays in place.
 
     ints: [contiguous samples, window samples, window d4 samples]; sums: (6, 4) window sums
     of clipped |d4|, x, x^2 and, in [:, 3] for the gyro rows, nothing; quat: rotation since the
     window start (gyro minus gyro_ref), (w, x, y, z), then [4] the previous sample time.
+    window_x, d4_abs: (window, 6) the window's samples (row ints[1]) and unclipped |d4| (row
+    ints[2]), for the median and the autocorrelation at the window's end.
     """
     n = x.shape[0]
     for i in range(n):
@@ -161,10 +174,12 @@ def _scan(t, x, gap, hist, ints, run_val, run_len, sums, quat, local, peak, peak
             if abs(v) >= sat_level[c]:
                 flags[i, c] |= 8
             sums[c, 1] += v
+            window_x[ints[1], c] = v
             sums[c, 2] += v * v
             if ints[0] >= 4:
                 d = v - 4.0 * hist[0, c] + 6.0 * hist[1, c] - 4.0 * hist[2, c] + hist[3, c]
                 sums[c, 0] += min(abs(d), d4_clip[c])
+                d4_abs[ints[2], c] = abs(d)
         if ints[0] >= 4:
             ints[2] += 1
         ints[1] += 1
@@ -264,6 +279,8 @@ class FaultDetector:
         self._run_val = np.zeros(6)
         self._run_len = np.zeros(6, dtype=np.int64)
         self._sums = np.zeros((6, 4))
+        self._window_x = np.zeros((self.window, 6))
+        self._d4_abs = np.zeros((self.window, 6))
         self._local = np.zeros(6)
         self._stuck_len = np.full(6, np.iinfo(np.int64).max // 4)
         self._peak = np.zeros(6)
@@ -271,6 +288,7 @@ class FaultDetector:
         self._window_t = 0.0
         self._rho: deque[np.ndarray] = deque(maxlen=NOISE_SPAN_WINDOWS)
         self._rho_flat: deque[np.ndarray] = deque(maxlen=NOISE_SPAN_WINDOWS)
+        self._rho_white: deque[np.ndarray] = deque(maxlen=NOISE_SPAN_WINDOWS)
         self._rate: deque[float] = deque(maxlen=NOISE_SPAN_WINDOWS)
         self._activity = np.ones(6)
         self._active_bits = np.zeros(6, dtype=np.uint8)
@@ -341,6 +359,7 @@ class FaultDetector:
         self._quat[:4] = (1.0, 0.0, 0.0, 0.0)
         self._rho.clear()
         self._rho_flat.clear()
+        self._rho_white.clear()
         self._rate.clear()
         self._rest = None
         for key in self._counts:
@@ -383,7 +402,8 @@ class FaultDetector:
             self._lsb_seen = np.minimum(self._lsb_seen, steps)
         _scan(t[a:b], chunk_x, gap[a:b], self._hist, self._ints, self._run_val, self._run_len,
               self._sums, self._quat, self._local, self._peak,
-              self._peak_decay, stuck, spike, clip, self._sat, gyro_ref,
+              self._peak_decay, stuck, spike, clip, self._sat, gyro_ref, self._window_x,
+              self._d4_abs,
               self.flags[a:b])
         self.flags[a:b] |= self._active_bits
 
@@ -409,8 +429,9 @@ class FaultDetector:
             self._floor = np.maximum(first, 1e-12)
         rho = m / self._floor
         self._activity = np.maximum(1.0, rho)
-        flat = spread <= NOISE_FLAT * m / D4_GAIN + 1e-300
+        flat, white = self._flat(spread, m, int(n), int(n_d4))
         self._rho.append(rho)
+        self._rho_white.append(white * D4_GAIN / self._floor)
         self._rho_flat.append(np.where(flat, rho, 0.0))
         self._rate.append(float(np.linalg.norm(mean[3:] - (self._gyro_ref if self._gyro_ref
                                                            is not None else 0.0))))
@@ -422,11 +443,39 @@ class FaultDetector:
         quiet = (rho < 1.5) & ((rho >= 0.3) | (self._run_len < 4))
         self._floor = np.where(quiet, self._floor + FLOOR_ALPHA * (m - self._floor), self._floor)
 
+    def _flat(self, spread: np.ndarray, m: np.ndarray, n: int, n_d4: int
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """Channels flat but for their white noise this window, and that noise's sigma.
+
+        Flat: the spread within NOISE_FLAT x the white-noise sigma. The clipped mean |d4| ``m``
+        (robust to taps) cannot exceed D4_CLIP x the floor, so noise far above the floor would
+        never look flat by it; the median |d4| is not clipped and ignores a few outliers as
+        well, but a tone near or above ODR / 4 also has a large |d4|. A flat window must
+        therefore also be white: with its straight-line trend removed (slow motion the spread
+        test allows), the autocorrelation at lags 1-3 within 3 standard errors of white noise
+        (3 / sqrt(n), at most 0.6). No pure tone passes: its largest |cos(k theta)| over
+        k = 1..3 is at least 0.707 at every frequency.
+        """
+        sigma = m / D4_GAIN
+        flat = spread <= NOISE_FLAT * sigma + 1e-300
+        if n_d4 < 8:
+            return flat, sigma
+        sigma = np.maximum(sigma, np.median(self._d4_abs[:n_d4], axis=0) / D4_MEDIAN_GAIN)
+        ramp = np.arange(n, dtype=float)
+        for c in np.flatnonzero(spread <= NOISE_FLAT * sigma):
+            x = self._window_x[:n, c]
+            x = x - np.polyval(np.polyfit(ramp, x, 1), ramp)
+            power = float(np.dot(x, x))
+            limit = min(WHITE_CORR_MAX, 3.0 / math.sqrt(n)) * power
+            flat[c] = all(abs(float(np.dot(x[k:], x[:-k]))) <= limit for k in (1, 2, 3))
+        return flat, sigma
+
     def _noise_test(self, t: float, out: list[FaultEvent]) -> None:
         self._active_bits &= ~np.uint8(NOISE)
         if len(self._rho) < NOISE_SPAN_WINDOWS or max(self._rate) >= NOISE_ARM_RATE_RAD_S:
             return
         low = np.mean(np.array(self._rho), axis=0)
+        level = np.mean(np.array(self._rho_white), axis=0)
         low_flat = np.mean(np.array(self._rho_flat), axis=0)
         for c in range(6):
             base = 0 if c < 3 else 3
@@ -435,7 +484,7 @@ class FaultDetector:
             if ratio > NOISE_RATIO:
                 self._active_bits[c] |= NOISE
                 self._event(out, t, CHANNELS[c], "noise", "fault",
-                            f"{CHANNELS[c]} noise {low[c]:.1f}x its level at rest "
+                            f"{CHANNELS[c]} noise {level[c]:.1f}x its level at rest "
                             f"(other axes {others:.1f}x) for 1 s", held=True)
 
     def _rest_tests(self, resting: bool, mean: np.ndarray, quat: np.ndarray, duration: float,
