@@ -17,7 +17,7 @@ from drivers.sim.device import SimulatedDevice
 
 TIMEOUT_MS = 60_000
 # A fast tour: 8 s per face, played ten times faster than real time.
-TOUR = "sim://tour?odr=104&seed=4&hold=8&speed=10"
+TOUR = "sim://tour?odr=104&seed=4&hold=8&speed=25"
 
 
 @pytest.fixture
@@ -110,7 +110,7 @@ def test_a_foreign_profile_is_refused_on_import(qtbot, window, store, tmp_path):
 def test_tare_makes_the_current_attitude_level(qtbot, window):
     session = window.session
     with qtbot.waitSignal(session.connected, timeout=TIMEOUT_MS):
-        window.connect_device("sim://static?roll=12&pitch=-5&odr=104&speed=10")
+        window.connect_device("sim://static?roll=12&pitch=-5&odr=104&speed=25")
     # Let the filter settle (30 s of device time) before taring, as a user would.
     qtbot.waitUntil(lambda: session.pipeline.counters.samples > 3000, timeout=TIMEOUT_MS)
     with qtbot.waitSignal(session.tareChanged, timeout=TIMEOUT_MS):
@@ -130,7 +130,7 @@ def test_static_statistics_and_reversal_from_the_measure_panel(qtbot, window):
     session = window.session
     panel = window.measure_panel
     with qtbot.waitSignal(session.connected, timeout=TIMEOUT_MS):
-        window.connect_device("sim://interactive?roll=1.0&pitch=0.5&odr=104&speed=10&errors=0")
+        window.connect_device("sim://interactive?roll=1.0&pitch=0.5&odr=104&speed=25&errors=0")
     qtbot.waitUntil(lambda: session.pipeline.counters.samples > 2000, timeout=TIMEOUT_MS)
 
     panel.duration.setValue(5.0)
