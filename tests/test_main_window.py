@@ -20,7 +20,7 @@ def window(qtbot, qapp, tmp_path):
     theme.apply_theme(qapp)
     settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
     session = DeviceSession()
-    window = MainWindow(session, settings, "sim://wobble?odr=208&seed=3")
+    window = MainWindow(session, settings, "sim://wobble?odr=208&seed=3&speed=4")
     qtbot.addWidget(window)
     window.resize(1280, 860)
     window.show()

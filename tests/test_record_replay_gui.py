@@ -20,7 +20,7 @@ TIMEOUT_MS = 30_000
 def window(qtbot, qapp, tmp_path):
     theme.apply_theme(qapp)
     settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    window = MainWindow(DeviceSession(), settings, "sim://wobble?odr=208&speed=5")
+    window = MainWindow(DeviceSession(), settings, "sim://wobble?odr=208&speed=10")
     qtbot.addWidget(window)
     window.resize(1280, 860)
     window.show()
@@ -156,7 +156,7 @@ def test_compare_view_error_over_time_and_range_statistics(qtbot, window, artifa
     from drivers.replay import replay_url
 
     with qtbot.waitSignal(window.session.connected, timeout=TIMEOUT_MS):
-        window.connect_device(replay_url(sample_recording("translation-208hz"), speed=2))
+        window.connect_device(replay_url(sample_recording("translation-208hz"), speed=8))
     window.session.requestComparisons.emit(["vqf"])
     session = window.session
     qtbot.waitUntil(lambda: session.pipeline.counters.samples > 1500, timeout=TIMEOUT_MS)

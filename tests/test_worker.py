@@ -24,7 +24,7 @@ def connect(qtbot, session: DeviceSession, url: str):
 
 
 def test_streaming_fills_the_buffers_with_the_true_tilt(qtbot, session):
-    info = connect(qtbot, session, "sim://static?odr=833&roll=5&pitch=-3&seed=2")
+    info = connect(qtbot, session, "sim://static?odr=833&roll=5&pitch=-3&seed=2&speed=4")
     assert info.sensor == "LSM6DSOX"
     qtbot.waitUntil(lambda: session.pipeline.counters.samples > 1500, timeout=TIMEOUT_MS)
     latest = session.pipeline.orientation.latest(200)
