@@ -203,7 +203,7 @@ def recording_source(
     ``movement == 1`` are the ones scored (:func:`recording_score_mask`).
     """
     from app.core.recording.reader import Recording, read_recording
-    from app.core.recording.stream import RecordingStream
+    from app.core.recording.stream import RecordingStream, prefetched
 
     with RecordingStream(path) as stream:  # the head only: typed errors for a bad file
         head = Recording(stream.metadata, stream.header, {}, Path(path))
@@ -229,7 +229,7 @@ def recording_source(
 
     def pieces() -> Iterator[tuple[SampleBlock, np.ndarray | None]]:
         with RecordingStream(path) as chunks:
-            for chunk in chunks.chunks():
+            for chunk in prefetched(chunks.chunks()):  # the next one parses meanwhile
                 yield chunk.rows.sample_block(calibration), recording_score_mask(chunk.rows)
 
     def blocks() -> Iterable[SampleBlock]:  # offline filters need the whole recording

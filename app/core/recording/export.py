@@ -36,7 +36,7 @@ from app.core.recording.format import (
     utc_timestamp,
 )
 from app.core.recording.reader import Recording
-from app.core.recording.stream import RecordingStream, device_blocks
+from app.core.recording.stream import RecordingStream, device_blocks, prefetched
 from app.core.recording.writer import format_table_bytes
 from app.core.samples import convert_raw_block
 from app.core.scoring import DEFAULT_SKIP_S, SCORE_COLUMN, ErrorAccumulator
@@ -258,7 +258,8 @@ def replay_streamed(
         head_lines = [ANGLES_MAGIC, *(metadata_line(k, v) for k, v in metadata.items()),
                       ",".join(names)]
         out.write(("\n".join(head_lines) + "\n").encode("utf-8"))
-        for raw, extra in device_blocks(stream.chunks(), block, extra=(SCORE_COLUMN,)):
+        chunks = prefetched(stream.chunks())  # the next chunk parses while this one runs
+        for raw, extra in device_blocks(chunks, block, extra=(SCORE_COLUMN,)):
             samples = cal.apply(convert_raw_block(raw))
             n = len(samples)
             if t0 is None:

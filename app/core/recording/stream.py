@@ -21,11 +21,13 @@ from __future__ import annotations
 
 import itertools
 import os
+import queue
+import threading
 import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO, overload
+from typing import Any, BinaryIO, TypeVar, overload
 
 import numpy as np
 
@@ -45,6 +47,7 @@ from app.core.recording.reader import (
 )
 from app.core.samples import RawBlock
 
+T = TypeVar("T")
 CHUNK_BYTES = 8 << 20
 """Text read and parsed at a time (about 37 k rows of a 6667 Hz recording)."""
 
@@ -251,6 +254,47 @@ def concatenate_recordings(stream: RecordingStream, parts: list[Recording]) -> R
             columns[name] = np.concatenate(pieces)
     return Recording(metadata=stream.metadata, header=stream.header, columns=columns,
                      path=stream.path)
+
+
+# -- reading ahead ----------------------------------------------------------------------------
+_DONE = object()
+
+
+def prefetched(items: Iterator[T], depth: int = 1) -> Iterator[T]:
+    """``items`` produced one step ahead in a thread: the next chunk is read and parsed (the
+    parser's kernels release the GIL) while the caller works on this one. Exceptions reach the
+    caller in order; closing the generator stops the thread."""
+    ready: queue.Queue[Any] = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+
+    def produce() -> None:
+        try:
+            for item in items:
+                while not stop.is_set():
+                    try:
+                        ready.put(item, timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            ready.put(_DONE)
+        except BaseException as exc:  # handed to the consumer
+            ready.put(exc)
+
+    thread = threading.Thread(target=produce, name="recording-prefetch", daemon=True)
+    thread.start()
+    try:
+        while True:
+            item = ready.get()
+            if item is _DONE:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        thread.join()
 
 
 # -- device blocks across chunks ------------------------------------------------------------
