@@ -270,7 +270,6 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """The ``replay`` sub-command."""
     from app.core.evaluation import (
         DEFAULT_SKIP_S,
-        SCORE_COLUMN,
         error_statistics,
         recording_score_mask,
         scoring_rows,
@@ -349,31 +348,19 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     outputs = run_filters(recording, names, calibration=calibration, parameters=parameters,
                           block=args.block)
     write_angles_csv(target, recording, outputs, calibration=calibration)
-    applied = "no calibration" if calibration is None else f"calibration {calibration.name!r}"
-    print(f"{target}: {len(recording)} rows, {recording.duration_s:.1f} s, {applied}",
-          file=out)
     reference = recording.reference_quat
-    if reference is not None:
-        rows = scoring_rows(reference, recording.t_s, DEFAULT_SKIP_S, score_mask)
-        rule = (f"rows with {SCORE_COLUMN} == 1" if score_mask is not None
-                else f"after the first {DEFAULT_SKIP_S:g} s")
-        print(f"  inclination error scored {rule} with a reference: "
-              f"{int(rows.sum())} of {len(recording)} rows", file=out)
-    width = max(6, *(len(o.name) for o in outputs))
-    header = f"  {'filter':<{width}}  {'final roll':>10}  {'final pitch':>11}"
-    if reference is not None:
-        header += f"  {'RMSE deg':>9}  {'max deg':>9}"
-    print(header, file=out)
+    scored = None
+    table = []
     for output in outputs:
-        line = (f"  {output.name:<{width}}  {output.roll_deg[-1]:10.3f}  "
-                f"{output.pitch_deg[-1]:11.3f}")
+        stats = None
         if reference is not None:
             stats = error_statistics(output.quat, reference, recording.t_s, DEFAULT_SKIP_S,
                                      score_mask)
-            rmse, worst = stats["rmse_deg"], stats["max_deg"]
-            line += (f"  {rmse:9.3f}  {worst:9.3f}" if math.isfinite(rmse)
-                     else f"  {'-':>9}  {'-':>9}")
-        print(line, file=out)
+        table.append((output.name, output.roll_deg[-1], output.pitch_deg[-1], stats))
+    if reference is not None:
+        scored = int(scoring_rows(reference, recording.t_s, DEFAULT_SKIP_S, score_mask).sum())
+    _print_replay(out, target, len(recording), recording.duration_s, calibration,
+                  score_mask is not None, scored, table)
     return 0
 
 
@@ -384,7 +371,6 @@ def _replay_streamed(args: argparse.Namespace, stream: Any, names: list[str],
     from app.core.recording.errors import RecordingError
     from app.core.recording.export import recorded_filter_parameters, replay_streamed
     from app.core.recording.reader import Recording
-    from app.core.scoring import DEFAULT_SKIP_S, SCORE_COLUMN
 
     try:
         check_parameters_for(cli_parameters, names)
@@ -414,26 +400,36 @@ def _replay_streamed(args: argparse.Namespace, stream: Any, names: list[str],
         _error(failure)
         return EXIT_FAILED
     calibration = None if args.raw else Recording(stream.metadata, stream.header, {}).calibration
-    applied = ("no calibration" if calibration is None
-               else f"calibration {calibration.name!r}")
-    print(f"{target}: {summary.rows} rows, {summary.duration_s:.1f} s, {applied}", file=out)
-    if summary.reference:
-        rule = (f"rows with {SCORE_COLUMN} == 1" if summary.masked
+    table = [(f.name, f.final_roll_deg, f.final_pitch_deg,
+              f.errors.result() if summary.reference else None) for f in summary.filters]
+    _print_replay(out, target, summary.rows, summary.duration_s, calibration, summary.masked,
+                  summary.scored_rows if summary.reference else None, table)
+    return 0
+
+
+def _print_replay(out: TextIO, target: Path, rows: int, duration_s: float, calibration: Any,
+                  masked: bool, scored: int | None,
+                  table: list[tuple[str, float, float, dict[str, Any] | None]]) -> None:
+    """What ``replay`` prints: the file, which rows were scored, a line per filter (final
+    angles, and RMSE and maximum when the recording has a reference: ``scored`` not None)."""
+    from app.core.scoring import DEFAULT_SKIP_S, SCORE_COLUMN
+
+    applied = "no calibration" if calibration is None else f"calibration {calibration.name!r}"
+    print(f"{target}: {rows} rows, {duration_s:.1f} s, {applied}", file=out)
+    if scored is not None:
+        rule = (f"rows with {SCORE_COLUMN} == 1" if masked
                 else f"after the first {DEFAULT_SKIP_S:g} s")
-        print(f"  inclination error scored {rule} with a reference: "
-              f"{summary.scored_rows} of {summary.rows} rows", file=out)
-    width = max(6, *(len(f.name) for f in summary.filters))
+        print(f"  inclination error scored {rule} with a reference: {scored} of {rows} rows",
+              file=out)
+    width = max(6, *(len(name) for name, *_ in table))
     header = f"  {'filter':<{width}}  {'final roll':>10}  {'final pitch':>11}"
-    if summary.reference:
+    if scored is not None:
         header += f"  {'RMSE deg':>9}  {'max deg':>9}"
     print(header, file=out)
-    for result in summary.filters:
-        line = (f"  {result.name:<{width}}  {result.final_roll_deg:10.3f}  "
-                f"{result.final_pitch_deg:11.3f}")
-        if summary.reference:
-            stats = result.errors.result()
+    for name, roll, pitch, stats in table:
+        line = f"  {name:<{width}}  {roll:10.3f}  {pitch:11.3f}"
+        if stats is not None:
             rmse, worst = stats["rmse_deg"], stats["max_deg"]
             line += (f"  {rmse:9.3f}  {worst:9.3f}" if math.isfinite(rmse)
                      else f"  {'-':>9}  {'-':>9}")
         print(line, file=out)
-    return 0
