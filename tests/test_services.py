@@ -254,3 +254,18 @@ def test_simulator_settings_round_trip_and_scenario_full_scales():
     assert any(d.url.startswith("sim://handheld") for d in scenarios)
     assert is_replay_url(replay_url("/tmp/a b.csv")) and not is_replay_url("sim://static")
     assert not is_replay_url("not a url")
+
+
+def test_status_meter_starts_afresh_when_the_count_restarts():
+    now = [0.0]
+    meter = StatusMeter(window_s=2.0, clock=lambda: now[0])
+    meter.reset(0.0)
+    for step in range(1, 9):
+        now[0] += 0.25
+        meter.measure(step * 100, 0.0)
+    now[0] += 0.25
+    rate, _load = meter.measure(10, 0.0)  # a seek cleared the pipeline's counters
+    assert rate == 0.0
+    now[0] += 0.25
+    rate, _load = meter.measure(110, 0.0)
+    assert rate == pytest.approx(400.0)

@@ -61,6 +61,8 @@ class StatusMeter:
         """
         now = self._clock()
         history = self._history
+        if history and samples < history[-1][1]:  # the count restarted (a replay seek)
+            history.clear()
         history.append((now, samples))
         while len(history) > 2 and now - history[0][0] > self.window_s:
             history.popleft()
