@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -166,18 +166,16 @@ class StreamedRows:
         self._stream = stream
         self._cond = cond
         self._chunks: Iterator[Chunk] | None = stream.chunks()
-        try:
-            first = next(self._chunks, None)
-        except RecordingError:
-            first = None
-        if first is None:
-            raise RecordingError(f"{stream.path}: the recording holds no samples", stream.path)
+        self._problem = ""
+        first = self._next_chunk()
+        if first is None:  # a bad first row says why; else there are no rows at all
+            raise RecordingError(self._problem or f"{stream.path}: the recording holds no "
+                                 "samples", stream.path)
         self.has_reference = all(c in stream.header for c in REFERENCE_COLUMNS)
         self.has_block_start = "block_start" in stream.header
         self._cur: tuple[int, Rows] = (0, rows_of(first.rows, self.has_reference))
         self._prev: tuple[int, Rows] | None = None
         self._final: int | None = None
-        self._problem = ""
         self.first_t = float(self._cur[1].t[0])
         head = Recording(stream.metadata, stream.header, {"t": self._cur[1].t})
         odr = head.device.get("odr_hz")
@@ -213,7 +211,7 @@ class StreamedRows:
                 self.index.finish()
                 self._cond.notify_all()
 
-    def _wait_for(self, ready: callable) -> None:  # type: ignore[valid-type]
+    def _wait_for(self, ready: Callable[[], object]) -> None:
         """Wait (lock held) until ``ready()`` or the index is complete."""
         self._cond.wait_for(lambda: ready() or self.index.complete or self._stop.is_set(),
                             timeout=INDEX_WAIT_S)
@@ -259,13 +257,18 @@ class StreamedRows:
             return self._read_on()
         return self._load(row)
 
-    def _read_on(self) -> bool:
+    def _next_chunk(self) -> Chunk | None:
+        """The next chunk of the current read; None at its end or at a row that cannot be
+        read (the reason is kept for :meth:`problem`)."""
         assert self._chunks is not None
         try:
-            chunk = next(self._chunks, None)
+            return next(self._chunks, None)
         except RecordingError as exc:
             self._problem = str(exc)
-            chunk = None
+            return None
+
+    def _read_on(self) -> bool:
+        chunk = self._next_chunk()
         if chunk is None:
             self._final = self._end()
             self._chunks = None
@@ -285,11 +288,7 @@ class StreamedRows:
             self._chunks.close()
         self._chunks = self._stream.chunks(entry.offset, entry.first_row, entry.line)
         self._prev = None
-        try:
-            chunk = next(self._chunks, None)
-        except RecordingError as exc:
-            self._problem = str(exc)
-            chunk = None
+        chunk = self._next_chunk()
         if chunk is None:
             return False
         self._cur = (chunk.first_row, rows_of(chunk.rows, self.has_reference))
