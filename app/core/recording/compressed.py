@@ -138,3 +138,10 @@ def gzip_member(data: bytes, level: int = 1) -> bytes:
     """``data`` as one complete gzip member (zlib level 1: fast, about 40 % of plain CSV)."""
     packer = zlib.compressobj(level, zlib.DEFLATED, 31)
     return packer.compress(data) + packer.flush(zlib.Z_FINISH)
+
+
+def byte_source(handle: BinaryIO, path: Path) -> PlainBytes | GzipBytes:
+    """The recording's bytes from an open file: decompressed when it starts like gzip."""
+    compressed = handle.read(2) == GZIP_MAGIC
+    handle.seek(0)
+    return GzipBytes(handle, path) if compressed else PlainBytes(handle)

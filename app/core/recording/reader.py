@@ -42,7 +42,13 @@ import numpy as np
 
 from app.core.calibration import SensorCalibration
 from app.core.recording import fast_csv
-from app.core.recording.compressed import GZIP_MAGIC, GzipBytes, PlainBytes, decompress_file
+from app.core.recording.compressed import (
+    GZIP_MAGIC,
+    GzipBytes,
+    PlainBytes,
+    byte_source,
+    decompress_file,
+)
 from app.core.recording.errors import (
     MissingColumnsError,
     NotARecordingError,
@@ -343,24 +349,28 @@ def read_metadata(path: str | os.PathLike[str]) -> tuple[dict[str, Any], tuple[s
 
 def read_head(path: Path) -> tuple[RecordingHead, bytes]:
     """The parsed metadata and header, and the bytes read (at least up to the header)."""
-    chunk = bytearray()
-    scanned = 0  # lines before this offset are metadata: never scanned twice
     with open(path, "rb") as handle:
-        compressed = handle.read(2) == GZIP_MAGIC
-        handle.seek(0)
-        source: PlainBytes | GzipBytes = (GzipBytes(handle, path) if compressed
-                                          else PlainBytes(handle))
-        while True:
-            more = source.read(1 << 20)
-            chunk += more
-            end, scanned = _header_end(chunk, scanned)
-            if end is not None or not more:
-                break
-            if len(chunk) > MAX_HEAD_BYTES:
-                raise RecordingCorruptError(
-                    f"{path}: no header row within the first {MAX_HEAD_BYTES >> 20} MB: the "
-                    "metadata lines go on and on, this is not a recording that can be read",
-                    path)
+        return read_head_from(byte_source(handle, path), path)
+
+
+def read_head_from(source: PlainBytes | GzipBytes, path: Path) -> tuple[RecordingHead, bytes]:
+    """:func:`read_head` from a byte source positioned at the start of the file.
+
+    Refuses (:class:`RecordingCorruptError`) a head that goes on past
+    :data:`MAX_HEAD_BYTES`; lines already seen are never scanned again, so this is linear.
+    """
+    chunk = bytearray()
+    scanned = 0
+    while True:
+        more = source.read(1 << 20)
+        chunk += more
+        end, scanned = _header_end(chunk, scanned)
+        if end is not None or not more:
+            break
+        if len(chunk) > MAX_HEAD_BYTES:
+            raise RecordingCorruptError(
+                f"{path}: no header row within the first {MAX_HEAD_BYTES >> 20} MB: the "
+                "metadata lines go on and on, this is not a recording that can be read", path)
     data = bytes(chunk)
     return _parse_head(data, path), data
 

@@ -31,19 +31,17 @@ from typing import Any, BinaryIO, TypeVar, overload
 
 import numpy as np
 
-from app.core.recording.compressed import GZIP_MAGIC, READ_BYTES, GzipBytes, PlainBytes
+from app.core.recording.compressed import GzipBytes, PlainBytes, byte_source
 from app.core.recording.errors import RecordingCorruptError, RecordingError, RecordingWarning
 from app.core.recording.format import REFERENCE_COLUMNS
 from app.core.recording.reader import (
-    MAX_HEAD_BYTES,
     Recording,
     RecordingHead,
     _count_lines,
-    _header_end,
     _kind,
     _parse_fast,
-    _parse_head,
     _parse_slow,
+    read_head_from,
 )
 from app.core.samples import RawBlock
 
@@ -88,11 +86,8 @@ class RecordingStream:
             raise RecordingError(f"{self.path}: cannot read the recording: "
                                  f"{exc.strerror or exc}", self.path) from exc
         try:
-            self.compressed = self._handle.read(2) == GZIP_MAGIC
-            self._handle.seek(0)
-            self._bytes: PlainBytes | GzipBytes = (
-                GzipBytes(self._handle, self.path) if self.compressed
-                else PlainBytes(self._handle))
+            self._bytes: PlainBytes | GzipBytes = byte_source(self._handle, self.path)
+            self.compressed = isinstance(self._bytes, GzipBytes)
             self.head = self._read_head()
         except BaseException:
             self._handle.close()
@@ -102,20 +97,8 @@ class RecordingStream:
         self._has_reference_columns = all(c in self.head.header for c in REFERENCE_COLUMNS)
 
     def _read_head(self) -> RecordingHead:
-        data = bytearray()
-        scanned = 0
-        while True:
-            more = self._bytes.read(READ_BYTES)
-            data += more
-            end, scanned = _header_end(data, scanned)
-            if end is not None or not more:
-                break
-            if len(data) > MAX_HEAD_BYTES:
-                raise RecordingCorruptError(
-                    f"{self.path}: no header row within the first {MAX_HEAD_BYTES >> 20} MB: "
-                    "this is not a recording that can be read", self.path)
-        head = _parse_head(bytes(data), self.path)
-        self._body = bytes(data[head.body_start:])  # already read: the first rows
+        head, data = read_head_from(self._bytes, self.path)
+        self._body = data[head.body_start:]  # already read: the first rows
         return head
 
     @property
