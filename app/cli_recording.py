@@ -277,7 +277,6 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     from app.core.filters import DEFAULT_FILTER, FILTERS
     from app.core.recording.errors import RecordingError
     from app.core.recording.export import (
-        recorded_filter_parameters,
         resolve_calibration,
         run_filters,
         write_angles_csv,
@@ -336,15 +335,11 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     except ValueError as exc:
         _error(str(exc))
         return EXIT_USAGE
-    target = Path(args.out)
-    if target.exists() and target.resolve() == source_path.resolve():
-        _error("--out would overwrite the recording itself")
+    target = _replay_target(args, source_path)
+    if target is None:
         return EXIT_USAGE
     calibration = None if args.raw else resolve_calibration(recording, "recorded")
-    # --param values change the recorded (else default) parameters; the rest stay.
-    recorded = recorded_filter_parameters(recording)
-    parameters = {name: {**recorded.get(name, {}), **cli_parameters.get(name, {})}
-                  for name in names}
+    parameters = _replay_parameters(recording, cli_parameters, names)
     outputs = run_filters(recording, names, calibration=calibration, parameters=parameters,
                           block=args.block)
     write_angles_csv(target, recording, outputs, calibration=calibration)
@@ -369,7 +364,7 @@ def _replay_streamed(args: argparse.Namespace, stream: Any, names: list[str],
                      out: TextIO) -> int:
     """``replay`` of online filters in one streamed pass: memory does not grow with the file."""
     from app.core.recording.errors import RecordingError
-    from app.core.recording.export import recorded_filter_parameters, replay_streamed
+    from app.core.recording.export import replay_streamed
     from app.core.recording.reader import Recording
 
     try:
@@ -377,13 +372,11 @@ def _replay_streamed(args: argparse.Namespace, stream: Any, names: list[str],
     except ValueError as exc:
         _error(str(exc))
         return EXIT_USAGE
-    target = Path(args.out)
-    if target.exists() and target.resolve() == source_path.resolve():
-        _error("--out would overwrite the recording itself")
+    target = _replay_target(args, source_path)
+    if target is None:
         return EXIT_USAGE
-    recorded = recorded_filter_parameters(Recording(stream.metadata, stream.header, {}))
-    parameters = {name: {**recorded.get(name, {}), **cli_parameters.get(name, {})}
-                  for name in names}
+    parameters = _replay_parameters(Recording(stream.metadata, stream.header, {}),
+                                    cli_parameters, names)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
@@ -405,6 +398,24 @@ def _replay_streamed(args: argparse.Namespace, stream: Any, names: list[str],
     _print_replay(out, target, summary.rows, summary.duration_s, calibration, summary.masked,
                   summary.scored_rows if summary.reference else None, table)
     return 0
+
+
+def _replay_target(args: argparse.Namespace, source_path: Path) -> Path | None:
+    """``--out``, or None (said why) when it would overwrite the recording itself."""
+    target = Path(args.out)
+    if target.exists() and target.resolve() == source_path.resolve():
+        _error("--out would overwrite the recording itself")
+        return None
+    return target
+
+
+def _replay_parameters(recording: Any, cli_parameters: dict[str, dict[str, Any]],
+                       names: list[str]) -> dict[str, dict[str, Any]]:
+    """Each filter's parameters: the recorded (else default) ones, changed by --param."""
+    from app.core.recording.export import recorded_filter_parameters
+
+    recorded = recorded_filter_parameters(recording)
+    return {name: {**recorded.get(name, {}), **cli_parameters.get(name, {})} for name in names}
 
 
 def _print_replay(out: TextIO, target: Path, rows: int, duration_s: float, calibration: Any,
