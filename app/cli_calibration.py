@@ -287,6 +287,35 @@ def write_calibration_report(result, profile, stream, label: str, path: Path) ->
 
 
 # -- commands ----------------------------------------------------------------------------------
+def _check_outputs(args: argparse.Namespace) -> None:
+    """``--out``, ``--save`` and ``--report`` of ``calibrate`` and ``calibrate-temperature``:
+    at least one, into folders that exist, a report named .html or .pdf (raises _Usage)."""
+    if args.out is None and not args.save and args.report is None:
+        raise _Usage("say what to do with the result: --out FILE.json, --save and/or "
+                     "--report FILE")
+    for option, value in (("--out", args.out), ("--report", args.report)):
+        if value is not None and not Path(value).resolve().parent.is_dir():
+            raise _Usage(f"{option} {value}: no such directory")
+    if args.report is not None and Path(args.report).suffix.lower() not in (
+            ".html", ".htm", ".pdf"):
+        raise _Usage(f"--report {args.report}: name an .html or a .pdf file")
+
+
+def _check_save(args: argparse.Namespace, stream: CapturedStream, label: str) -> None:
+    if args.save and not stream.unique_id:
+        raise _Usage(f"{label}: the device has no unique id, so --save cannot name its "
+                     "profile; use --out FILE.json")
+
+
+def _write_json(path: str, document: dict[str, Any], out: TextIO) -> None:
+    """The binding calibration JSON, written atomically."""
+    from app.core.calibration_procedures.profiles import write_bytes_atomic
+
+    text = json.dumps(document, indent=2, allow_nan=False) + "\n"
+    write_bytes_atomic(Path(path), text.encode("utf-8"))
+    print(f"wrote {path}", file=out)
+
+
 def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """The ``calibrate`` sub-command."""
     from app.core.calibration_procedures.offline import (
@@ -298,26 +327,15 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
         ProfileStore,
         make_profile,
         utc_now_iso,
-        write_bytes_atomic,
     )
 
     out = sys.stdout if out is None else out
     try:
-        if args.out is None and not args.save and args.report is None:
-            raise _Usage("say what to do with the result: --out FILE.json, --save and/or "
-                         "--report FILE")
-        for option, value in (("--out", args.out), ("--report", args.report)):
-            if value is not None and not Path(value).resolve().parent.is_dir():
-                raise _Usage(f"{option} {value}: no such directory")
-        if args.report is not None and Path(args.report).suffix.lower() not in (
-                ".html", ".htm", ".pdf"):
-            raise _Usage(f"--report {args.report}: name an .html or a .pdf file")
+        _check_outputs(args)
         if not math.isfinite(args.gyro_seconds) or args.gyro_seconds <= 0:
             raise _Usage("--gyro-seconds must be positive")
         stream, label = load_stream(args, out)
-        if args.save and not stream.unique_id:
-            raise _Usage(f"{label}: the device has no unique id, so --save cannot name its "
-                         "profile; use --out FILE.json")
+        _check_save(args, stream, label)
         try:
             result = calibrate_stream(stream.block, stream.settings, method=args.method,
                                       gyro_seconds=args.gyro_seconds)
@@ -334,10 +352,7 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
         print_truth(result, stream.unit_errors, out)
     created = utc_now_iso()
     if args.out is not None:
-        document = calibration_json(result, stream.unique_id, label, created)
-        text = json.dumps(document, indent=2, allow_nan=False) + "\n"
-        write_bytes_atomic(Path(args.out), text.encode("utf-8"))
-        print(f"wrote {args.out}", file=out)
+        _write_json(args.out, calibration_json(result, stream.unique_id, label, created), out)
     profile = make_profile(
         stream.unique_id or "unknown", result.calibration, result.settings,
         method=result.fit.method, temperature_degc=result.temperature_degc,
@@ -622,7 +637,6 @@ def temperature_command(args: argparse.Namespace, out: TextIO | None = None) -> 
         ProfileStore,
         make_profile,
         utc_now_iso,
-        write_bytes_atomic,
     )
     from app.core.calibration_procedures.temperature import (
         TemperatureFitError,
@@ -632,15 +646,7 @@ def temperature_command(args: argparse.Namespace, out: TextIO | None = None) -> 
 
     out = sys.stdout if out is None else out
     try:
-        if args.out is None and not args.save and args.report is None:
-            raise _Usage("say what to do with the result: --out FILE.json, --save and/or "
-                         "--report FILE")
-        for option, value in (("--out", args.out), ("--report", args.report)):
-            if value is not None and not Path(value).resolve().parent.is_dir():
-                raise _Usage(f"{option} {value}: no such directory")
-        if args.report is not None and Path(args.report).suffix.lower() not in (
-                ".html", ".htm", ".pdf"):
-            raise _Usage(f"--report {args.report}: name an .html or a .pdf file")
+        _check_outputs(args)
         if not math.isfinite(args.min_span) or args.min_span <= 0:
             raise _Usage("--min-span must be a positive number of degC")
         base = base_temp = None
@@ -649,9 +655,7 @@ def temperature_command(args: argparse.Namespace, out: TextIO | None = None) -> 
             base, base_temp = _read_base(args.base)
             base_label = args.base
         stream, label = load_stream(args, out)
-        if args.save and not stream.unique_id:
-            raise _Usage(f"{label}: the device has no unique id, so --save cannot name its "
-                         "profile; use --out FILE.json")
+        _check_save(args, stream, label)
         store = ProfileStore(args.profile_dir)
         existing = None
         if stream.unique_id and not args.no_merge:
@@ -682,10 +686,8 @@ def temperature_command(args: argparse.Namespace, out: TextIO | None = None) -> 
     lines = print_temperature(fit, calibration, how, label, stream, out)
     created = utc_now_iso()
     if args.out is not None:
-        document = temperature_json(fit, calibration, how, stream.unique_id, label, created)
-        text = json.dumps(document, indent=2, allow_nan=False) + "\n"
-        write_bytes_atomic(Path(args.out), text.encode("utf-8"))
-        print(f"wrote {args.out}", file=out)
+        _write_json(args.out, temperature_json(fit, calibration, how, stream.unique_id, label,
+                                               created), out)
     residuals = {"temperature_fit": fit.summary()}
     if existing is not None and calibration.name == name:
         profile = replace(existing, calibration=calibration, created_utc=created,
