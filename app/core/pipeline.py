@@ -91,6 +91,9 @@ class Pipeline:
         self.comparisons: dict[str, OrientationFilter] = {}
         """Filters run side by side with the main one, on the same calibrated samples."""
         self.comparison_buffers: dict[str, RingBuffer] = {}
+        self.uncalibrated: SampleBlock | None = None
+        """The last block in SI units before calibration (for monitors of the sensor itself,
+        such as the fault detector, so they need not convert it again)."""
         self._capacity = 1024
         self.configure(odr_hz)
 
@@ -164,6 +167,7 @@ class Pipeline:
         """Run one device block through every stage and into the ring buffers."""
         cpu_start = time.thread_time()
         uncalibrated = convert_raw_block(raw)
+        self.uncalibrated = uncalibrated
         block = self.calibration.apply(uncalibrated)
         n = len(block)
         if n == 0:

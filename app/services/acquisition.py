@@ -52,7 +52,7 @@ class Acquisition:
         self.connection.continue_time_axis(raw)
         self.pipeline.process(raw)
         self.recording.write(raw)
-        events = self.health.update(raw)
+        events = self.health.update(raw, self.pipeline.uncalibrated)
         if events and self._on_events is not None:
             self._on_events(events)
         return len(raw)

@@ -18,7 +18,7 @@ from app.core.devices import DeviceInfo
 from app.core.faults import FaultDetector, FaultEvent, SensorSpec
 from app.core.faults.recording import recorded_fault_events, save_fault_events
 from app.core.recording.errors import RecordingError
-from app.core.samples import RawBlock, convert_raw_block
+from app.core.samples import RawBlock, SampleBlock, convert_raw_block
 
 OK_STATE = "ok"
 
@@ -42,12 +42,14 @@ class HealthMonitor:
         if self.detector is not None:
             self.detector.reset()
 
-    def update(self, raw: RawBlock) -> list[FaultEvent]:
-        """The events declared in this block (``raw`` as the device delivered it)."""
+    def update(self, raw: RawBlock, samples: SampleBlock | None = None) -> list[FaultEvent]:
+        """The events declared in this block (``raw`` as the device delivered it; ``samples``
+        the same in SI units before calibration, when already converted)."""
         if self.detector is None or not len(raw):
             return []
         counts = np.issubdtype(np.asarray(raw.accel_raw).dtype, np.integer)
-        events = self.detector.update(convert_raw_block(raw), raw if counts else None)
+        samples = convert_raw_block(raw) if samples is None else samples
+        events = self.detector.update(samples, raw if counts else None)
         if self._recording is not None:
             self._recording.extend(events)
         return events
