@@ -104,7 +104,7 @@ def test_a_killed_compressed_recording_reads_up_to_its_last_write(tmp_path):
     """SIGKILL mid-recording, as for plain CSV: the file keeps what was written."""
     target = tmp_path / "killed.csv.gz"
     script = (
-        "import sys, time\n"
+        "import signal\n"
         "from app.core.recording import RecordingWriter, recording_metadata\n"
         "from drivers.sim.device import SimulatedDevice\n"
         f"d = SimulatedDevice({URL!r}); info = d.open()\n"
@@ -113,7 +113,7 @@ def test_a_killed_compressed_recording_reads_up_to_its_last_write(tmp_path):
         "for i in range(10**6):\n"
         "    w.write(d.read(1.0))\n"
         "    if w.status.rows_synced > 20000:\n"
-        "        print('synced', flush=True); time.sleep(60)\n"
+        "        print('synced', flush=True); signal.pause()  # until killed\n"
     )
     process = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
                                text=True)
