@@ -4,7 +4,9 @@ For someone who has just flashed the firmware: one command that says whether the
 sensor and the link work, rate by rate. It reports what the board says about itself, the
 PING round trip, and for every output data rate the board accepts a few seconds of streaming:
 samples against the expected count, lost samples, sequence gaps, CRC errors, the regularity
-of the device time axis and the board clock against the computer's; then the sensor's
+of the device time axis, the sample rate measured on the chip's own clock against the rate an
+LSM6DSOX really runs at (6666.67 Hz / ODR_Coeff, trimmed: "104 Hz" is 104.17 Hz) and against
+the rate the board reports, and the board clock against the computer's; then the sensor's
 self-test (it must lie still). Rates the board refuses (its link or sensor bus cannot carry
 them) are listed with its reason; they are not failures. Exit status 0 when everything passed.
 """
@@ -28,6 +30,11 @@ COUNT_TOLERANCE = 0.03
 """Samples may differ from rate x time by this share (startup, the last packet in flight)."""
 CLOCK_TOLERANCE_PPM = 30_000
 """Device clock against the computer's: the trimmed chip clock is within a few percent."""
+RATE_TOLERANCE_PPM = 1_000
+"""Measured sample rate (chip timestamps) against the real rate: a datasheet label used as the
+rate is 1 600 ppm off ("104 Hz" for 104.17 Hz), 40 000 at "12.5 Hz"."""
+REPORTED_TOLERANCE_PPM = 100
+"""The rate the board reports (CONFIG's odr_mhz) against the real one (rounding: 13 ppm)."""
 
 
 def add_check_parser(commands: argparse._SubParsersAction) -> None:
@@ -60,6 +67,26 @@ class RateResult:
     """Largest |dt - 1/ODR| of the device time axis, in sample periods."""
     clock_ppm: float = 0.0
     """Device time against the computer's, over the run (ppm)."""
+    measured_hz: float = 0.0
+    """Samples per second of the chip's own clock (its timestamps)."""
+    real_hz: float = 0.0
+    """The rate an LSM6DSOX runs at for this setting: 6666.67 Hz / ODR_Coeff x the trim the
+    board's tick reports."""
+    reported_hz: float = 0.0
+    """The rate the board reports (CONFIG)."""
+
+    @property
+    def rate_ppm(self) -> float:
+        return (self.measured_hz / self.real_hz - 1.0) * 1e6 if self.real_hz else 0.0
+
+    @property
+    def reported_ppm(self) -> float:
+        return (self.reported_hz / self.real_hz - 1.0) * 1e6 if self.real_hz else 0.0
+
+    @property
+    def rate_ok(self) -> bool:
+        return (abs(self.rate_ppm) < RATE_TOLERANCE_PPM
+                and abs(self.reported_ppm) < REPORTED_TOLERANCE_PPM)
 
     @property
     def passed(self) -> bool:
@@ -68,11 +95,22 @@ class RateResult:
             and self.lost == self.seq_gaps == self.crc_errors == 0
             and self.worst_step_error < 0.5
             and abs(self.clock_ppm) < CLOCK_TOLERANCE_PPM
+            and self.rate_ok
         )
+
+    def rate_problem(self) -> str:
+        """Why the rate is wrong, for the report; empty when it is right."""
+        if self.refused or self.rate_ok:
+            return ""
+        return (f"the chip should run at {self.real_hz:.3f} Hz (\"{self.odr_nominal_hz:g} Hz\" "
+                f"is 6666.67 Hz / ODR_Coeff, trimmed); measured {self.measured_hz:.3f} Hz "
+                f"({self.rate_ppm:+.0f} ppm), the board reports {self.reported_hz:.3f} Hz "
+                f"({self.reported_ppm:+.0f} ppm)")
 
 
 def check_rate(port: str, odr_hz: float, seconds: float) -> RateResult:
     """Stream ``odr_hz`` for ``seconds`` (at least :data:`MIN_SAMPLES` samples)."""
+    from drivers import lsm6dsox
     from drivers.errors import SettingRefusedError
     from drivers.serial_link import SerialLinkDevice
 
@@ -104,11 +142,18 @@ def check_rate(port: str, odr_hz: float, seconds: float) -> RateResult:
         device_span = float(t[-1] - t[0]) if len(t) > 1 else 0.0
         # The first and last reads each hold up to a packet's worth (about 5 ms) of latency.
         clock_ppm = (device_span / wall - 1.0) * 1e6 if wall > 1.0 else 0.0
+        # The rate on the chip's own clock (its timestamps place the packets), against the rate
+        # the chip really runs at: the ODR code's 6666.67 Hz / ODR_Coeff times the trim that
+        # the board's tick length carries (tick_ns = 25 000 / trim).
+        tick_ns = float(info.extra.get("tick_ns") or 25_000)
+        real_hz = lsm6dsox.real_odr_hz(odr_hz) * 25_000.0 / tick_ns
+        measured_hz = (len(t) - 1) / device_span if device_span > 0 else 0.0
         return RateResult(
             odr_hz, samples=len(t), expected=duration * info.odr_hz,
             lost=counters.lost_samples, seq_gaps=counters.seq_gaps,
             crc_errors=counters.crc_errors + counters.undecodable, worst_step_error=worst,
-            clock_ppm=clock_ppm,
+            clock_ppm=clock_ppm, measured_hz=measured_hz, real_hz=real_hz,
+            reported_hz=info.odr_hz,
         )
     finally:
         device.close()
@@ -132,7 +177,7 @@ def check_board(port: str, rates: list[float], seconds: float, self_test: bool,
         print(f"board     {info.name}, firmware {info.firmware}, unique id {info.unique_id}",
               file=out)
         print(f"sensor    {info.sensor} (WHO_AM_I 0x{extra.get('who_am_i', 0):02X}), "
-              f"{info.odr_hz:g} Hz (nominal {info.odr_nominal_hz:g}), tick "
+              f"{info.odr_hz:g} Hz (label {info.odr_nominal_hz:g}), tick "
               f"{extra.get('tick_ns')} ns, +-{info.accel_fs_g} g, +-{info.gyro_fs_dps} dps",
               file=out)
         if extra.get("usb_vid_pid"):
@@ -146,7 +191,8 @@ def check_board(port: str, rates: list[float], seconds: float, self_test: bool,
     finally:
         device.close()
 
-    print(f"{'rate':>7}  {'samples':>14}  lost  gaps  crc  step  clock ppm  result", file=out)
+    print(f"{'rate':>7}  {'samples':>14}  lost  gaps  crc  step  {'real Hz':>9}  {'rate ppm':>8}  "
+          f"clock ppm  result", file=out)
     for odr in rates:
         try:
             result = check_rate(port, odr, seconds)
@@ -161,7 +207,10 @@ def check_board(port: str, rates: list[float], seconds: float, self_test: bool,
         counts = f"{result.samples}/{result.expected:.0f}"
         print(f"{odr:>7g}  {counts:>14}  {result.lost:>4}  "
               f"{result.seq_gaps:>4}  {result.crc_errors:>3}  {result.worst_step_error:>4.2f}  "
+              f"{result.measured_hz:>9.3f}  {result.rate_ppm:>+8.0f}  "
               f"{result.clock_ppm:>+9.0f}  {'ok' if result.passed else 'FAIL'}", file=out)
+        if result.rate_problem():
+            print(f"         rate: {result.rate_problem()}", file=out)
 
     if self_test:
         device = SerialLinkDevice(f"serial://{port}")
@@ -187,7 +236,7 @@ def check_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     from drivers import lsm6dsox
 
     out = sys.stdout if out is None else out
-    rates = list(lsm6dsox.ODR_CODES_HZ.values())
+    rates = list(lsm6dsox.ODR_LABELS_HZ.values())
     if args.rates:
         try:
             rates = [float(text) for text in args.rates.split(",") if text.strip()]
@@ -195,9 +244,9 @@ def check_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             print(f"inclinometer: --rates wants numbers like 104,833: {args.rates!r}",
                   file=sys.stderr)
             return 2
-    unknown = [r for r in rates if r not in lsm6dsox.ODR_CODES_HZ.values()]
+    unknown = [r for r in rates if r not in lsm6dsox.ODR_LABELS_HZ.values()]
     if unknown:
-        choices = ", ".join(f"{hz:g}" for hz in lsm6dsox.ODR_CODES_HZ.values())
+        choices = ", ".join(f"{hz:g}" for hz in lsm6dsox.ODR_LABELS_HZ.values())
         print(f"inclinometer: {unknown[0]:g} Hz is not an LSM6DSOX rate; use {choices}",
               file=sys.stderr)
         return 2

@@ -186,9 +186,9 @@ class EmulatedNucleo:
         share_port: bool = False,
     ) -> None:
         odr_code = lsm6dsox.odr_code_for(odr_hz)
-        if not odr_fits_link(lsm6dsox.ODR_CODES_HZ[odr_code], baud):
+        if not odr_fits_link(lsm6dsox.ODR_RATES_HZ[odr_code], baud):
             raise ValueError(f"{odr_hz:g} Hz does not fit a {baud} baud link")
-        if not odr_fits_sensor_bus(lsm6dsox.ODR_CODES_HZ[odr_code], sensor_bus_hz):
+        if not odr_fits_sensor_bus(lsm6dsox.ODR_RATES_HZ[odr_code], sensor_bus_hz):
             raise ValueError(f"{odr_hz:g} Hz does not fit I2C at {sensor_bus_hz} Hz")
         self.scenario = scenario
         self.seed = seed
@@ -298,9 +298,10 @@ class EmulatedNucleo:
     def config(self) -> p.Config:
         """The CONFIG the board would report now."""
         sim = self._sim
-        tick_ns = round(p.DEFAULT_TICK_NS / sim.unit_errors.clock_trim_factor)
-        return p.Config(round(sim.odr_hz * 1000), sim.options.accel_fs_g,
-                        sim.options.gyro_fs_dps, tick_ns)
+        freq_fine = sim.unit_errors.freq_fine
+        odr_mhz = lsm6dsox.odr_mhz(self._settings[0], freq_fine)  # the real rate, trimmed
+        return p.Config(odr_mhz, sim.options.accel_fs_g, sim.options.gyro_fs_dps,
+                        lsm6dsox.tick_ns(freq_fine))
 
     @property
     def info(self) -> p.Info:
@@ -330,7 +331,7 @@ class EmulatedNucleo:
         self._run_sent = 0
 
     def _new_sim(self, odr_code: int, accel_fs_g: int, gyro_fs_dps: int) -> SimulatedDevice:
-        url = (f"sim://{self.scenario}?odr={lsm6dsox.ODR_CODES_HZ[odr_code]:g}"
+        url = (f"sim://{self.scenario}?odr={lsm6dsox.ODR_LABELS_HZ[odr_code]:g}"
                f"&accel_fs={accel_fs_g}&gyro_fs={gyro_fs_dps}&seed={self.seed}&realtime=0"
                f"&block={SIM_BLOCK}&errors={int(self.errors)}&noise={int(self.noise)}")
         sim = SimulatedDevice(url, **self.scenario_params)
@@ -435,7 +436,8 @@ class EmulatedNucleo:
                 self._start()
             self._queue(p.Ack(p.START, p.ACK_OK))
             config = self.config
-            self._queue(p.Log(1, f"streaming at {config.odr_hz:g} Hz, +-{config.accel_fs_g} g, "
+            self._queue(p.Log(1, f"streaming at {lsm6dsox.odr_text(config.odr_hz)}, "
+                                 f"+-{config.accel_fs_g} g, "
                                  f"+-{config.gyro_fs_dps} dps"))
         elif isinstance(packet, p.Stop):
             self._streaming = False
@@ -451,24 +453,24 @@ class EmulatedNucleo:
 
     def _configure(self, command: p.Configure) -> None:
         problem = ""
-        if command.odr_code not in lsm6dsox.ODR_CODES_HZ:
+        if command.odr_code not in lsm6dsox.ODR_RATES_HZ:
             problem = f"odr_code {command.odr_code} is not 1..10"
         elif command.accel_fs_g not in lsm6dsox.ACCEL_MG_PER_LSB:
             problem = f"accel_fs_g {command.accel_fs_g} is not 2, 4, 8 or 16"
         elif command.gyro_fs_dps not in lsm6dsox.GYRO_MDPS_PER_LSB:
             problem = f"gyro_fs_dps {command.gyro_fs_dps} is not 125, 250, 500, 1000 or 2000"
-        elif not odr_fits_link(lsm6dsox.ODR_CODES_HZ[command.odr_code], self.baud):
-            odr = lsm6dsox.ODR_CODES_HZ[command.odr_code]
+        elif not odr_fits_link(lsm6dsox.ODR_RATES_HZ[command.odr_code], self.baud):
+            odr = lsm6dsox.ODR_RATES_HZ[command.odr_code]
             needed = odr * link_bytes_per_sample()
-            problem = (f"{odr:g} Hz needs {needed:,.0f} bytes/s; {self.baud} baud carries "
-                       f"{link_capacity_bytes_s(self.baud or 0):,.0f}")
-        elif not odr_fits_sensor_bus(lsm6dsox.ODR_CODES_HZ[command.odr_code],
+            problem = (f"{lsm6dsox.odr_label_hz(odr):g} Hz needs {needed:,.0f} bytes/s; "
+                       f"{self.baud} baud carries {link_capacity_bytes_s(self.baud or 0):,.0f}")
+        elif not odr_fits_sensor_bus(lsm6dsox.ODR_RATES_HZ[command.odr_code],
                                      self.sensor_bus_hz):
-            odr = lsm6dsox.ODR_CODES_HZ[command.odr_code]
+            odr = lsm6dsox.ODR_RATES_HZ[command.odr_code]
             bus_hz = self.sensor_bus_hz or 0
-            problem = (f"ODR {odr:g} Hz needs about {sensor_bus_bits_s(odr) / 1e3:.0f} kbit/s "
-                       f"on I2C1; the bus at {bus_hz / 1e3:g} kHz carries about "
-                       f"{_BUS_USABLE * bus_hz / 1e3:.0f}")
+            problem = (f"ODR {lsm6dsox.odr_label_hz(odr):g} Hz needs about "
+                       f"{sensor_bus_bits_s(odr) / 1e3:.0f} kbit/s on I2C1; the bus at "
+                       f"{bus_hz / 1e3:g} kHz carries about {_BUS_USABLE * bus_hz / 1e3:.0f}")
         if problem:
             self._queue(p.Ack(p.CONFIGURE, p.ACK_BAD_ARGUMENT, problem))
         elif self._streaming:
@@ -516,8 +518,10 @@ class EmulatedNucleo:
         due = math.floor((now - self._run_start) * self._sim.true_odr_hz) + 1 - self._run_sent
         if due <= 0:
             return
-        config = self.config
-        ticks_per_sample = 1e12 / (config.odr_mhz * config.tick_ns)
+        # The chip's own clock places t0: ticks of 25 us / trim per sample of 6666.67 Hz /
+        # ODR_Coeff x trim (the trim cancels), whatever CONFIG says.
+        real_hz = lsm6dsox.ODR_RATES_HZ[self._settings[0]]
+        ticks_per_sample = 1.0 / (lsm6dsox.TIMESTAMP_TICK_S * real_hz)
         rows = self._take_samples(due)
         for first in range(0, due, p.MAX_SAMPLES_PER_PACKET):
             chunk = rows[first:first + p.MAX_SAMPLES_PER_PACKET]

@@ -11,12 +11,33 @@ import math
 
 WHO_AM_I_VALUE = 0x6C
 
-# Output data rate codes (ODR_XL / ODR_G) -> nominal rate in Hz.
-ODR_CODES_HZ: dict[int, float] = {
+# Output data rates. The datasheet labels a rate "12.5 Hz", "104 Hz", ... "6667 Hz"; the chip
+# runs at 6666.67 Hz / ODR_Coeff with ODR_Coeff = 512, 256, ... 1 (AN5272), times its trim
+# (INTERNAL_FREQ_FINE). The labels are for people (menus, CLI options, messages); every
+# computation (sample times, CONFIG's odr_mhz, gap estimates, expected sample counts) uses the
+# real rates. This module is the one place that maps one to the other.
+ODR_BASE_HZ = 20000.0 / 3.0
+"""The chip's fastest rate, "6667 Hz": a 40 kHz timestamp clock divided by 6."""
+ODR_LABELS_HZ: dict[int, float] = {
     1: 12.5, 2: 26.0, 3: 52.0, 4: 104.0, 5: 208.0,
     6: 417.0, 7: 833.0, 8: 1667.0, 9: 3333.0, 10: 6667.0,
 }
+"""ODR code (ODR_XL / ODR_G) -> the datasheet's label in Hz."""
+ODR_RATES_HZ: dict[int, float] = {code: ODR_BASE_HZ / 2 ** (10 - code) for code in ODR_LABELS_HZ}
+"""ODR code -> the rate the chip really runs at before its trim (12.5 Hz is 13.02 Hz)."""
 
+# Turn-on transient: after the ODR is (re)set the first samples come out of filters that are
+# still settling. ST's drivers drop them: per ODR code, (accelerometer, gyroscope) samples to
+# discard, the settling figures plus two (the issue's AN4987 figures: 3-7 accelerometer, 4-541
+# gyroscope samples; the values between the figures ST's Linux driver lists for 12.5-416 Hz
+# and 6667 Hz follow the gyroscope's roughly constant settling time). Firmware/core/lsm6dsox.c
+# holds the same table; the host tests compare the two.
+TURN_ON_DISCARD: dict[int, tuple[int, int]] = {
+    1: (3, 4), 2: (3, 7), 3: (3, 9), 4: (4, 14), 5: (4, 22),
+    6: (4, 38), 7: (5, 72), 8: (5, 137), 9: (6, 272), 10: (7, 541),
+}
+SETTLING_MARGIN_SAMPLES = 2
+"""TURN_ON_DISCARD is the settling figure plus this many samples."""
 # Sensitivities per full scale.
 ACCEL_MG_PER_LSB: dict[int, float] = {2: 0.061, 4: 0.122, 8: 0.244, 16: 0.488}
 GYRO_MDPS_PER_LSB: dict[int, float] = {125: 4.375, 250: 8.75, 500: 17.50, 1000: 35.0, 2000: 70.0}
@@ -40,8 +61,50 @@ STANDARD_GRAVITY_M_S2 = 9.80665
 
 
 def odr_code_for(odr_hz: float) -> int:
-    """The ODR code whose nominal rate is closest to ``odr_hz``."""
-    return min(ODR_CODES_HZ, key=lambda code: abs(ODR_CODES_HZ[code] - odr_hz))
+    """The ODR code whose label or real rate is closest to ``odr_hz`` (104 and 104.17 -> 4)."""
+    def distance(code: int) -> float:
+        return min(abs(ODR_LABELS_HZ[code] - odr_hz), abs(ODR_RATES_HZ[code] - odr_hz))
+
+    return min(ODR_LABELS_HZ, key=distance)
+
+
+def real_odr_hz(odr_hz: float) -> float:
+    """The untrimmed rate the chip runs at for a label or rate (12.5 -> 13.0208)."""
+    return ODR_RATES_HZ[odr_code_for(odr_hz)]
+
+
+def odr_label_hz(odr_hz: float) -> float:
+    """The datasheet label of a label or rate (13.0208 -> 12.5)."""
+    return ODR_LABELS_HZ[odr_code_for(odr_hz)]
+
+
+def odr_text(odr_hz: float) -> str:
+    """For people: the label, with the real rate beside it ("12.5 Hz (13.02 Hz)")."""
+    code = odr_code_for(odr_hz)
+    return f"{ODR_LABELS_HZ[code]:g} Hz ({ODR_RATES_HZ[code]:.2f} Hz)"
+
+
+def trim_ppm(freq_fine: int) -> int:
+    """``1 + 0.0015 * INTERNAL_FREQ_FINE`` in parts per million (an integer, as the firmware)."""
+    return 1_000_000 + 1500 * int(freq_fine)
+
+
+def odr_mhz(odr_code: int, freq_fine: int = 0) -> int:
+    """CONFIG's odr_mhz: the real, trimmed rate in mHz, rounded exactly as the firmware does."""
+    numerator = 20_000_000 * trim_ppm(freq_fine)  # 6666.67 Hz = 20 000 000 / 3 mHz
+    denominator = 3 * 2 ** (10 - odr_code) * 1_000_000
+    return (numerator + denominator // 2) // denominator
+
+
+def tick_ns(freq_fine: int = 0) -> int:
+    """CONFIG's tick_ns: the trimmed 25 us timestamp tick in ns, rounded as the firmware does."""
+    trim = trim_ppm(freq_fine)
+    return (25_000 * 1_000_000 + trim // 2) // trim
+
+
+def turn_on_discard(odr_hz: float) -> int:
+    """Samples (slots with both sensors) to drop after the ODR is set: the larger figure."""
+    return max(TURN_ON_DISCARD[odr_code_for(odr_hz)])
 
 
 def accel_m_s2_per_lsb(accel_fs_g: int) -> float:

@@ -184,7 +184,7 @@ def parse_link_url(url: str, *, allow_other: bool = False) -> LinkOptions:
                 raise fail(f"baud={text!r} must be a whole number")
             values["baud"] = int(baud)
         elif key == "odr":
-            values["odr_hz"] = lsm6dsox.ODR_CODES_HZ[lsm6dsox.odr_code_for(number(key, text))]
+            values["odr_hz"] = lsm6dsox.odr_label_hz(number(key, text))
         elif key == "accel_fs":
             values["accel_fs_g"] = choice(key, text, sorted(lsm6dsox.ACCEL_MG_PER_LSB), "g")
         elif key == "gyro_fs":
@@ -507,7 +507,7 @@ class SerialLinkDevice(Device):
                     else lsm6dsox.odr_code_for(opts.odr_hz))
         accel = current.accel_fs_g if opts.accel_fs_g is None else opts.accel_fs_g
         gyro = current.gyro_fs_dps if opts.gyro_fs_dps is None else opts.gyro_fs_dps
-        wanted = f"{lsm6dsox.ODR_CODES_HZ[odr_code]:g} Hz, +-{accel} g, +-{gyro} dps"
+        wanted = f"{lsm6dsox.ODR_LABELS_HZ[odr_code]:g} Hz, +-{accel} g, +-{gyro} dps"
         with self._state:
             self._replies = deque((r for r in self._replies if not isinstance(r, p.Config)),
                                   maxlen=self._replies.maxlen)
@@ -525,7 +525,8 @@ class SerialLinkDevice(Device):
         if applied != (odr_code, accel, gyro):
             raise DeviceOpenError(
                 f"{self.port}: asked for {wanted}, the board uses "
-                f"{config.odr_hz:g} Hz, +-{config.accel_fs_g} g, +-{config.gyro_fs_dps} dps"
+                f"{lsm6dsox.odr_text(config.odr_hz)}, +-{config.accel_fs_g} g, "
+                f"+-{config.gyro_fs_dps} dps"
             )
         return config
 
@@ -537,7 +538,7 @@ class SerialLinkDevice(Device):
 
     def _device_info(self, info: p.Info, config: p.Config) -> DeviceInfo:
         usb = port_info(self.port)
-        odr_nominal = lsm6dsox.ODR_CODES_HZ[config.odr_code]
+        odr_nominal = lsm6dsox.ODR_LABELS_HZ[config.odr_code]  # the label; odr_hz is real
         return DeviceInfo(
             url=self.url,
             name=info.name or "NUCLEO (protocol v1)",

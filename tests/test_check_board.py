@@ -6,13 +6,16 @@ from __future__ import annotations
 import argparse
 import io
 import sys
+from dataclasses import replace
 
 import pytest
 from fwcore import FirmwareCore, PtyBoard
 
 from app.cli import build_parser
 from app.cli_check import check_board, check_command
+from drivers import lsm6dsox
 from drivers.emulated_nucleo import EmulatedNucleo, NucleoFaults
+from drivers.link import protocol as p
 from drivers.lsm6dsox_direct.emulated_chip import EmulatedLsm6dsox
 from drivers.sim.options import SimOptions
 
@@ -65,3 +68,44 @@ def test_rates_are_checked_before_anything_is_opened(capsys) -> None:
     assert "100 Hz is not an LSM6DSOX rate" in capsys.readouterr().err
     bad = argparse.Namespace(port="/dev/null", rates="fast", seconds=1.0, no_self_test=True)
     assert check_command(bad) == 2
+
+
+class LabelRateBoard(EmulatedNucleo):
+    """A board whose firmware reports the datasheet label as its rate (firmware before 1.1: CONFIG
+    said 104 Hz while the chip ran at 104.17 Hz); its samples come at the real rate."""
+
+    @property
+    def config(self) -> p.Config:
+        real = super().config
+        label = lsm6dsox.ODR_LABELS_HZ[self._settings[0]]
+        return replace(real, odr_mhz=round(label * 1000 * 25_000 / real.tick_ns))
+
+
+def test_a_board_reporting_the_label_as_its_rate_fails_the_rate_check() -> None:
+    board = LabelRateBoard("static", seed=3)
+    out = io.StringIO()
+    try:
+        passed = check_board(board.port, [104.0], 1.5, False, out)
+    finally:
+        board.close()
+    report = out.getvalue()
+    assert not passed, report
+    row = next(line for line in report.splitlines() if line.strip().startswith("104 "))
+    assert row.endswith("FAIL")
+    measured_hz = float(row.split()[6])
+    assert measured_hz == pytest.approx(104.167 * board._sim.unit_errors.clock_trim_factor,
+                                        rel=5e-4)  # the samples come at the real rate
+    assert "rate: the chip should run at" in report and "the board reports 10" in report
+
+
+def test_the_emulated_board_runs_and_reports_the_real_rate() -> None:
+    board = EmulatedNucleo("static", seed=3)
+    out = io.StringIO()
+    try:
+        passed = check_board(board.port, [104.0], 1.5, False, out)
+    finally:
+        board.close()
+    report = out.getvalue()
+    row = next(line for line in report.splitlines() if line.strip().startswith("104 "))
+    assert passed and row.endswith("ok"), report
+    assert abs(float(row.split()[7])) < 1_000  # rate ppm against 104.17 Hz x trim

@@ -119,7 +119,9 @@ def test_hello_answers_info_and_config(board) -> None:
     core.send(p.Hello())
     info, config = core.packets()
     assert info == p.Info(1, (1, 0, 0), 0x6C, UNIQUE_ID, "NUCLEO-F746ZG")
-    assert config.odr_mhz == round(104_000 * chip.trim)
+    # "104 Hz" runs at 6666.67 / 64 = 104.167 Hz, times the chip's trim.
+    assert config.odr_mhz == lsm6dsox.odr_mhz(4, chip.unit.freq_fine)
+    assert config.odr_mhz == pytest.approx(104_166.67 * chip.trim, abs=1)
     assert (config.accel_fs_g, config.gyro_fs_dps) == (4, 250)
 
 
@@ -148,7 +150,8 @@ def test_rates_the_uart_cannot_carry_are_refused(firmware_lib) -> None:
     ack, _ = core.packets()
     assert ack.status == p.ACK_BAD_ARGUMENT
     full_packet_bytes = 396 + 2 + 1  # packet, COBS overhead, delimiter: 32 samples
-    assert ack.message == (f"ODR 1667 Hz needs {1667 * full_packet_bytes // 32} bytes/s; the UART "
+    need = lsm6dsox.odr_mhz(8) * full_packet_bytes // 32 // 1000  # the real 1666.67 Hz
+    assert ack.message == (f"ODR 1667 Hz needs {need} bytes/s; the UART "
                            f"at 115200 baud carries {115_200 // 10} (highest ODR 833 Hz)")
     core.close()
 
@@ -159,14 +162,14 @@ def test_link_limits_match_the_protocol_table(firmware_lib, baud, highest_hz) ->
     """docs/protocol.md section 6, and the Python emulated board's rule."""
     from drivers.emulated_nucleo import odr_fits_link
 
-    for code, hz in lsm6dsox.ODR_CODES_HZ.items():
+    for code, label in lsm6dsox.ODR_LABELS_HZ.items():
         fits, _ = rate_fits(firmware_lib, code, baud, 0)
-        assert fits == (hz <= highest_hz) == odr_fits_link(hz, baud)
+        assert fits == (label <= highest_hz) == odr_fits_link(lsm6dsox.ODR_RATES_HZ[code], baud)
     assert rate_fits(firmware_lib, 10, 0, 0)[0]  # native USB, no bus limit
 
 
 def test_i2c_at_400_khz_limits_the_rate_to_1667_hz(firmware_lib) -> None:
-    allowed = [hz for code, hz in lsm6dsox.ODR_CODES_HZ.items()
+    allowed = [hz for code, hz in lsm6dsox.ODR_LABELS_HZ.items()
                if rate_fits(firmware_lib, code, 921_600, 400_000)[0]]
     assert max(allowed) == 1667.0 and min(allowed) == 12.5
 
@@ -182,7 +185,8 @@ def test_commands_while_streaming(board) -> None:
     core.send(p.Start())
     ack, log = core.packets()[:2]
     assert ack == p.Ack(p.START, p.ACK_OK, "")
-    assert log.text == (f"streaming {hz_text(round(104_000 * chip.trim))} Hz, +-4 g, +-250 dps "
+    real = hz_text(lsm6dsox.odr_mhz(4, chip.unit.freq_fine))
+    assert log.text == (f"streaming 104 Hz (really {real} Hz), +-4 g, +-250 dps "
                         "from the LSM6DSOX at 0x6A")
     assert core.streaming and core.led_mode == LED_STREAMING
     core.send(p.Configure(5, 4, 250), p.SelfTest(), p.Start(), p.Hello(), p.Ping(7))
@@ -232,7 +236,7 @@ def test_no_sensor_then_the_sensor_is_plugged_in(firmware_lib) -> None:
     core.send(p.Hello())
     info, config, log = core.packets()
     assert info.who_am_i == 0x00  # the host reports "nothing driving the bus"
-    assert config.odr_mhz == 104_000 and config.tick_ns == 25_000
+    assert config.odr_mhz == 104_167 and config.tick_ns == 25_000  # untrimmed "104 Hz"
     assert log.level == 3 and "no LSM6DSOX answers on I2C1 (PB8 SCL, PB9 SDA)" in log.text
     core.send(p.Start())
     (ack,) = core.packets()
@@ -365,7 +369,7 @@ def test_the_emulated_board_limits_rates_as_the_firmware_does(firmware_lib, bus_
     """``inclinometer simulate`` (the Python emulated NUCLEO) follows the firmware's rule."""
     from drivers.emulated_nucleo import odr_fits_sensor_bus
 
-    for code, hz in lsm6dsox.ODR_CODES_HZ.items():
+    for code, hz in lsm6dsox.ODR_RATES_HZ.items():
         assert odr_fits_sensor_bus(hz, bus_hz) == rate_fits(firmware_lib, code, 0, bus_hz)[0]
 
 

@@ -142,7 +142,7 @@ def test_discover_lists_every_scenario_and_each_opens() -> None:
 
 
 def test_every_odr_and_full_scale_opens() -> None:
-    for odr in lsm6dsox.ODR_CODES_HZ.values():
+    for odr in lsm6dsox.ODR_LABELS_HZ.values():
         for accel_fs in lsm6dsox.ACCEL_MG_PER_LSB:
             for gyro_fs in lsm6dsox.GYRO_MDPS_PER_LSB:
                 url = f"sim://static?odr={odr}&accel_fs={accel_fs}&gyro_fs={gyro_fs}&realtime=0"
@@ -157,7 +157,7 @@ def test_every_odr_and_full_scale_opens() -> None:
 
 @pytest.mark.parametrize("asked", [1.0, 100.0, 150.0, 3000.0, 7000.0, 1e6])
 def test_odr_snaps_to_nearest_chip_rate(asked: float) -> None:
-    rates = list(lsm6dsox.ODR_CODES_HZ.values())
+    rates = list(lsm6dsox.ODR_LABELS_HZ.values())
     nearest = min(rates, key=lambda r: abs(r - asked))
     assert SimulatedDevice(f"sim://static?odr={asked}").options.odr_nominal_hz == nearest
 
@@ -222,7 +222,9 @@ def test_errors_off_gives_an_ideal_unit_with_the_same_id() -> None:
     assert ideal.unique_id == real.unique_id
     assert np.array_equal(ideal.unit_errors.accel_matrix, np.eye(3))
     assert not np.any(ideal.unit_errors.gyro_bias_rad_s)
-    assert ideal.odr_hz == ideal.true_odr_hz == ideal.options.odr_nominal_hz
+    # The label is 104 Hz; an ideal chip runs at 6666.67 / 64 = 104.17 Hz, no trim, no residual.
+    assert ideal.options.odr_nominal_hz == 104.0
+    assert ideal.odr_hz == ideal.true_odr_hz == pytest.approx(20000 / 3 / 64, rel=1e-15)
     assert np.any(real.unit_errors.accel_bias_m_s2)
 
 
@@ -387,12 +389,23 @@ def test_trimmed_odr_is_reported_and_sets_the_timestamps() -> None:
     unit = UnitErrors.draw(seed)
     device = SimulatedDevice(f"sim://static?odr=208&seed={seed}&realtime=0", block=1000)
     info = device.open()
-    trimmed = 208.0 * (1.0 + lsm6dsox.FREQ_FINE_STEP * unit.freq_fine)
+    trimmed = 20000 / 3 / 32 * (1.0 + lsm6dsox.FREQ_FINE_STEP * unit.freq_fine)  # "208" = 208.33
     assert info.odr_nominal_hz == 208.0
     assert info.odr_hz == pytest.approx(trimmed, rel=1e-12) and info.odr_hz != 208.0
     block = collect(device, 2000)
     np.testing.assert_allclose(np.diff(block.t_s), 1.0 / info.odr_hz, rtol=1e-9)
     assert block.t_s[0] == 0.0
+
+
+def test_an_ideal_chip_at_12_5_hz_reports_and_produces_13_02_hz() -> None:
+    device = SimulatedDevice("sim://static?odr=12.5&errors=0&realtime=0", block=100)
+    info = device.open()
+    assert info.odr_nominal_hz == 12.5  # the datasheet's label, for people
+    assert info.odr_hz == pytest.approx(13.0208, abs=1e-4)  # 6666.67 Hz / 512
+    block = collect(device, 200)
+    rate = (len(block.t_s) - 1) / (block.t_s[-1] - block.t_s[0])
+    assert rate == pytest.approx(20000 / 3 / 512, rel=1e-9)
+    device.close()
 
 
 def test_realtime_pacing_follows_the_true_clock() -> None:

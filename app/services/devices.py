@@ -54,7 +54,7 @@ class SensorChoices:
 
 
 SENSOR_CHOICES = SensorChoices(
-    odr_hz=tuple(lsm6dsox.ODR_CODES_HZ.values()),
+    odr_hz=tuple(lsm6dsox.ODR_LABELS_HZ.values()),  # labels, for people
     accel_fs_g=tuple(sorted(lsm6dsox.ACCEL_MG_PER_LSB)),
     gyro_fs_dps=tuple(sorted(lsm6dsox.GYRO_MDPS_PER_LSB)),
 )

@@ -138,7 +138,7 @@ def parse_lsm6dsox_url(url: str, overrides: dict[str, object] | None = None) -> 
     options: dict[str, object] = {"bus": bus}
     if "odr" in raw:
         odr = _positive(url, "odr", raw["odr"])
-        options["odr_nominal_hz"] = lsm6dsox.ODR_CODES_HZ[lsm6dsox.odr_code_for(odr)]
+        options["odr_nominal_hz"] = lsm6dsox.odr_label_hz(odr)
     if "accel_fs" in raw:
         value = _int(url, "accel_fs", raw["accel_fs"], 0, 10**6)
         if value not in lsm6dsox.FS_XL_CODES:

@@ -23,6 +23,7 @@ class StreamSettings:
     """What :meth:`Lsm6dsoxDriver.configure` set up and read back."""
 
     odr_nominal_hz: float
+    """The datasheet label (12.5 ... 6667 Hz); the chip runs at :attr:`odr_hz`."""
     accel_fs_g: int
     gyro_fs_dps: int
     freq_fine: int
@@ -35,9 +36,14 @@ class StreamSettings:
         return 1.0 + lsm6dsox.FREQ_FINE_STEP * self.freq_fine
 
     @property
+    def odr_code(self) -> int:
+        return lsm6dsox.odr_code_for(self.odr_nominal_hz)
+
+    @property
     def odr_hz(self) -> float:
-        """The trimmed output data rate."""
-        return self.odr_nominal_hz * self.trim
+        """The real, trimmed output data rate (6666.67 Hz / ODR_Coeff x trim), as the firmware
+        reports it in CONFIG."""
+        return lsm6dsox.odr_mhz(self.odr_code, self.freq_fine) / 1000.0
 
     @property
     def tick_s(self) -> float:
@@ -47,7 +53,7 @@ class StreamSettings:
     @property
     def ticks_per_sample(self) -> float:
         """Timestamp ticks per sample (the trim cancels: one oscillator drives both)."""
-        return 1.0 / (lsm6dsox.TIMESTAMP_TICK_S * self.odr_nominal_hz)
+        return 1.0 / (lsm6dsox.TIMESTAMP_TICK_S * lsm6dsox.ODR_RATES_HZ[self.odr_code])
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,6 +101,9 @@ class Lsm6dsoxDriver:
         self.label = label
         self.settings: StreamSettings | None = None
         self.decoder: FifoDecoder | None = None
+        self.settling_left = 0
+        """Samples of the turn-on transient still to drop (lsm6dsox.TURN_ON_DISCARD)."""
+        self.settling_dropped = 0
         self.max_burst_words = max(1, bus.max_read_bytes // reg.FIFO_WORD_BYTES)
 
     # -- registers ------------------------------------------------------------------------------
@@ -156,10 +165,12 @@ class Lsm6dsoxDriver:
             raise DeviceIOError(f"{self.label}: configuration did not stick: {'; '.join(wrong)}")
         freq_fine = int.from_bytes(self.read(reg.INTERNAL_FREQ_FINE), "little", signed=True)
         self.settings = StreamSettings(
-            lsm6dsox.ODR_CODES_HZ[reg.check_settings(odr_hz, accel_fs_g, gyro_fs_dps)],
+            lsm6dsox.ODR_LABELS_HZ[reg.check_settings(odr_hz, accel_fs_g, gyro_fs_dps)],
             accel_fs_g, gyro_fs_dps, freq_fine, tuple(sequence),
         )
         self.decoder = FifoDecoder(self.settings.ticks_per_sample)
+        # The FIFO fills from the ODR write on: its first samples are the turn-on transient.
+        self.settling_left = lsm6dsox.turn_on_discard(odr_hz)
         return self.settings
 
     def stop(self) -> None:
@@ -188,6 +199,11 @@ class Lsm6dsoxDriver:
         count = min(level, self.max_burst_words)
         data = self.read(reg.FIFO_DATA_OUT_TAG, count * reg.FIFO_WORD_BYTES)
         decoded = self.decoder.decode(data)
+        if self.settling_left and len(decoded):
+            drop = min(self.settling_left, len(decoded))
+            decoded = decoded.tail(drop)
+            self.settling_left -= drop
+            self.settling_dropped += drop
         return decoded if len(decoded) else None
 
     # -- self-test --------------------------------------------------------------------------------
@@ -233,7 +249,7 @@ class Lsm6dsoxDriver:
         self, ready_bit: int, out_register: int, enable_value: int, odr_code: int
     ) -> np.ndarray:
         """|mean with self-test - mean without| per axis, in LSB."""
-        period_s = 1.0 / lsm6dsox.ODR_CODES_HZ[odr_code]
+        period_s = 1.0 / lsm6dsox.ODR_RATES_HZ[odr_code]
         self.bus.delay(reg.SELF_TEST_SETTLE_S)
         off = self._average(ready_bit, out_register, period_s)
         self.write(reg.CTRL5_C, enable_value)

@@ -24,6 +24,12 @@ Modelling choices (assumed, not from a datasheet):
   continuous mode the oldest are overwritten, which sets FIFO_OVR_LATCHED (cleared by reading
   FIFO_STATUS2) and FIFO_OVR_IA (cleared once the level falls below full);
 - a software reset completes :data:`RESET_TIME_S` after it is written;
+- the turn-on transient: after CTRL1_XL or CTRL2_G is written, the first samples come out of
+  filters still settling. Their number is the settling figure of the engine's ODR code
+  (:data:`drivers.lsm6dsox.TURN_ON_DISCARD` less its two-sample margin), per sensor; sample
+  ``k`` of ``n`` settling ones reads ``k / (n + 1)`` of the true acceleration and the true
+  rate plus ``(1 - k / (n + 1))`` x :data:`SETTLING_GYRO_OFFSET_DPS`. A reader that drops
+  TURN_ON_DISCARD samples sees none of them;
 - the self-test adds a per-unit output change: 300-900 mg per accelerometer axis, and a
   gyroscope rate of 250-500 dps at +-2000 dps full scale, proportional to the full scale
   (inside the datasheet windows of HARDWARE.md); ``self_test_working=False`` models a chip
@@ -54,6 +60,8 @@ from drivers.sim.options import SimOptions
 from drivers.sim.scenarios import SCENARIOS, Scenario
 
 RESET_TIME_S = 50e-6
+SETTLING_GYRO_OFFSET_DPS = 20.0
+"""The gyroscope's error on the first settling sample (it decays to zero)."""
 TICKS_PER_S_NOMINAL = 1.0 / lsm6dsox.TIMESTAMP_TICK_S
 STREAM_SELF_TEST = 7
 """Random stream of the unit's self-test response (after the simulator's streams 0-5)."""
@@ -331,7 +339,7 @@ class EmulatedLsm6dsox(I2CBus):
     # -- internals: sampling -----------------------------------------------------------------
     def _odr_code(self, register: int) -> int:
         code = self._regs[register] >> 4
-        return code if code in lsm6dsox.ODR_CODES_HZ else 0
+        return code if code in lsm6dsox.ODR_RATES_HZ else 0
 
     def _start_engine(self) -> None:
         code = max(self._odr_code(reg.CTRL1_XL), self._odr_code(reg.CTRL2_G))
@@ -339,7 +347,7 @@ class EmulatedLsm6dsox(I2CBus):
             self._model = None
             self._engine_rate_hz = 0.0
             return
-        nominal = lsm6dsox.ODR_CODES_HZ[code]
+        nominal = lsm6dsox.ODR_RATES_HZ[code]  # the real rate: "12.5 Hz" runs at 13.02 Hz
         accel_fs = _FS_XL_FROM_CODE[(self._regs[reg.CTRL1_XL] >> 2) & 0x03]
         gyro_fs = _FS_G_FROM_CODE.get((self._regs[reg.CTRL2_G] >> 1) & 0x07, 250)
         self._accel_fs_g, self._gyro_fs_dps = accel_fs, gyro_fs
@@ -361,7 +369,7 @@ class EmulatedLsm6dsox(I2CBus):
 
         bdr = self._regs[reg.FIFO_CTRL3]
         xl_code, g_code = bdr & 0x0F, bdr >> 4
-        rates = lsm6dsox.ODR_CODES_HZ
+        rates = lsm6dsox.ODR_RATES_HZ
         accel = every(rates.get(xl_code, 0.0)) if self._odr_code(reg.CTRL1_XL) else 0
         gyro = every(rates.get(g_code, 0.0)) if self._odr_code(reg.CTRL2_G) else 0
         ctrl4 = self._regs[reg.FIFO_CTRL4]
@@ -395,6 +403,7 @@ class EmulatedLsm6dsox(I2CBus):
         accel_raw, gyro_raw = model.measure(
             int(index[0]), specific_force, motion.angular_rate_rad_s, temp_degc
         )
+        accel_raw, gyro_raw = self._apply_settling(index, accel_raw, gyro_raw)
         accel_raw, gyro_raw = self._apply_self_test(accel_raw, gyro_raw)
         temp_raw = np.rint((temp_degc - REFERENCE_TEMP_DEGC) * lsm6dsox.TEMP_LSB_PER_DEGC)
         temp_raw = np.clip(temp_raw, -32768, 32767).astype(np.int16)
@@ -414,6 +423,25 @@ class EmulatedLsm6dsox(I2CBus):
                 })
             self._slot += due
         self._produced += due
+
+    def _apply_settling(
+        self, index: np.ndarray, accel_raw: np.ndarray, gyro_raw: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The turn-on transient on samples 1..n after the ODR was set (module docstring)."""
+        code = max(self._odr_code(reg.CTRL1_XL), self._odr_code(reg.CTRL2_G))
+        margin = lsm6dsox.SETTLING_MARGIN_SAMPLES
+        n_accel, n_gyro = (n - margin for n in lsm6dsox.TURN_ON_DISCARD[code])
+        if index[0] > max(n_accel, n_gyro):
+            return accel_raw, gyro_raw
+        accel_raw, gyro_raw = accel_raw.copy(), gyro_raw.copy()
+        settling = index <= n_accel
+        share = index[settling, None] / (n_accel + 1)
+        accel_raw[settling] = _saturate(np.rint(accel_raw[settling] * share))
+        settling = index <= n_gyro
+        error_dps = (1.0 - index[settling, None] / (n_gyro + 1)) * SETTLING_GYRO_OFFSET_DPS
+        error_lsb = error_dps * 1e3 / lsm6dsox.GYRO_MDPS_PER_LSB[self._gyro_fs_dps]
+        gyro_raw[settling] = _saturate(gyro_raw[settling] + np.rint(error_lsb))
+        return accel_raw, gyro_raw
 
     def _apply_self_test(
         self, accel_raw: np.ndarray, gyro_raw: np.ndarray

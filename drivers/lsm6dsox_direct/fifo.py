@@ -57,6 +57,11 @@ class DecodedSamples:
     def __len__(self) -> int:
         return int(self.ticks.shape[0])
 
+    def tail(self, start: int) -> DecodedSamples:
+        """The samples from ``start`` on (the ones before are dropped, not lost)."""
+        return DecodedSamples(self.ticks[start:], self.accel_raw[start:], self.gyro_raw[start:],
+                              self.temp_raw[start:], self.lost_before[start:])
+
 
 @dataclass(slots=True)
 class FifoCounters:

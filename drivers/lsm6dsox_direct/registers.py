@@ -167,9 +167,11 @@ def fifo_ctrl4_value(mode: int = FIFO_MODE_CONTINUOUS) -> int:
 
 def check_settings(odr_hz: float, accel_fs_g: int, gyro_fs_dps: int) -> int:
     """Validate a setting; return the ODR code. Raises ``ValueError`` naming the choices."""
-    codes = [code for code, hz in lsm6dsox.ODR_CODES_HZ.items() if abs(hz - odr_hz) < 1e-6]
+    codes = [code for code in lsm6dsox.ODR_LABELS_HZ
+             if abs(lsm6dsox.ODR_LABELS_HZ[code] - odr_hz) < 1e-6
+             or abs(lsm6dsox.ODR_RATES_HZ[code] - odr_hz) < 1e-6]
     if not codes:
-        rates = ", ".join(f"{hz:g}" for hz in lsm6dsox.ODR_CODES_HZ.values())
+        rates = ", ".join(f"{hz:g}" for hz in lsm6dsox.ODR_LABELS_HZ.values())
         raise ValueError(f"odr {odr_hz:g} Hz is not an LSM6DSOX rate; use one of {rates}")
     if accel_fs_g not in lsm6dsox.FS_XL_CODES:
         raise ValueError(f"accel_fs {accel_fs_g} g: use 2, 4, 8 or 16")
@@ -183,9 +185,9 @@ def configuration_sequence(
 ) -> list[tuple[int, int]]:
     """The register writes that configure streaming, in order, as ``(register, value)``.
 
-    ``odr_hz`` must be one of the nominal rates (12.5 ... 6667). After the first write
-    (SW_RESET) the host polls CTRL3_C until bit 0 reads 0 before going on. See the module
-    docstring for what each write does.
+    ``odr_hz`` must be one of the labels (12.5 ... 6667) or real rates (13.02 ... 6666.67).
+    After the first write (SW_RESET) the host polls CTRL3_C until bit 0 reads 0 before going
+    on. See the module docstring for what each write does.
     """
     odr_code = check_settings(odr_hz, accel_fs_g, gyro_fs_dps)
     return [

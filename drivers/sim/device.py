@@ -117,8 +117,10 @@ class SimulatedDevice(Device):
     # -- what the GUI and tests use ------------------------------------------------------------
     @property
     def odr_hz(self) -> float:
-        """The trimmed output data rate the chip reports (nominal x trim)."""
-        return self.options.odr_nominal_hz * self.unit_errors.clock_trim_factor
+        """The trimmed output data rate the chip reports: its real rate (6666.67 Hz / ODR_Coeff,
+        "12.5 Hz" is 13.02 Hz) x trim; ``odr_nominal_hz`` is the datasheet label."""
+        real = lsm6dsox.real_odr_hz(self.options.odr_nominal_hz)
+        return real * self.unit_errors.clock_trim_factor
 
     @property
     def true_odr_hz(self) -> float:

@@ -31,7 +31,13 @@ void fifo_stream_restart(fifo_stream *s, uint32_t odr_mhz_nominal, int16_t tempe
         ? (((uint64_t)40000 * 1000u) << 16) / odr_mhz_nominal : (uint64_t)1 << 16;
     s->ticks_per_slot_q16 = s->nominal_ticks_per_slot_q16;
     s->temperature_raw = temperature_raw;
+    s->discard = 0;
     s->packet.count = 0;
+}
+
+void fifo_stream_discard(fifo_stream *s, uint32_t samples)
+{
+    s->discard = samples;
 }
 
 /* t0 of the waiting packet, when an anchor can place it. */
@@ -94,6 +100,11 @@ static void cut(fifo_stream *s, uint32_t now_us, fifo_packet_sink sink, void *ct
 static void add_sample(fifo_stream *s, uint32_t now_us, fifo_packet_sink sink, void *ctx)
 {
     fifo_packet *packet = &s->packet;
+    if (s->discard) { /* settling: never streamed, and not a gap */
+        s->discard--;
+        s->counters.settling++;
+        return;
+    }
     if (packet->count && s->slot != s->first_slot + packet->count) {
         cut(s, now_us, sink, ctx);
         skip_sequence_number(s); /* the samples of the hole */

@@ -36,6 +36,7 @@ typedef struct fifo_stream_counters {
     uint32_t samples;
     uint32_t packets;
     uint32_t dropped_packets;   /* sequence numbers skipped (data lost before the host) */
+    uint32_t settling;          /* samples discarded as the sensor's turn-on transient */
 } fifo_stream_counters;
 
 typedef struct fifo_stream {
@@ -53,6 +54,7 @@ typedef struct fifo_stream {
     uint64_t ticks_per_slot_q16;       /* measured, else nominal */
     uint64_t nominal_ticks_per_slot_q16;
     int16_t temperature_raw;
+    uint32_t discard;                  /* samples still to drop (turn-on transient) */
     /* packet being assembled */
     fifo_packet packet;
     uint32_t first_slot;
@@ -71,6 +73,11 @@ void fifo_stream_init(fifo_stream *s, uint32_t flush_after_us);
 /* Start of a stream (the FIFO was emptied): forget slots, anchors and waiting samples; keep the
  * sequence number. `odr_mhz_nominal` sets the tick period per slot until it is measured. */
 void fifo_stream_restart(fifo_stream *s, uint32_t odr_mhz_nominal, int16_t temperature_raw);
+
+/* Drop the next `samples` samples (the turn-on transient after a (re)configure) before they
+ * enter a packet. They are not a loss: no sequence number is skipped, and the first packet's
+ * t0 is the time of the first sample kept. Cleared by fifo_stream_restart. */
+void fifo_stream_discard(fifo_stream *s, uint32_t samples);
 
 /* Feed `words` FIFO words read at `now_us`; complete packets go to `sink`. */
 void fifo_stream_feed(fifo_stream *s, const uint8_t *data, uint16_t words, uint32_t now_us,

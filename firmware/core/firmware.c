@@ -130,6 +130,21 @@ static bool bring_up_sensor(fw_state *fw, text *t)
     return fw->sensor_ok;
 }
 
+/* Samples of the turn-on transient still ahead: the larger of the accelerometer's and the
+ * gyroscope's discard count (a sample carries both), less the samples the chip has produced
+ * since it was configured (counted 2 % short, so an MCU clock running fast cannot cut the
+ * discard short). Discarding keeps the protocol's rule that a packet's samples are
+ * consecutive and valid, where marking would need a flag v1 does not have. */
+static uint32_t settling_samples_left(fw_state *fw)
+{
+    uint8_t code = fw->chip.settings.odr_code;
+    uint32_t accel = lsm_turn_on_discard(code, false), gyro = lsm_turn_on_discard(code, true);
+    uint32_t needed = accel > gyro ? accel : gyro;
+    uint64_t elapsed_us = (uint32_t)(now_us(fw) - fw->chip.configured_us);
+    uint64_t produced = elapsed_us * lsm_odr_mhz(&fw->chip) / 1000000000u * 98u / 100u;
+    return produced >= needed ? 0u : needed - (uint32_t)produced;
+}
+
 static bool start_stream(fw_state *fw)
 {
     int16_t temperature = 0;
@@ -140,6 +155,7 @@ static bool start_stream(fw_state *fw)
         return false;
     fifo_stream_restart(&fw->stream, lsm_odr_nominal_mhz(fw->chip.settings.odr_code),
                         temperature);
+    fifo_stream_discard(&fw->stream, settling_samples_left(fw));
     fw->streaming = true;
     fw->last_poll_us = now_us(fw);
     return true;
@@ -182,7 +198,7 @@ bool fw_rate_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, char *why, s
         while (highest > LSM_ODR_CODE_MIN && !fw_rate_fits(highest, baud, 0, NULL, 0))
             highest--;
         text_str(&t, "ODR ");
-        text_mhz(&t, odr_mhz);
+        text_mhz(&t, lsm_odr_label_mhz(odr_code));
         text_str(&t, " Hz needs ");
         text_u32(&t, (uint32_t)(need_bytes_milli / 1000u));
         text_str(&t, " bytes/s; the UART at ");
@@ -190,7 +206,7 @@ bool fw_rate_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, char *why, s
         text_str(&t, " baud carries ");
         text_u32(&t, baud / 10u);
         text_str(&t, " (highest ODR ");
-        text_mhz(&t, lsm_odr_nominal_mhz(highest));
+        text_mhz(&t, lsm_odr_label_mhz(highest));
         text_str(&t, " Hz)");
         return false;
     }
@@ -207,7 +223,7 @@ bool fw_rate_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, char *why, s
             while (highest > LSM_ODR_CODE_MIN && !fw_rate_fits(highest, 0, i2c_hz, NULL, 0))
                 highest--;
             text_str(&t, "ODR ");
-            text_mhz(&t, odr_mhz);
+            text_mhz(&t, lsm_odr_label_mhz(odr_code));
             text_str(&t, " Hz needs about ");
             text_u32(&t, (uint32_t)(need_bits / 1000u));
             text_str(&t, " kbit/s on I2C1; the bus at ");
@@ -215,7 +231,7 @@ bool fw_rate_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, char *why, s
             text_str(&t, " kHz carries about ");
             text_u32(&t, (uint32_t)(usable_bits / 1000u));
             text_str(&t, " (highest ODR ");
-            text_mhz(&t, lsm_odr_nominal_mhz(highest));
+            text_mhz(&t, lsm_odr_label_mhz(highest));
             text_str(&t, " Hz)");
             return false;
         }
@@ -324,8 +340,10 @@ static void on_start(fw_state *fw)
     fw->want_streaming = true;
     send_ack(fw, LINK_START, LINK_ACK_OK, NULL);
     text_str(&t, "streaming ");
+    text_mhz(&t, lsm_odr_label_mhz(fw->chip.settings.odr_code));
+    text_str(&t, " Hz (really ");
     text_mhz(&t, lsm_odr_mhz(&fw->chip));
-    text_str(&t, " Hz, +-");
+    text_str(&t, " Hz), +-");
     text_u32(&t, fw->chip.settings.accel_fs_g);
     text_str(&t, " g, +-");
     text_u32(&t, fw->chip.settings.gyro_fs_dps);

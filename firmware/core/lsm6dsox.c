@@ -13,14 +13,47 @@
 #define SELF_TEST_GYRO_FS_DPS 2000u
 #define FREQ_FINE_STEP_PPM 1500     /* 0.15 % per step of INTERNAL_FREQ_FINE */
 
-static const uint32_t odr_mhz_table[LSM_ODR_CODE_MAX + 1] = {
+/* The datasheet's labels, for messages. The chip runs at 6666.67 Hz / ODR_Coeff with ODR_Coeff
+ * = 512, 256, ... 1 (AN5272): "12.5 Hz" is 13.02 Hz, "104 Hz" 104.17 Hz. */
+static const uint32_t odr_label_mhz_table[LSM_ODR_CODE_MAX + 1] = {
     0, 12500, 26000, 52000, 104000, 208000, 417000, 833000, 1667000, 3333000, 6667000,
 };
+/* Samples to discard after the ODR is set (turn-on transient): accelerometer, gyroscope. The
+ * settling figures plus two, as ST's drivers do (drivers/lsm6dsox.py: TURN_ON_DISCARD). */
+static const uint16_t turn_on_discard_table[LSM_ODR_CODE_MAX + 1][2] = {
+    {0, 0}, {3, 4}, {3, 7}, {3, 9}, {4, 14}, {4, 22}, {4, 38}, {5, 72}, {5, 137}, {6, 272},
+    {7, 541},
+};
+
+static bool valid_odr_code(uint8_t odr_code)
+{
+    return odr_code >= LSM_ODR_CODE_MIN && odr_code <= LSM_ODR_CODE_MAX;
+}
+
+uint32_t lsm_odr_label_mhz(uint8_t odr_code)
+{
+    return valid_odr_code(odr_code) ? odr_label_mhz_table[odr_code] : 0;
+}
+
+/* ODR in mHz with the clock trim `trim_ppm` (1 000 000 = untrimmed), rounded:
+ * 20 000 000 / 3 mHz / 2^(10 - code) x trim. */
+static uint32_t odr_trimmed_mhz(uint8_t odr_code, int64_t trim_ppm)
+{
+    if (!valid_odr_code(odr_code))
+        return 0;
+    int64_t numerator = (int64_t)20000000 * trim_ppm;
+    int64_t denominator = (int64_t)3 * ((int64_t)1 << (LSM_ODR_CODE_MAX - odr_code)) * 1000000;
+    return (uint32_t)((numerator + denominator / 2) / denominator);
+}
 
 uint32_t lsm_odr_nominal_mhz(uint8_t odr_code)
 {
-    return odr_code >= LSM_ODR_CODE_MIN && odr_code <= LSM_ODR_CODE_MAX ? odr_mhz_table[odr_code]
-                                                                         : 0;
+    return odr_trimmed_mhz(odr_code, 1000000);
+}
+
+uint16_t lsm_turn_on_discard(uint8_t odr_code, bool gyro)
+{
+    return valid_odr_code(odr_code) ? turn_on_discard_table[odr_code][gyro ? 1 : 0] : 0;
 }
 
 int lsm_fs_xl_code(uint8_t accel_fs_g)
@@ -174,6 +207,7 @@ int lsm_configure(lsm6dsox *chip, const lsm_settings *settings)
     if (err)
         return err;
     chip->freq_fine = (int8_t)fine;
+    chip->configured_us = chip->platform->micros(chip->platform->ctx);
     chip->settings = *settings;
     chip->configured = true;
     return LSM_OK;
@@ -225,8 +259,7 @@ static int64_t divide_rounded(int64_t numerator, int64_t denominator)
 
 uint32_t lsm_odr_mhz(const lsm6dsox *chip)
 {
-    int64_t nominal = lsm_odr_nominal_mhz(chip->settings.odr_code);
-    return (uint32_t)divide_rounded(nominal * trim_ppm(chip), 1000000);
+    return odr_trimmed_mhz(chip->settings.odr_code, trim_ppm(chip));
 }
 
 uint32_t lsm_tick_ns(const lsm6dsox *chip)

@@ -88,8 +88,15 @@ enum {
     LSM_ERR_NO_DATA = -5,    /* self-test: no new sample in time */
 };
 
-/* Nominal output data rate of an ODR code (1..10) in millihertz; 0 for other codes. */
+/* Output data rate of an ODR code (1..10) in millihertz before the clock trim: the rate the
+ * chip really runs at, 6666.67 Hz / 2^(10 - code) (13021 for "12.5 Hz", 104167 for "104 Hz");
+ * 0 for other codes. */
 uint32_t lsm_odr_nominal_mhz(uint8_t odr_code);
+/* The datasheet's label of an ODR code in millihertz (12500, 104000, ...), for people. */
+uint32_t lsm_odr_label_mhz(uint8_t odr_code);
+/* Samples of the accelerometer (`gyro` false) or gyroscope to discard after the ODR is set:
+ * the turn-on transient's settling figures plus two. */
+uint16_t lsm_turn_on_discard(uint8_t odr_code, bool gyro);
 /* FS_XL / FS_G field codes; -1 for a full scale the chip does not have. */
 int lsm_fs_xl_code(uint8_t accel_fs_g);
 int lsm_fs_g_code(uint16_t gyro_fs_dps);
@@ -116,6 +123,7 @@ typedef struct lsm6dsox {
     uint8_t who_am_i;  /* last WHO_AM_I read (0x00 when nothing answered) */
     int8_t freq_fine;  /* INTERNAL_FREQ_FINE: clock trim in steps of 0.15 % */
     bool configured;
+    uint32_t configured_us; /* platform micros() when the ODR was last set (transient start) */
     lsm_settings settings;
 } lsm6dsox;
 

@@ -119,7 +119,7 @@ int fwh_streaming(const host_board *board)
 
 /* Counters, in this order: commands, bus_errors, tx_dropped_packets, words, unknown_tags,
  * incomplete_slots, lost_slots, overruns, samples, packets, dropped_packets, rx frames,
- * rx bad_frames. Returns how many were written (at most `size`). */
+ * rx bad_frames, settling (samples discarded as turn-on transient). Returns how many were written (at most `size`). */
 size_t fwh_counters(const host_board *board, uint32_t *out, size_t size)
 {
     const fw_counters *c = &board->fw.counters;
@@ -127,7 +127,7 @@ size_t fwh_counters(const host_board *board, uint32_t *out, size_t size)
     const uint32_t values[] = {
         c->commands, c->bus_errors, c->tx_dropped_packets, s->words, s->unknown_tags,
         s->incomplete_slots, s->lost_slots, s->overruns, s->samples, s->packets,
-        s->dropped_packets, board->fw.rx.frames, board->fw.rx.bad_frames,
+        s->dropped_packets, board->fw.rx.frames, board->fw.rx.bad_frames, s->settling,
     };
     size_t n = sizeof values / sizeof values[0];
     if (n > size)

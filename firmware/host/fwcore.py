@@ -40,7 +40,7 @@ FIRMWARE_DIR = Path(__file__).resolve().parents[1]
 COUNTER_NAMES = (
     "commands", "bus_errors", "tx_dropped_packets", "words", "unknown_tags", "incomplete_slots",
     "lost_slots", "overruns", "samples", "packets", "dropped_packets", "rx_frames",
-    "rx_bad_frames",
+    "rx_bad_frames", "settling",
 )
 LED_IDLE, LED_STREAMING, LED_ERROR = 0, 1, 2
 POLL_INTERVAL_S = 0.002

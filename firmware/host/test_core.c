@@ -202,6 +202,56 @@ static void test_fifo_stream_packets(void)
     CHECK(s.counters.samples == 100 && s.counters.incomplete_slots == 0);
 }
 
+static void test_fifo_stream_discards_settling_samples(void)
+{
+    static uint8_t buf[200 * 3 * LSM_FIFO_WORD_BYTES];
+    fifo_stream s;
+    sink_log log = {0};
+    fifo_stream_init(&s, 5000);
+    fifo_stream_restart(&s, 104167, 0);
+    fifo_stream_discard(&s, 14); /* "104 Hz": 14 gyroscope samples of turn-on transient */
+    uint16_t words = make_slots(buf, 0, 46, 1000, 384, UINT32_MAX);
+    fifo_stream_feed(&s, buf, words, 0, sink, &log);
+    CHECK(log.packets == 1);
+    CHECK(log.last[0].seq == 0);                 /* no sequence number skipped: not a loss */
+    CHECK(log.last[0].count == 32);
+    CHECK(log.last[0].samples[0][0] == 14);      /* the first sample kept is slot 14 ... */
+    CHECK(log.last[0].t0 == 1000u + 14u * 384u); /* ... and t0 is its time */
+    CHECK(s.counters.settling == 14 && s.counters.samples == 32);
+    fifo_stream_restart(&s, 104167, 0);          /* a restart forgets a pending discard */
+    CHECK(s.discard == 0);
+}
+
+static void test_odr_tables(void)
+{
+    /* The chip runs at 6666.67 Hz / ODR_Coeff (AN5272); the labels are the datasheet's. */
+    const uint32_t real[] = {0, 13021, 26042, 52083, 104167, 208333, 416667, 833333, 1666667,
+                             3333333, 6666667};
+    const uint32_t label[] = {0, 12500, 26000, 52000, 104000, 208000, 417000, 833000, 1667000,
+                              3333000, 6667000};
+    for (uint8_t code = 0; code <= LSM_ODR_CODE_MAX + 1; code++) {
+        uint32_t want_real = code <= LSM_ODR_CODE_MAX ? real[code] : 0;
+        uint32_t want_label = code <= LSM_ODR_CODE_MAX ? label[code] : 0;
+        CHECK(lsm_odr_nominal_mhz(code) == want_real);
+        CHECK(lsm_odr_label_mhz(code) == want_label);
+    }
+    /* Turn-on discard: 3-7 accelerometer and 4-541 gyroscope samples, growing with the rate. */
+    CHECK(lsm_turn_on_discard(1, false) == 3 && lsm_turn_on_discard(10, false) == 7);
+    CHECK(lsm_turn_on_discard(1, true) == 4 && lsm_turn_on_discard(10, true) == 541);
+    for (uint8_t code = 2; code <= LSM_ODR_CODE_MAX; code++) {
+        CHECK(lsm_turn_on_discard(code, false) >= lsm_turn_on_discard(code - 1, false));
+        CHECK(lsm_turn_on_discard(code, true) > lsm_turn_on_discard(code - 1, true));
+    }
+    CHECK(lsm_turn_on_discard(0, true) == 0 && lsm_turn_on_discard(11, false) == 0);
+    /* Trimmed: FREQ_FINE = -10 is 1.5 % slow; 104.167 Hz x 0.985 = 102.604 Hz. */
+    lsm6dsox chip;
+    lsm_init(&chip, NULL);
+    chip.settings.odr_code = 4;
+    chip.freq_fine = -10;
+    CHECK(lsm_odr_mhz(&chip) == 102604);
+    CHECK(lsm_tick_ns(&chip) == 25381);
+}
+
 static void test_fifo_stream_hole_and_overrun(void)
 {
     static uint8_t buf[200 * 3 * LSM_FIFO_WORD_BYTES];
@@ -417,6 +467,8 @@ int main(void)
     test_cobs_rejects();
     test_rx_resync();
     test_fifo_stream_packets();
+    test_fifo_stream_discards_settling_samples();
+    test_odr_tables();
     test_fifo_stream_hole_and_overrun();
     test_fifo_stream_measures_rate();
     test_fifo_stream_timestamps_wrap();
