@@ -53,6 +53,7 @@ def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
         print("inclinometer: simulate needs --pty (the only transport so far)", file=sys.stderr)
         return 2
     try:
+        from drivers import lsm6dsox
         from drivers.emulated_nucleo import EmulatedNucleo
         from drivers.errors import DeviceError
 
@@ -71,7 +72,8 @@ def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
     print(board.port, file=out)
     print(f"Emulated NUCLEO-F746ZG, protocol v1, scenario {args.scenario}, seed {args.seed}: "
           f"unique id {board.unique_id.hex().upper()}, USB serial {board.usb_serial}, "
-          f"{config.odr_hz:g} Hz, +-{config.accel_fs_g} g, +-{config.gyro_fs_dps} dps.",
+          f"{config.odr_hz:.3f} Hz (\"{lsm6dsox.odr_label_hz(config.odr_hz):g} Hz\"), "
+          f"+-{config.accel_fs_g} g, +-{config.gyro_fs_dps} dps.",
           file=out)
     print(f"Connect with: inclinometer --device {board.port}    (Ctrl-C stops)", file=out)
     out.flush()

@@ -16,6 +16,10 @@ The board registers its port with the USB identity of an ST-LINK/V2-1 (0483:374B
 number derived from the seed, so discovery and reconnect-by-USB-serial treat it as a real one.
 Pseudo-terminals need Linux or macOS.
 
+Turn-on transient: the simulated chip is opened with ``settling=1`` (its first samples after
+power-on or CONFIGURE are wrong, :mod:`drivers.sim.transient`), and the board drops
+:func:`drivers.lsm6dsox.turn_on_discard` samples before any packet, as the firmware does.
+
 Timing model: the board's clock runs with the wall clock from power-on (``initial_ticks`` at
 power-on; it keeps running across an unplug unless :meth:`replug` is told ``power_cycle``).
 Samples are produced at the simulated chip's true rate and sent every ``packet_interval_s``
@@ -139,6 +143,8 @@ class NucleoStats:
     packets_dropped: int = 0
     samples_dropped: int = 0
     packets_corrupted: int = 0
+    settling_discarded: int = 0
+    """Samples of the simulated chip's turn-on transient dropped before any packet."""
 
 
 class EmulatedNucleo:
@@ -333,9 +339,13 @@ class EmulatedNucleo:
     def _new_sim(self, odr_code: int, accel_fs_g: int, gyro_fs_dps: int) -> SimulatedDevice:
         url = (f"sim://{self.scenario}?odr={lsm6dsox.ODR_LABELS_HZ[odr_code]:g}"
                f"&accel_fs={accel_fs_g}&gyro_fs={gyro_fs_dps}&seed={self.seed}&realtime=0"
-               f"&block={SIM_BLOCK}&errors={int(self.errors)}&noise={int(self.noise)}")
+               f"&block={SIM_BLOCK}&errors={int(self.errors)}&noise={int(self.noise)}"
+               "&settling=1")
         sim = SimulatedDevice(url, **self.scenario_params)
         sim.open()
+        # The simulated chip starts with its turn-on transient; the firmware drops it, as
+        # firmware/core does (fifo_stream_discard), before any packet.
+        self._settling_left = lsm6dsox.turn_on_discard(lsm6dsox.ODR_LABELS_HZ[odr_code])
         return sim
 
     def _board_ticks(self, now: float) -> int:
@@ -503,7 +513,12 @@ class EmulatedNucleo:
                 block[:, 0:3] = raw.gyro_raw
                 block[:, 3:6] = raw.accel_raw
                 block[:, 6] = raw.temp_raw
-                self._pending = [block]
+                settling, self._settling_left = (min(self._settling_left, len(block)),
+                                                 max(0, self._settling_left - len(block)))
+                self.stats.settling_discarded += settling
+                if settling == len(block):
+                    continue
+                self._pending = [block[settling:]]
             head = self._pending[0]
             take = min(count - have, len(head))
             rows.append(head[:take])

@@ -8,6 +8,7 @@ import io
 import sys
 from dataclasses import replace
 
+import numpy as np
 import pytest
 from fwcore import FirmwareCore, PtyBoard
 
@@ -109,3 +110,24 @@ def test_the_emulated_board_runs_and_reports_the_real_rate() -> None:
     row = next(line for line in report.splitlines() if line.strip().startswith("104 "))
     assert passed and row.endswith("ok"), report
     assert abs(float(row.split()[7])) < 1_000  # rate ppm against 104.17 Hz x trim
+
+
+def test_the_emulated_board_drops_the_turn_on_transient() -> None:
+    from drivers.serial_link import SerialLinkDevice
+
+    board = EmulatedNucleo("static", seed=3, odr_hz=833, errors=False, noise=False)
+    device = SerialLinkDevice(f"serial://{board.port}")
+    try:
+        device.open()
+        block = None
+        while block is None or not len(block):
+            block = device.read(1.0)
+    finally:
+        device.close()
+        board.close()
+    assert board.stats.settling_discarded == lsm6dsox.turn_on_discard(833)
+    # The first sample streamed is a settled one: 1 g at rest, no rate (the chip's first 70 read
+    # up to 20 dps and a fraction of 1 g).
+    accel_g = np.linalg.norm(block.accel_raw[0]) * lsm6dsox.ACCEL_MG_PER_LSB[4] / 1e3
+    assert accel_g == pytest.approx(1.0, abs=0.01)
+    assert np.abs(block.gyro_raw[0]).max() * lsm6dsox.GYRO_MDPS_PER_LSB[250] / 1e3 < 0.1

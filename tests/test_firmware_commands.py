@@ -9,6 +9,7 @@ computes for the same chip.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -388,3 +389,37 @@ def test_the_emulated_board_refuses_what_i2c_cannot_carry() -> None:
         ok.close()
     finally:
         board.close()
+
+
+def test_the_firmware_rate_and_discard_tables_are_the_python_ones(firmware_lib) -> None:
+    """drivers/lsm6dsox.py is the source of truth; firmware/core/lsm6dsox.c holds a copy."""
+    import ctypes
+
+    firmware_lib.lsm_odr_nominal_mhz.restype = ctypes.c_uint32
+    firmware_lib.lsm_odr_nominal_mhz.argtypes = [ctypes.c_uint8]
+    firmware_lib.lsm_odr_label_mhz.restype = ctypes.c_uint32
+    firmware_lib.lsm_odr_label_mhz.argtypes = [ctypes.c_uint8]
+    firmware_lib.lsm_turn_on_discard.restype = ctypes.c_uint16
+    firmware_lib.lsm_turn_on_discard.argtypes = [ctypes.c_uint8, ctypes.c_bool]
+    for code, label in lsm6dsox.ODR_LABELS_HZ.items():
+        assert firmware_lib.lsm_odr_nominal_mhz(code) == lsm6dsox.odr_mhz(code)
+        assert firmware_lib.lsm_odr_nominal_mhz(code) == round(lsm6dsox.ODR_RATES_HZ[code] * 1000)
+        assert firmware_lib.lsm_odr_label_mhz(code) == round(label * 1000)
+        accel, gyro = lsm6dsox.TURN_ON_DISCARD[code]
+        assert firmware_lib.lsm_turn_on_discard(code, False) == accel
+        assert firmware_lib.lsm_turn_on_discard(code, True) == gyro
+    assert firmware_lib.lsm_odr_nominal_mhz(1) == 13_021  # "12.5 Hz" is 13.02 Hz
+    assert firmware_lib.lsm_odr_nominal_mhz(11) == firmware_lib.lsm_odr_label_mhz(0) == 0
+
+
+@pytest.mark.parametrize("freq_fine", [-128, -37, -1, 0, 1, 19, 127])
+def test_config_odr_matches_the_python_rounding_for_every_trim(firmware_lib, freq_fine) -> None:
+    chip = EmulatedLsm6dsox(SimOptions("static", seed=2), clock=VirtualClock(1.0))
+    chip.unit = replace(chip.unit, freq_fine=freq_fine)  # INTERNAL_FREQ_FINE after a reset
+    core = FirmwareCore(firmware_lib, RecordingBus(chip), unique_id=UNIQUE_ID)
+    for code in (1, 4, 8):
+        core.send(p.Configure(code, 4, 250))
+        _, config = core.packets()
+        assert config.odr_mhz == lsm6dsox.odr_mhz(code, freq_fine)
+        assert config.tick_ns == lsm6dsox.tick_ns(freq_fine)
+    core.close()

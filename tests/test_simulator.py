@@ -721,3 +721,17 @@ def test_a_simulator_url_without_a_scenario_starts_the_interactive_one():
         assert len(device.read(1.0)) > 0
     finally:
         device.close()
+
+
+def test_settling_models_the_turn_on_transient_and_the_discard_removes_it() -> None:
+    url = "sim://static?odr=833&errors=0&noise=0&realtime=0"
+    plain = collect(SimulatedDevice(url, block=200), 200)
+    settling = collect(SimulatedDevice(url + "&settling=1", block=200), 200)
+    skip = lsm6dsox.turn_on_discard(833)  # 5 accelerometer, 72 gyroscope samples
+    accel_g = np.linalg.norm(settling.accel_raw, axis=1) * lsm6dsox.ACCEL_MG_PER_LSB[4] / 1e3
+    gyro_dps = np.abs(settling.gyro_raw).max(axis=1) * lsm6dsox.GYRO_MDPS_PER_LSB[250] / 1e3
+    assert accel_g[0] < 0.5 and gyro_dps[0] > 10.0  # the first samples are wrong ...
+    assert np.all(gyro_dps[:skip - 2] > 0.1)        # ... for the whole settling figure
+    # ... and after the discard count the stream is the chip's true output, sample for sample.
+    np.testing.assert_array_equal(settling.accel_raw[skip:], plain.accel_raw[skip:])
+    np.testing.assert_array_equal(settling.gyro_raw[skip:], plain.gyro_raw[skip:])

@@ -63,7 +63,7 @@ class DevicePanel(QWidget):
         self.values["unique_id"].setText(info.unique_id)
         self.values["sensor"].setText(info.sensor)
         self.values["firmware"].setText(info.firmware or "—")
-        self.values["odr"].setText(f"{info.odr_hz:.2f} Hz (nominal {info.odr_nominal_hz:g} Hz)")
+        self.values["odr"].setText(f"{info.odr_hz:.2f} Hz (\"{info.odr_nominal_hz:g} Hz\" setting)")
         self.values["ranges"].setText(f"±{info.accel_fs_g} g, ±{info.gyro_fs_dps} °/s")
 
     def set_self_test_available(self, available: bool) -> None:

@@ -24,12 +24,9 @@ Modelling choices (assumed, not from a datasheet):
   continuous mode the oldest are overwritten, which sets FIFO_OVR_LATCHED (cleared by reading
   FIFO_STATUS2) and FIFO_OVR_IA (cleared once the level falls below full);
 - a software reset completes :data:`RESET_TIME_S` after it is written;
-- the turn-on transient: after CTRL1_XL or CTRL2_G is written, the first samples come out of
-  filters still settling. Their number is the settling figure of the engine's ODR code
-  (:data:`drivers.lsm6dsox.TURN_ON_DISCARD` less its two-sample margin), per sensor; sample
-  ``k`` of ``n`` settling ones reads ``k / (n + 1)`` of the true acceleration and the true
-  rate plus ``(1 - k / (n + 1))`` x :data:`SETTLING_GYRO_OFFSET_DPS`. A reader that drops
-  TURN_ON_DISCARD samples sees none of them;
+- the turn-on transient (:mod:`drivers.sim.transient`): after CTRL1_XL or CTRL2_G is written,
+  the first samples of the engine's ODR code are settling, per sensor; a reader that drops
+  :data:`drivers.lsm6dsox.TURN_ON_DISCARD` samples sees none of them;
 - the self-test adds a per-unit output change: 300-900 mg per accelerometer axis, and a
   gyroscope rate of 250-500 dps at +-2000 dps full scale, proportional to the full scale
   (inside the datasheet windows of HARDWARE.md); ``self_test_working=False`` models a chip
@@ -58,10 +55,9 @@ from drivers.sim.error_model import (
 )
 from drivers.sim.options import SimOptions
 from drivers.sim.scenarios import SCENARIOS, Scenario
+from drivers.sim.transient import apply_turn_on_transient
 
 RESET_TIME_S = 50e-6
-SETTLING_GYRO_OFFSET_DPS = 20.0
-"""The gyroscope's error on the first settling sample (it decays to zero)."""
 TICKS_PER_S_NOMINAL = 1.0 / lsm6dsox.TIMESTAMP_TICK_S
 STREAM_SELF_TEST = 7
 """Random stream of the unit's self-test response (after the simulator's streams 0-5)."""
@@ -429,19 +425,7 @@ class EmulatedLsm6dsox(I2CBus):
     ) -> tuple[np.ndarray, np.ndarray]:
         """The turn-on transient on samples 1..n after the ODR was set (module docstring)."""
         code = max(self._odr_code(reg.CTRL1_XL), self._odr_code(reg.CTRL2_G))
-        margin = lsm6dsox.SETTLING_MARGIN_SAMPLES
-        n_accel, n_gyro = (n - margin for n in lsm6dsox.TURN_ON_DISCARD[code])
-        if index[0] > max(n_accel, n_gyro):
-            return accel_raw, gyro_raw
-        accel_raw, gyro_raw = accel_raw.copy(), gyro_raw.copy()
-        settling = index <= n_accel
-        share = index[settling, None] / (n_accel + 1)
-        accel_raw[settling] = _saturate(np.rint(accel_raw[settling] * share))
-        settling = index <= n_gyro
-        error_dps = (1.0 - index[settling, None] / (n_gyro + 1)) * SETTLING_GYRO_OFFSET_DPS
-        error_lsb = error_dps * 1e3 / lsm6dsox.GYRO_MDPS_PER_LSB[self._gyro_fs_dps]
-        gyro_raw[settling] = _saturate(gyro_raw[settling] + np.rint(error_lsb))
-        return accel_raw, gyro_raw
+        return apply_turn_on_transient(index, accel_raw, gyro_raw, code, self._gyro_fs_dps)
 
     def _apply_self_test(
         self, accel_raw: np.ndarray, gyro_raw: np.ndarray

@@ -5,12 +5,15 @@ URL: ``sim://SCENARIO?key=value&...``, for example ``sim://wobble?odr=416&seed=7
 Scenarios (:data:`SCENARIOS`): static, slow-tilt, wobble, vibration, translation, tour,
 interactive. Options every scenario accepts:
 
-- ``odr`` Hz, snapped to the nearest LSM6DSOX rate 12.5 ... 6667 (default 104)
+- ``odr`` Hz, snapped to the nearest LSM6DSOX rate 12.5 ... 6667 (default 104); the chip runs
+  at 6666.67 Hz / ODR_Coeff, so "12.5" delivers 13.02 Hz and "104" 104.17 Hz (times the trim)
 - ``accel_fs`` 2/4/8/16 g (default 4), ``gyro_fs`` 125/250/500/1000/2000 dps (default 250)
 - ``seed`` integer >= 0 (default 1): picks the simulated *unit*, its unique id and errors
 - ``realtime`` 1 (default): paced by the wall clock; 0: each read returns ``block`` samples
   (default 256) at once
 - ``errors`` 0: an ideal chip; ``noise`` 0: no white noise (quantisation stays)
+- ``settling`` 1: the first samples are the chip's turn-on transient (:mod:`drivers.sim.transient`),
+  as a reader that does not discard them would see; 0 (default): already discarded
 - ``fail_after`` seconds of device time, after which reads raise ``DeviceIOError`` as if the
   cable had been unplugged
 - ``warmup=RISE[:TAU]``: the die warms by RISE degC with time constant TAU s (default 300)
@@ -55,6 +58,7 @@ from drivers.sim.error_model import (
 from drivers.sim.faults import SimulatedFaults
 from drivers.sim.options import SimOptions, parse_sim_url
 from drivers.sim.scenarios import SCENARIOS, Interactive, Scenario
+from drivers.sim.transient import apply_turn_on_transient
 
 __all__ = ["SCENARIOS", "SimulatedDevice"]
 
@@ -286,6 +290,10 @@ class SimulatedDevice(Device):
                     first + start, specific_force, motion.angular_rate_rad_s, temp_degc[start:stop]
                 )
                 reference[start:stop] = motion.orientation_quat
+        if self.options.settling:  # sample k of the stream is the (k+1)th after the ODR write
+            accel_raw, gyro_raw = apply_turn_on_transient(
+                np.arange(first + 1, first + n + 1), accel_raw, gyro_raw,
+                lsm6dsox.odr_code_for(self.options.odr_nominal_hz), self.options.gyro_fs_dps)
         temp_raw = np.rint((temp_degc - REFERENCE_TEMP_DEGC) * lsm6dsox.TEMP_LSB_PER_DEGC)
         t_s = np.arange(first, first + n) / self.odr_hz
         accel_raw, gyro_raw = self._faults.apply(t_s, accel_raw, gyro_raw)

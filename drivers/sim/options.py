@@ -33,6 +33,8 @@ GENERAL_OPTIONS: dict[str, str] = {
     "block": "samples per read when realtime=0",
     "errors": "0: an ideal chip (no bias, scale, cross-axis, drift or clock error)",
     "noise": "0: no white noise (quantisation stays)",
+    "settling": "1: the first samples after open (a configure) are the chip's turn-on transient, "
+                "as a board that does not discard them would send (default 0: discarded)",
     "fail_after": "seconds of device time after which reads fail like an unplugged cable",
     "warmup": "RISE[:TAU]: the die warms by RISE degC (0 ... 60) with time constant TAU s "
               "(1 ... 36000, default 300) after power-up, instead of the unit's own 1.5-4 degC",
@@ -60,6 +62,8 @@ class SimOptions:
     errors: bool = True
     noise: bool = True
     fail_after_s: float | None = None
+    settling: bool = False
+    """Model the turn-on transient on the first samples (drivers.sim.transient)."""
     scenario_params: dict[str, float | int | bool] = field(default_factory=dict)
     faults: tuple[FaultSpec, ...] = ()
     """Injected faults (``fault=...``, repeatable), in URL order."""
@@ -201,7 +205,7 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
         options["speed"] = speed
     if "block" in raw:
         options["block"] = _integer(url, "block", raw["block"], 1, MAX_BLOCK)
-    for key in ("realtime", "errors", "noise"):
+    for key in ("realtime", "errors", "noise", "settling"):
         if key in raw:
             options[key] = _flag(url, key, raw[key])
     if "fail_after" in raw:
