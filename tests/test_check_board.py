@@ -72,7 +72,7 @@ def test_rates_are_checked_before_anything_is_opened(capsys) -> None:
 
 
 class LabelRateBoard(EmulatedNucleo):
-    """A board whose firmware reports the datasheet label as its rate (firmware before 1.1: CONFIG
+    """A board whose firmware reports the datasheet label as its rate (earlier builds: CONFIG
     said 104 Hz while the chip ran at 104.17 Hz); its samples come at the real rate."""
 
     @property
