@@ -6,8 +6,9 @@ PING round trip, and for every output data rate the board accepts a few seconds 
 samples against the expected count, lost samples, sequence gaps, CRC errors, the regularity
 of the device time axis, the sample rate measured on the chip's own clock against the rate an
 LSM6DSOX really runs at (6666.67 Hz / ODR_Coeff, trimmed: "104 Hz" is 104.17 Hz) and against
-the rate the board reports, and the board clock against the computer's; then the sensor's
-self-test (it must lie still). Rates the board refuses (its link or sensor bus cannot carry
+the rate the board reports, and the board clock against the computer's; then |a| at rest (0.5 g
+or 2 g is a look-alike part answering WHO_AM_I 0x6C, such as an LSM6DSO32: a warning); then the
+sensor's self-test (it must lie still). Rates the board refuses (its link or sensor bus cannot carry
 them) are listed with its reason; they are not failures. Exit status 0 when everything passed.
 """
 
@@ -18,14 +19,19 @@ import statistics
 import sys
 import time
 from dataclasses import dataclass
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from drivers.base import Device
 
 CHECK_SECONDS = 3.0
 MIN_SAMPLES = 40
 """Each rate streams at least this many samples (12.5 Hz takes longer than the seconds asked)."""
 PINGS = 20
+AT_REST_SECONDS = 5.0
+"""Longest wait for the board to lie still for the look-alike check (|a| at rest)."""
 COUNT_TOLERANCE = 0.03
 """Samples may differ from rate x time by this share (startup, the last packet in flight)."""
 CLOCK_TOLERANCE_PPM = 30_000
@@ -159,6 +165,26 @@ def check_rate(port: str, odr_hz: float, seconds: float) -> RateResult:
         device.close()
 
 
+def at_rest_line(device: Device) -> str:
+    """|a| while the board lies still: near 0.5 g or 2 g is a look-alike part (WHO_AM_I 0x6C
+    answers for the LSM6DSO32 too, whose ranges are double)."""
+    from app.core.lookalike import GIVE_UP_SECONDS, LookAlikeCheck
+    from app.core.samples import convert_raw_block
+
+    check = LookAlikeCheck()
+    warning = None
+    deadline = time.monotonic() + min(GIVE_UP_SECONDS, AT_REST_SECONDS)
+    while not check.done and time.monotonic() < deadline:
+        block = device.read(0.2)
+        if block is not None and len(block):
+            warning = check.update(convert_raw_block(block))
+    if warning:
+        return f"WARN  sensor: {warning}"
+    if check.accel_g is None:
+        return "at rest   no verdict on |a|: the board moved (it must lie still)"
+    return f"at rest   |a| = {check.accel_g:.3f} g (an LSM6DSOX reads 1 g)"
+
+
 def check_board(port: str, rates: list[float], seconds: float, self_test: bool,
                 out: TextIO) -> bool:
     """Run the checks, print a report to ``out``; True when everything passed."""
@@ -211,6 +237,16 @@ def check_board(port: str, rates: list[float], seconds: float, self_test: bool,
               f"{result.clock_ppm:>+9.0f}  {'ok' if result.passed else 'FAIL'}", file=out)
         if result.rate_problem():
             print(f"         rate: {result.rate_problem()}", file=out)
+
+    device = SerialLinkDevice(f"serial://{port}")
+    try:
+        device.open()
+        print(at_rest_line(device), file=out)
+    except DeviceError as exc:
+        print(f"FAIL  at rest: {exc}", file=out)
+        ok = False
+    finally:
+        device.close()
 
     if self_test:
         device = SerialLinkDevice(f"serial://{port}")

@@ -131,3 +131,18 @@ def test_the_emulated_board_drops_the_turn_on_transient() -> None:
     accel_g = np.linalg.norm(block.accel_raw[0]) * lsm6dsox.ACCEL_MG_PER_LSB[4] / 1e3
     assert accel_g == pytest.approx(1.0, abs=0.01)
     assert np.abs(block.gyro_raw[0]).max() * lsm6dsox.GYRO_MDPS_PER_LSB[250] / 1e3 < 0.1
+
+
+def test_a_look_alike_lsm6dso32_is_named_but_not_failed(firmware_lib) -> None:
+    board = PtyBoard(lambda: FirmwareCore(
+        firmware_lib, EmulatedLsm6dsox(SimOptions("static", seed=9), part="LSM6DSO32"),
+        unique_id=bytes(12)))
+    out = io.StringIO()
+    try:
+        passed = check_board(board.port, [104.0], 0.5, False, out)
+    finally:
+        board.close()
+    report = out.getvalue()
+    line = next(line for line in report.splitlines() if line.startswith("WARN"))
+    assert "sensor: accelerometer reads 0.5" in line and "LSM6DSO32" in line
+    assert passed, report  # a warning: the link and the rates work

@@ -269,3 +269,21 @@ def test_status_meter_starts_afresh_when_the_count_restarts():
     now[0] += 0.25
     rate, _load = meter.measure(110, 0.0)
     assert rate == pytest.approx(400.0)
+
+
+@pytest.mark.parametrize(("part", "warned"), [("lsm6dso32", True), ("lsm6dsox", False)])
+def test_a_look_alike_part_reading_half_the_acceleration_is_a_device_message(part, warned):
+    url = f"lsm6dsox://emulated?scenario=static&odr=208&seed=3&part={part}"
+    connection, _pipeline, _rec, acquisition, messages = parts(url)
+    deadline = time.monotonic() + DEADLINE_S
+    while not acquisition.lookalike.done:
+        assert time.monotonic() < deadline, "no verdict on a sensor at rest"
+        acquisition.step()
+    connection.close()
+    warnings = [text for level, text in messages if level == 2 and "at rest" in text]
+    assert acquisition.lookalike.accel_g == pytest.approx(0.5 if warned else 1.0, abs=0.03)
+    if warned:
+        assert len(warnings) == 1 and "LSM6DSO32" in warnings[0]
+        assert warnings[0].startswith("sensor: accelerometer reads 0.5")
+    else:
+        assert warnings == []

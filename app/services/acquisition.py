@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from app.core.faults import FaultEvent
+from app.core.lookalike import LookAlikeCheck
 from app.core.pipeline import Pipeline
 from app.services.connection import Connection
 from app.services.health import HealthMonitor
@@ -20,8 +21,10 @@ READ_TIMEOUT_S = 0.05
 class Acquisition:
     """Moves one block at a time from the connection's device into the pipeline.
 
-    ``on_message(level, text)`` gets the device's own messages (a board's LOG packets);
-    ``on_events(events)`` the fault detector's events (``health``), when a block has some.
+    ``on_message(level, text)`` gets the device's own messages (a board's LOG packets), and a
+    warning when the accelerometer reads 0.5 g or 2 g at rest after a device is opened (a
+    look-alike part, :mod:`app.core.lookalike`); ``on_events(events)`` the fault detector's
+    events (``health``), when a block has some.
     """
 
     def __init__(self, connection: Connection, pipeline: Pipeline, recording: RecordingControl,
@@ -34,6 +37,8 @@ class Acquisition:
         self.health = health or HealthMonitor()
         self._on_message = on_message
         self._on_events = on_events
+        self.lookalike = LookAlikeCheck()
+        self._checked_device: object | None = None
 
     def step(self, timeout_s: float = READ_TIMEOUT_S) -> int:
         """Read at most one block (waiting up to ``timeout_s``); returns its samples.
@@ -51,11 +56,22 @@ class Acquisition:
             return 0
         self.connection.continue_time_axis(raw)
         self.pipeline.process(raw)
+        self._check_lookalike(device)
         self.recording.write(raw)
         events = self.health.update(raw, self.pipeline.uncalibrated)
         if events and self._on_events is not None:
             self._on_events(events)
         return len(raw)
+
+    def _check_lookalike(self, device: object) -> None:
+        if device is not self._checked_device:  # a new device: judge it again
+            self._checked_device = device
+            self.lookalike.reset()
+        block = self.pipeline.uncalibrated
+        if block is not None and not self.lookalike.done:
+            warning = self.lookalike.update(block)
+            if warning:
+                self._on_message(2, f"sensor: {warning}")
 
     def last_sample_time(self) -> float | None:
         """Session time of the newest sample, None before the first one."""

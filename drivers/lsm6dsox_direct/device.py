@@ -20,7 +20,8 @@ order, default 0), ``speed`` I2C clock in Hz (default 400000), ``force=1`` to al
 ``emulated`` options: ``scenario`` (a simulator scenario, default slow-tilt) and its options,
 ``seed``, ``errors``, ``noise`` as for ``sim://``; fault injection: ``who_am_i=0x6b`` (another
 part answers), ``selftest_fault=1`` (the self-test changes nothing), ``fail_after`` seconds
-(the adapter is pulled).
+(the adapter is pulled), ``part=lsm6dso32`` (a look-alike answering 0x6C whose accelerometer
+ranges are double: it reads half the acceleration).
 """
 
 from __future__ import annotations
@@ -58,7 +59,7 @@ DEFAULT_ADDRESS = 0x6A
 DEFAULT_EMULATED_SCENARIO = "slow-tilt"
 COMMON_OPTIONS = ("odr", "accel_fs", "gyro_fs", "address")
 MCP2221_OPTIONS = ("serial", "index", "speed", "force")
-EMULATED_OWN_OPTIONS = ("scenario", "who_am_i", "selftest_fault", "fail_after")
+EMULATED_OWN_OPTIONS = ("scenario", "who_am_i", "selftest_fault", "fail_after", "part")
 _SIM_ONLY = ("realtime", "block")
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
@@ -81,6 +82,8 @@ class DirectOptions:
     who_am_i: int = lsm6dsox.WHO_AM_I_VALUE
     selftest_fault: bool = False
     fail_after_s: float | None = None
+    part: str = "LSM6DSOX"
+    """The emulated part (``EmulatedLsm6dsox.PART_ACCEL_RANGE_FACTOR``)."""
 
 
 def _fail(url: str, message: str) -> DeviceUrlError:
@@ -185,6 +188,14 @@ def parse_lsm6dsox_url(url: str, overrides: dict[str, object] | None = None) -> 
         options["who_am_i"] = _int(url, "who_am_i", raw.pop("who_am_i"), 0, 0xFF)
     if "selftest_fault" in raw:
         options["selftest_fault"] = _flag(url, "selftest_fault", raw.pop("selftest_fault"))
+    if "part" in raw:
+        from drivers.lsm6dsox_direct.emulated_chip import PART_ACCEL_RANGE_FACTOR
+
+        part = raw.pop("part").upper()
+        if part not in PART_ACCEL_RANGE_FACTOR:
+            raise _fail(url, f"part={part.lower()!r}: use one of "
+                             f"{', '.join(p.lower() for p in PART_ACCEL_RANGE_FACTOR)}")
+        options["part"] = part
     if "fail_after" in raw:
         options["fail_after_s"] = _positive(url, "fail_after", raw.pop("fail_after"))
     scenario = raw.pop("scenario", DEFAULT_EMULATED_SCENARIO)
@@ -354,6 +365,7 @@ class Lsm6dsoxDirectDevice(Device):
         return EmulatedLsm6dsox(
             opts.sim, address=opts.address, who_am_i=opts.who_am_i,
             self_test_working=not opts.selftest_fault, fail_after_s=opts.fail_after_s,
+            part=opts.part,
         )
 
     def _name(self, bus: I2CBus) -> str:

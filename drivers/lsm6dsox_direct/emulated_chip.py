@@ -58,6 +58,9 @@ from drivers.sim.scenarios import SCENARIOS, Scenario
 from drivers.sim.transient import apply_turn_on_transient
 
 RESET_TIME_S = 50e-6
+PART_ACCEL_RANGE_FACTOR = {"LSM6DSOX": 1, "LSM6DSO": 1, "LSM6DSO32": 2, "LSM6DSO32X": 2}
+"""Parts answering WHO_AM_I 0x6C, and their accelerometer range over the LSM6DSOX's at the
+same FS_XL code (the LSM6DSO32's "+-4 g" is +-8 g: it reads half the acceleration)."""
 TICKS_PER_S_NOMINAL = 1.0 / lsm6dsox.TIMESTAMP_TICK_S
 STREAM_SELF_TEST = 7
 """Random stream of the unit's self-test response (after the simulator's streams 0-5)."""
@@ -118,6 +121,8 @@ class EmulatedLsm6dsox(I2CBus):
     unit : the unit's errors, overriding the seed's draw.
     record_truth : keep the truth of every sample batched in the FIFO (see :meth:`truth`).
     fail_after_s : bus time after which every transfer fails, as if the adapter were pulled.
+    part : which part answers (:data:`PART_ACCEL_RANGE_FACTOR`): a look-alike LSM6DSO32 reads
+        half the acceleration.
     """
 
     max_read_bytes = 65535
@@ -134,6 +139,7 @@ class EmulatedLsm6dsox(I2CBus):
         unit: UnitErrors | None = None,
         record_truth: bool = False,
         fail_after_s: float | None = None,
+        part: str = "LSM6DSOX",
     ) -> None:
         self.sim = sim or SimOptions(scenario="static")
         self.address = address
@@ -146,6 +152,8 @@ class EmulatedLsm6dsox(I2CBus):
         self.self_test_working = self_test_working
         self.record_truth = record_truth
         self.fail_after_s = fail_after_s
+        self.part = part
+        self.accel_range_factor = PART_ACCEL_RANGE_FACTOR[part]
         rng = np.random.default_rng([self.sim.seed, STREAM_SCENARIO])
         self.scenario: Scenario = SCENARIOS[self.sim.scenario](rng, **self.sim.scenario_params)
         self.transactions = 0
@@ -399,6 +407,8 @@ class EmulatedLsm6dsox(I2CBus):
         accel_raw, gyro_raw = model.measure(
             int(index[0]), specific_force, motion.angular_rate_rad_s, temp_degc
         )
+        if self.accel_range_factor != 1:  # a look-alike with wider ranges: fewer LSB per g
+            accel_raw = _saturate(np.rint(accel_raw / self.accel_range_factor))
         accel_raw, gyro_raw = self._apply_settling(index, accel_raw, gyro_raw)
         accel_raw, gyro_raw = self._apply_self_test(accel_raw, gyro_raw)
         temp_raw = np.rint((temp_degc - REFERENCE_TEMP_DEGC) * lsm6dsox.TEMP_LSB_PER_DEGC)
