@@ -217,7 +217,7 @@ def check_board(port: str, rates: list[float], seconds: float, self_test: bool,
     finally:
         device.close()
 
-    print(f"{'rate':>7}  {'samples':>14}  lost  gaps  crc  step  {'real Hz':>9}  {'rate ppm':>8}  "
+    print(f"{'rate':>7}  {'samples':>14}  lost  gaps  crc  step  {'measured':>9}  {'rate ppm':>8}  "
           f"clock ppm  result", file=out)
     for odr in rates:
         try:

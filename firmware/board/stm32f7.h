@@ -119,6 +119,7 @@ _Static_assert(offsetof(usart_regs, TDR) == 0x28, "USART_TDR offset");
 #define USART_CR1_TE (1u << 3)
 #define USART_CR1_RXNEIE (1u << 5)
 #define USART_CR1_TXEIE (1u << 7)
+#define USART_CR1_OVER8 (1u << 15) /* oversampling by 8 (BRR[2:0] = USARTDIV[3:0] >> 1) */
 #define USART_CR3_EIE (1u << 0)
 #define USART_ISR_PE (1u << 0)
 #define USART_ISR_FE (1u << 1)

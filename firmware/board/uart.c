@@ -11,6 +11,7 @@
 
 #include "clock.h"
 #include "stm32f7.h"
+#include "uart_divisor.h"
 
 #define RX_SIZE 2048u  /* ~22 ms of traffic at 921600 baud */
 #define TX_SIZE 16384u /* ~180 ms of traffic */
@@ -44,16 +45,18 @@ void uart_init(void)
     gpio_field2(&GPIOD->MODER, PIN_TX, GPIO_MODE_AF); /* ... and hand them over */
     gpio_field2(&GPIOD->MODER, PIN_RX, GPIO_MODE_AF);
 
-    /* Oversampling by 16 (OVER8 = 0): BRR = f_ck / baud, rounded. 216 MHz / 921600 = 234.375
-     * -> 234 -> 923077 baud, +0.16 %. */
-    uint32_t hz = clock_sysclk_hz();
-    USART3->BRR = (hz + UART_BAUD / 2u) / UART_BAUD;
+    /* Oversampling by 16: BRR = f_ck / baud, rounded. 216 MHz / 921600 = 234.375 -> 234 ->
+     * 923077 baud, +0.16 %. On the HSI alone (16 MHz, the PLL failed) 16x would be 941 176
+     * baud (+2.1 %): uart_divisor_for then picks 8x oversampling, 914 286 baud (-0.8 %). */
+    uart_divisor divisor = uart_divisor_for(clock_sysclk_hz(), UART_BAUD);
+    USART3->BRR = divisor.brr;
     USART3->CR2 = 0u;                    /* 1 stop bit, no LIN, no clock output */
     USART3->CR3 = USART_CR3_EIE;         /* interrupt on framing/noise/overrun errors too */
     USART3->ICR = USART_ICR_ERRORS;      /* clear any stale error flags */
     rx_head = rx_tail = tx_head = tx_tail = 0u;
     /* 8 data bits (M = 00), no parity; enable TX, RX and the RXNE interrupt, then the USART. */
-    USART3->CR1 = USART_CR1_TE | USART_CR1_RE | USART_CR1_RXNEIE | USART_CR1_UE;
+    USART3->CR1 = (divisor.over8 ? USART_CR1_OVER8 : 0u) | USART_CR1_TE | USART_CR1_RE |
+                  USART_CR1_RXNEIE | USART_CR1_UE;
 
     NVIC_IPR8(IRQ_USART3) = (uint8_t)(UART_IRQ_PRIORITY << NVIC_PRIO_SHIFT);
     NVIC_ISER(IRQ_USART3 / 32u) = 1u << (IRQ_USART3 % 32u); /* enable IRQ 39 in the NVIC */

@@ -14,6 +14,7 @@
 #include "../core/firmware.h"
 #include "../core/link.h"
 #include "../core/lsm6dsox.h"
+#include "../core/uart_divisor.h"
 
 static int failures;
 static int checks;
@@ -442,6 +443,20 @@ static void test_core_with_fake_bus(void)
     CHECK(fw.rx.bad_frames > 1000);
 }
 
+static void test_uart_divisor(void)
+{
+    /* 216 MHz (the PLL, from the MCO or the HSI): 16x, BRR 234, 923 077 baud. */
+    uart_divisor d = uart_divisor_for(216000000u, 921600u);
+    CHECK(d.brr == 234 && !d.over8 && d.actual_baud == 923076u);
+    /* 16 MHz (the HSI alone): 16x would be 941 176 (+2.1 %); 8x gives 914 285 (-0.8 %). */
+    d = uart_divisor_for(16000000u, 921600u);
+    CHECK(d.over8 && d.brr == 0x21 && d.actual_baud == 914285u);
+    /* A slower rate on the HSI stays at 16x: 138.9 -> 139, -0.08 %. */
+    d = uart_divisor_for(16000000u, 115200u);
+    CHECK(!d.over8 && d.brr == 139 && d.actual_baud == 115107u);
+    CHECK(uart_divisor_for(16000000u, 0u).brr == 0);
+}
+
 static void test_rates(void)
 {
     /* docs/protocol.md section 6: the highest ODR per baud rate. */
@@ -475,6 +490,7 @@ int main(void)
     test_fifo_stream_long_runs_keep_the_rate();
     test_core_with_fake_bus();
     test_rates();
+    test_uart_divisor();
     printf("%d checks, %d failed\n", checks, failures);
     return failures ? 1 : 0;
 }
