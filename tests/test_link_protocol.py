@@ -258,6 +258,19 @@ def test_decoder_builds_raw_blocks_with_units_time_and_temperature():
     assert decoder.clock_origin_s == pytest.approx(1000 * 25e-6)
 
 
+def test_decoder_times_and_gap_estimates_use_the_real_rate_the_board_reports():
+    """The firmware reports "12.5 Hz" as its real 13.021 Hz (docs/protocol.md section 5)."""
+    config = p.Config(lsm6dsox.odr_mhz(1), 4, 250, 25_000)
+    ticks = 1e12 / (config.odr_mhz * config.tick_ns)  # 3072 ticks a sample, not 3200
+    decoder = LinkDecoder()
+    feed_all(decoder, config, samples_packet(0, 0, count=3),
+             samples_packet(2, round(13 * ticks), count=2))  # seq 1 (10 samples) was lost
+    block = take_all(decoder)
+    np.testing.assert_allclose(block.t_s[:3], np.arange(3) / 13.021, rtol=1e-9)
+    assert block.t_s[3] == pytest.approx(13 / 13.0208, rel=1e-4)
+    assert block.gap[3] and block.lost_samples == 10  # 13 - 3 samples, at the real rate
+
+
 def test_every_counter():
     decoder = LinkDecoder()
     good = encode_packet(samples_packet(0, 0, count=4))

@@ -19,7 +19,8 @@ static const uint32_t odr_label_mhz_table[LSM_ODR_CODE_MAX + 1] = {
     0, 12500, 26000, 52000, 104000, 208000, 417000, 833000, 1667000, 3333000, 6667000,
 };
 /* Samples to discard after the ODR is set (turn-on transient): accelerometer, gyroscope. The
- * settling figures plus two, as ST's drivers do (drivers/lsm6dsox.py: TURN_ON_DISCARD). */
+ * settling figures plus two, as ST's drivers do; where the figures come from and which are
+ * extrapolated: drivers/lsm6dsox.py, TURN_ON_DISCARD (the host tests compare the tables). */
 static const uint16_t turn_on_discard_table[LSM_ODR_CODE_MAX + 1][2] = {
     {0, 0}, {3, 4}, {3, 7}, {3, 9}, {4, 14}, {4, 22}, {4, 38}, {5, 72}, {5, 137}, {6, 272},
     {7, 541},
