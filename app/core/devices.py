@@ -19,8 +19,9 @@ class DeviceInfo:
     unique_id: str
     sensor: str
     odr_hz: float
-    """Output data rate actually used (trimmed clock), samples per second."""
+    """Output data rate actually used (trimmed clock), samples per second: the real rate."""
     odr_nominal_hz: float
+    """The datasheet label the rate was set by ("104 Hz" for a chip at 104.17 Hz x trim)."""
     accel_fs_g: int
     gyro_fs_dps: int
     firmware: str = ""
