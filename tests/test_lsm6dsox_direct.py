@@ -301,6 +301,15 @@ def test_self_test_passes_on_a_healthy_chip_and_streaming_resumes() -> None:
     after = stream(device, clock, 0.3)
     assert after.t_s[0] > before.t_s[-1] + 0.1  # the pause is kept on the time axis
     assert after.gap[0] and after.lost_samples > 0
+    # The first sample after the restart sits at its true time, the dropped turn-on transient
+    # (14 samples at "104 Hz", 0.13 s) included.
+    truth = chip.truth()
+    rows = np.flatnonzero(np.all(truth["gyro_raw"] == after.gyro_raw[0], axis=1)
+                          & np.all(truth["accel_raw"] == after.accel_raw[0], axis=1))
+    last = np.flatnonzero(np.all(truth["gyro_raw"] == before.gyro_raw[-1], axis=1)
+                          & np.all(truth["accel_raw"] == before.accel_raw[-1], axis=1))
+    true_step = truth["t_true_s"][rows[-1]] - truth["t_true_s"][last[0]]
+    assert after.t_s[0] - before.t_s[-1] == pytest.approx(true_step, abs=0.02)
 
 
 def test_self_test_fails_on_a_chip_whose_self_test_does_nothing() -> None:

@@ -394,8 +394,10 @@ class Lsm6dsoxDirectDevice(Device):
         settings = driver.configure(opts.odr_nominal_hz, opts.accel_fs_g, opts.gyro_fs_dps)
         if self._last_t_s is not None:
             paused_s = max(0.0, bus.monotonic() - self._last_block_clock_s)
-            self._time_offset_s = self._last_t_s + paused_s
-            self._pending_lost = max(0, round(paused_s * settings.odr_hz) - 1)
+            # The first sample kept comes after the turn-on transient the driver drops.
+            settling = driver.settling_left
+            self._time_offset_s = self._last_t_s + paused_s + settling / settings.odr_hz
+            self._pending_lost = max(0, round(paused_s * settings.odr_hz) - 1) + settling
             self._origin_ticks = None
 
     def _block(self, decoded: DecodedSamples, driver: Lsm6dsoxDriver, bus: I2CBus) -> RawBlock:
