@@ -40,6 +40,7 @@ TURN_ON_DISCARD: dict[int, tuple[int, int]] = {
 }
 SETTLING_MARGIN_SAMPLES = 2
 """TURN_ON_DISCARD is the settling figure plus this many samples."""
+
 # Sensitivities per full scale.
 ACCEL_MG_PER_LSB: dict[int, float] = {2: 0.061, 4: 0.122, 8: 0.244, 16: 0.488}
 GYRO_MDPS_PER_LSB: dict[int, float] = {125: 4.375, 250: 8.75, 500: 17.50, 1000: 35.0, 2000: 70.0}

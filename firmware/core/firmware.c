@@ -141,7 +141,7 @@ static uint32_t settling_samples_left(fw_state *fw)
     uint32_t accel = lsm_turn_on_discard(code, false), gyro = lsm_turn_on_discard(code, true);
     uint32_t needed = accel > gyro ? accel : gyro;
     uint64_t elapsed_us = (uint32_t)(now_us(fw) - fw->chip.configured_us);
-    uint64_t produced = elapsed_us * lsm_odr_mhz(&fw->chip) / 1000000000u * 98u / 100u;
+    uint64_t produced = elapsed_us * lsm_odr_mhz(&fw->chip) * 98u / 100000000000u;
     return produced >= needed ? 0u : needed - (uint32_t)produced;
 }
 
