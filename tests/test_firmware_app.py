@@ -12,6 +12,7 @@ import sys
 import pytest
 from fwcore import FirmwareCore, PtyBoard
 from PySide6.QtCore import QSettings, Qt
+from PySide6.QtWidgets import QDockWidget
 from test_firmware_commands import RecordingBus
 
 from app.gui import theme
@@ -114,3 +115,26 @@ def test_a_device_without_a_self_test_says_so(qtbot) -> None:
         assert report is None and "has no self-test" in error
     finally:
         session.shutdown()
+
+
+def test_a_look_alike_lsm6dso32_is_named_in_the_messages_tab(
+        qtbot, qapp, tmp_path, firmware_lib, artifacts_dir) -> None:
+    chip = EmulatedLsm6dsox(SimOptions("static", seed=12), part="LSM6DSO32")
+    board = PtyBoard(lambda: FirmwareCore(firmware_lib, chip, unique_id=bytes(range(12))))
+    theme.apply_theme(qapp)
+    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+    session = DeviceSession()
+    window = MainWindow(session, settings, f"{board.port}?odr=208")
+    qtbot.addWidget(window)
+    try:
+        window.resize(1280, 860)
+        window.show()
+        qtbot.waitUntil(lambda: "LSM6DSO32" in window.messages.toPlainText(),
+                        timeout=TIMEOUT_MS)
+        text = window.messages.toPlainText()
+        assert "sensor: accelerometer reads 0.5" in text and "ranges are double" in text
+        window.findChild(QDockWidget, "dock-messages").raise_()  # the tab, for the screenshot
+        window.grab().save(os.path.join(artifacts_dir, "lookalike_lsm6dso32.png"))
+    finally:
+        window.close()
+        board.close()
