@@ -10,6 +10,7 @@ from collections.abc import Callable
 
 from app.core.faults import FaultEvent
 from app.core.pipeline import Pipeline
+from app.services.board_health import BoardHealth
 from app.services.connection import Connection
 from app.services.health import HealthMonitor
 from app.services.recording_control import RecordingControl
@@ -22,6 +23,8 @@ class Acquisition:
 
     ``on_message(level, text)`` gets the device's own messages (a board's LOG packets);
     ``on_events(events)`` the fault detector's events (``health``), when a block has some.
+    A board's STATUS counters go to ``board``; a rise becomes a message through
+    ``on_message``.
     """
 
     def __init__(self, connection: Connection, pipeline: Pipeline, recording: RecordingControl,
@@ -32,6 +35,7 @@ class Acquisition:
         self.pipeline = pipeline
         self.recording = recording
         self.health = health or HealthMonitor()
+        self.board = BoardHealth()
         self._on_message = on_message
         self._on_events = on_events
 
@@ -47,6 +51,8 @@ class Acquisition:
         raw = device.read(timeout_s)
         for message in device.take_messages():
             self._on_message(message.level, message.text)
+        for note in self.board.update(device.board_status):
+            self._on_message(note.level, note.text)
         if raw is None or not len(raw):
             return 0
         self.connection.continue_time_axis(raw)
