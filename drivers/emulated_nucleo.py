@@ -184,6 +184,8 @@ class EmulatedNucleo:
     scenario_params : the scenario's own options.
     share_port : announce the port to other processes of this user too (for
         ``inclinometer simulate``), not only to this one.
+    sends_status : False acts as firmware before the STATUS extension: no STATUS, and
+        GET_STATUS is an unknown command.
     """
 
     def __init__(
@@ -205,6 +207,7 @@ class EmulatedNucleo:
         on_packet_sent: Callable[[int, int, int, float], None] | None = None,
         scenario_params: dict[str, object] | None = None,
         share_port: bool = False,
+        sends_status: bool = True,
     ) -> None:
         odr_code = lsm6dsox.odr_code_for(odr_hz)
         if not odr_fits_link(lsm6dsox.ODR_CODES_HZ[odr_code], baud):
@@ -224,6 +227,7 @@ class EmulatedNucleo:
         self.on_packet_sent = on_packet_sent
         self.scenario_params = dict(scenario_params or {})
         self.share_port = share_port
+        self.sends_status = sends_status
         self.unique_id = bytes.fromhex(unique_id_for_seed(seed).removeprefix("SIM-"))
         self.usb_serial = usb_serial_for_seed(seed)
         self.stats = NucleoStats()
@@ -426,7 +430,8 @@ class EmulatedNucleo:
                     self._on_frame(frame)
             if self._streaming and time.monotonic() >= next_send:
                 self._send_samples(time.monotonic())
-            if self._streaming and time.monotonic() - self._last_status >= STATUS_INTERVAL_S:
+            if (self._streaming and self.sends_status
+                    and time.monotonic() - self._last_status >= STATUS_INTERVAL_S):
                 self._send_status()
             if self._tx or writable:
                 self._flush_tx()
@@ -471,7 +476,8 @@ class EmulatedNucleo:
             return
         command = body[0]
         self.stats.commands += 1
-        if command not in p.HOST_PACKET_TYPES:
+        if command not in p.HOST_PACKET_TYPES or (
+                command == p.GET_STATUS and not self.sends_status):
             self._queue(p.Ack(command, p.ACK_UNSUPPORTED, f"unknown command 0x{command:02X}"))
             return
         try:
@@ -491,9 +497,10 @@ class EmulatedNucleo:
             config = self.config
             self._queue(p.Log(1, f"streaming at {config.odr_hz:g} Hz, +-{config.accel_fs_g} g, "
                                  f"+-{config.gyro_fs_dps} dps"))
-            self._last_status = time.monotonic()
-            self.stats.status_sent += 1
-            self._queue(self.status())
+            if self.sends_status:
+                self._last_status = time.monotonic()
+                self.stats.status_sent += 1
+                self._queue(self.status())
         elif isinstance(packet, p.Stop):
             self._streaming = False
             self._queue(p.Ack(p.STOP, p.ACK_OK))
