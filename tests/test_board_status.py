@@ -222,3 +222,23 @@ def test_check_board_prints_the_counters_and_fails_an_injected_overrun():
     assert overruns.split()[3:] == ["1", "(+1", "during", "the", "check)", "FAIL"]
     retries = next(line for line in report.splitlines() if "I2C retries" in line)
     assert retries.split()[2] == "0" and not retries.endswith("FAIL")
+
+
+def test_a_headless_recording_of_a_board_keeps_its_counters(tmp_path):
+    from app.services.recorder import record_device
+    from drivers.registry import create_device
+
+    board = EmulatedNucleo("static", odr_hz=208.0, seed=9)
+    try:
+        path = tmp_path / "headless.csv"
+        outcome = record_device(create_device(board.port), path, duration_s=1.5)
+        assert outcome.reason == "duration", outcome.message
+        metadata = read_recording(path).metadata
+        start, end = metadata[KEY_STATUS_START], metadata[KEY_STATUS_END]
+        assert start["reset_cause"] == end["reset_cause"] == "power-on"
+        rows = outcome.status.rows_written
+        assert end["samples_sent"] - start["samples_sent"] >= rows
+        assert end["uptime_s"] - start["uptime_s"] >= 1.5
+        assert end["fifo_overruns"] == end["uart_tx_dropped_bytes"] == 0
+    finally:
+        board.close()
