@@ -242,3 +242,35 @@ def test_a_headless_recording_of_a_board_keeps_its_counters(tmp_path):
         assert end["fifo_overruns"] == end["uart_tx_dropped_bytes"] == 0
     finally:
         board.close()
+
+
+def test_the_emulated_board_counts_the_bytes_it_drops_when_the_host_stops_reading():
+    import re
+
+    board = EmulatedNucleo("static", odr_hz=1667.0, seed=10)
+    try:
+        connection, _pipeline, _rec, acquisition, messages = parts(board.port)
+        stream(acquisition, 500)
+        deadline = time.monotonic() + DEADLINE_S
+        while board.stats.tx_dropped_bytes == 0:  # the host does not read meanwhile
+            assert time.monotonic() < deadline, "the board never had to drop"
+            time.sleep(0.01)
+        device = connection.device
+        while device.counters.seq_gaps == 0:  # reading again: the gap arrives
+            assert time.monotonic() < deadline
+            acquisition.step()
+        stream(acquisition, 3000)  # the backlog is drained, the board sends everything again
+        status = device.request_status()
+        stream(acquisition, 1)
+        stats = board.stats
+        assert status.uart_tx_dropped_bytes == stats.tx_dropped_bytes > 0
+        assert status.samples_read - status.samples_sent == stats.samples_dropped > 0
+        said = [m for _, m in messages if m.startswith("board: UART dropped")]
+        assert said, messages
+        told_bytes = sum(int(re.search(r"dropped (\d+) bytes", m).group(1)) for m in said)
+        told_samples = sum(int(re.search(r", (\d+) samples lost", m).group(1)) for m in said)
+        assert told_bytes == stats.tx_dropped_bytes
+        assert told_samples == stats.samples_dropped == device.counters.lost_samples
+        connection.close()
+    finally:
+        board.close()
