@@ -21,8 +21,9 @@ _FIELDS = (
 )
 _BOARD_FIELDS = (("reset_cause", "Started by"), ("uptime", "Uptime"),
                  *((name, BoardStatus.TITLES[name]) for name in BoardStatus.COUNTERS))
-_PROBLEM_COUNTERS = ("uart_tx_dropped_bytes", "uart_rx_errors", "i2c_errors", "i2c_recoveries",
+_PROBLEM_COUNTERS = ("uart_tx_dropped_bytes", "uart_rx_errors", "i2c_recoveries",
                      "fifo_overruns", "watchdog_resets")
+"""Shown in red when not 0 (I2C errors are not: the probe of an empty address counts too)."""
 
 
 class DevicePanel(QWidget):
