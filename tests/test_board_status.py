@@ -274,3 +274,37 @@ def test_the_emulated_board_counts_the_bytes_it_drops_when_the_host_stops_readin
         connection.close()
     finally:
         board.close()
+
+
+def test_simulate_pty_injects_fifo_overruns_that_the_host_sees_explained(capsys):
+    import threading
+
+    from app.cli import build_parser
+    from app.cli_simulate import simulate_command
+
+    bad = build_parser().parse_args(["simulate", "--pty", "--fifo-overrun", "soon"])
+    assert simulate_command(bad, io.StringIO()) == 2
+    assert "--fifo-overrun wants sequence numbers" in capsys.readouterr().err
+    args = build_parser().parse_args(["simulate", "--pty", "--scenario", "static",
+                                      "--odr", "833", "--fifo-overrun", "20"])
+    out, stop = io.StringIO(), threading.Event()
+    server = threading.Thread(target=simulate_command, args=(args, out, stop), daemon=True)
+    server.start()
+    try:
+        deadline = time.monotonic() + DEADLINE_S
+        while not out.getvalue():
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        port = out.getvalue().splitlines()[0]
+        device = SerialLinkDevice(f"serial://{port}")
+        device.open()
+        while device.counters.seq_gaps == 0:
+            assert time.monotonic() < deadline, "no gap"
+            device.read(0.1)
+        status = device.request_status()
+        assert status.fifo_overruns == 1 and status.host_gap_samples > 0
+        device.close()
+    finally:
+        stop.set()
+        server.join(timeout=10)
+    assert "1 FIFO overruns" in out.getvalue().splitlines()[-1]
