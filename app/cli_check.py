@@ -9,7 +9,10 @@ LSM6DSOX really runs at (6666.67 Hz / ODR_Coeff, trimmed: "104 Hz" is 104.17 Hz)
 the rate the board reports, and the board clock against the computer's; then |a| at rest (0.5 g
 or 2 g is a look-alike part answering WHO_AM_I 0x6C, such as an LSM6DSO32: a warning); then the
 sensor's self-test (it must lie still). Rates the board refuses (its link or sensor bus cannot carry
-them) are listed with its reason; they are not failures. Exit status 0 when everything passed.
+them) are listed with its reason; they are not failures. Last, the board's own health counters
+(STATUS) and how they rose during the check: a FIFO overrun, dropped or damaged bytes, a stuck
+I2C bus or a watchdog reset fail it; I2C retries are reported. Exit status 0 when everything
+passed.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from typing import TYPE_CHECKING, TextIO
 import numpy as np
 
 if TYPE_CHECKING:
+    from app.core.devices import BoardStatus
     from drivers.base import Device
 
 CHECK_SECONDS = 3.0
@@ -41,6 +45,9 @@ RATE_TOLERANCE_PPM = 1_000
 rate is 1 600 ppm off ("104 Hz" for 104.17 Hz), 40 000 at "12.5 Hz"."""
 REPORTED_TOLERANCE_PPM = 100
 """The rate the board reports (CONFIG's odr_mhz) against the real one (rounding: 13 ppm)."""
+HEALTH_PROBLEMS = ("uart_tx_dropped_bytes", "uart_rx_errors", "i2c_recoveries",
+                   "fifo_overruns", "watchdog_resets")
+"""Board counters whose rise during the check fails it."""
 
 
 def add_check_parser(commands: argparse._SubParsersAction) -> None:
@@ -185,6 +192,41 @@ def at_rest_line(device: Device) -> str:
     return f"at rest   |a| = {check.accel_g:.3f} g (an LSM6DSOX reads 1 g)"
 
 
+def request_board_status(port: str) -> BoardStatus | None:
+    """The board's STATUS now (None: its firmware predates STATUS). Raises DeviceError."""
+    from drivers.serial_link import SerialLinkDevice
+
+    device = SerialLinkDevice(f"serial://{port}")
+    try:
+        device.open()
+        return device.request_status()
+    finally:
+        device.close()
+
+
+def health_report(start: BoardStatus | None, end: BoardStatus | None,
+                  out: TextIO) -> bool:
+    """Print the board's counters at the end and their rise since ``start``; False when a
+    rise means trouble (see :data:`HEALTH_PROBLEMS`) or the board restarted."""
+    if end is None:
+        print("health    no STATUS: the firmware predates the STATUS extension of protocol v1",
+              file=out)
+        return True
+    restarted = start is not None and end.restarted_since(start)
+    print(f"health    started by {end.reset_cause}, up {end.uptime_s:.1f} s"
+          + (", on its internal oscillator" if end.clock_fallback else "")
+          + (" - RESTARTED during the check" if restarted else ""), file=out)
+    ok = not restarted
+    for name in end.COUNTERS:
+        value = getattr(end, name)
+        rise = 0 if start is None or restarted else end.rise(start, name)
+        bad = name in HEALTH_PROBLEMS and rise > 0
+        ok &= not bad
+        print(f"  {end.TITLES[name]:<22} {value:>12,}  (+{rise:,} during the check)"
+              + ("  FAIL" if bad else ""), file=out)
+    return ok
+
+
 def check_board(port: str, rates: list[float], seconds: float, self_test: bool,
                 out: TextIO) -> bool:
     """Run the checks, print a report to ``out``; True when everything passed."""
@@ -211,6 +253,7 @@ def check_board(port: str, rates: list[float], seconds: float, self_test: bool,
         trips = [device.ping() * 1e3 for _ in range(PINGS)]
         print(f"ping      {len(trips)} round trips: median {statistics.median(trips):.1f} ms, "
               f"max {max(trips):.1f} ms", file=out)
+        status_at_start = device.request_status()
     except DeviceError as exc:
         print(f"FAIL  {exc}", file=out)
         return False
@@ -263,6 +306,11 @@ def check_board(port: str, rates: list[float], seconds: float, self_test: bool,
             ok = False
         finally:
             device.close()
+    try:
+        ok &= health_report(status_at_start, request_board_status(port), out)
+    except DeviceError as exc:
+        print(f"FAIL  board status: {exc}", file=out)
+        ok = False
     print("PASS: the board works." if ok else "FAIL: see the lines marked FAIL.", file=out)
     return ok
 

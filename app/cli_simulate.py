@@ -43,6 +43,10 @@ def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
                           help="the I2C clock the firmware reads the sensor at: faster ODRs "
                                "than it drains are refused, as by the real firmware (above "
                                "1667 Hz at 400 kHz); 0 for no limit (default %(default)s)")
+    simulate.add_argument("--fifo-overrun", metavar="SEQ,...", default="",
+                          help="lose the samples of these SAMPLES packets (sequence numbers) "
+                               "to a sensor FIFO overrun, as the firmware reports one: a gap, "
+                               "a LOG and a rise of STATUS's fifo_overruns")
 
 
 def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
@@ -53,14 +57,21 @@ def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
         print("inclinometer: simulate needs --pty (the only transport so far)", file=sys.stderr)
         return 2
     try:
+        overruns = frozenset(int(seq) for seq in args.fifo_overrun.split(",") if seq.strip())
+    except ValueError:
+        print(f"inclinometer: --fifo-overrun wants sequence numbers like 100,250: "
+              f"{args.fifo_overrun!r}", file=sys.stderr)
+        return 2
+    try:
         from drivers import lsm6dsox
-        from drivers.emulated_nucleo import EmulatedNucleo
+        from drivers.emulated_nucleo import EmulatedNucleo, NucleoFaults
         from drivers.errors import DeviceError
 
         board = EmulatedNucleo(
             args.scenario, odr_hz=args.odr, accel_fs_g=args.accel_fs, gyro_fs_dps=args.gyro_fs,
             seed=args.seed, baud=args.baud or None,
             sensor_bus_hz=args.i2c_khz * 1000 or None, share_port=True,
+            faults=NucleoFaults(overrun_seqs=overruns),
         )
     except ImportError as exc:
         print(f"inclinometer: pseudo-terminals need Linux or macOS ({exc})", file=sys.stderr)
@@ -90,5 +101,7 @@ def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
         board.close()
     stats = board.stats
     print(f"Stopped: {stats.packets_sent} SAMPLES packets, {stats.samples_sent} samples sent, "
-          f"{stats.packets_dropped} packets dropped, {stats.commands} commands.", file=out)
+          f"{stats.packets_dropped} packets dropped ({stats.tx_dropped_bytes} bytes for want of "
+          f"room, {stats.fifo_overruns} FIFO overruns), {stats.status_sent} STATUS, "
+          f"{stats.commands} commands.", file=out)
     return 0

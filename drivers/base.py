@@ -14,7 +14,7 @@ import threading
 from abc import ABC, abstractmethod
 from typing import ClassVar
 
-from app.core.devices import DeviceDescriptor, DeviceInfo, DeviceMessage
+from app.core.devices import BoardStatus, DeviceDescriptor, DeviceInfo, DeviceMessage
 from app.core.samples import RawBlock
 from drivers.errors import DeviceClosedError, DeviceError, DeviceIOError
 
@@ -78,6 +78,12 @@ class Device(ABC):
         Call from the thread that reads.
         """
         return []
+
+    @property
+    def board_status(self) -> BoardStatus | None:
+        """The board's latest health counters (link protocol v1 STATUS); None for devices
+        without them. Thread-safe."""
+        return None
 
     @property
     def info(self) -> DeviceInfo | None:

@@ -31,6 +31,7 @@ ring would (the host sees sequence gaps).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import logging
 import math
@@ -64,6 +65,8 @@ TX_BUFFER_BYTES = 16 * 1024
 """The emulated firmware's transmit ring: SAMPLES are dropped when this much is unsent."""
 SIM_BLOCK = 256
 PACKET_INTERVAL_S = 0.005
+STATUS_INTERVAL_S = 1.0
+"""STATUS while streaming, as the firmware (FW_STATUS_INTERVAL_US)."""
 SELF_TEST_ACCEL_WINDOW_MG = (50, 1700)
 SELF_TEST_GYRO_WINDOW_DPS = (20, 80)
 """Self-test output change windows at +-250 dps (LSM6DSO datasheet, same family)."""
@@ -128,6 +131,15 @@ class NucleoFaults:
     """SAMPLES packets with these sequence numbers get one sample byte flipped (bad CRC)."""
     drop_probability: float = 0.0
     corrupt_probability: float = 0.0
+    overrun_seqs: frozenset[int] = frozenset()
+    """The samples of these SAMPLES packets are lost in a sensor FIFO overrun: never read, not
+    sent, counted in STATUS (``fifo_overruns``) and told in a LOG, as the firmware does."""
+    cut_seqs: frozenset[int] = frozenset()
+    """These SAMPLES frames lose bytes from their middle after the board sent them, as inside
+    the ST-LINK's USB bridge (no flow control): the host sees corrupt frames, the board's
+    counters see nothing."""
+    i2c_retry_seqs: frozenset[int] = frozenset()
+    """Reading these packets' samples needed one I2C retry (counted in STATUS)."""
     self_test_fails: bool = False
     seed: int = 0
 
@@ -145,6 +157,15 @@ class NucleoStats:
     packets_corrupted: int = 0
     settling_discarded: int = 0
     """Samples of the simulated chip's turn-on transient dropped before any packet."""
+    packets_cut: int = 0
+    tx_dropped_bytes: int = 0
+    """Wire bytes of packets dropped because the transmit buffer was full (or injected)."""
+    fifo_overruns: int = 0
+    samples_read: int = 0
+    """Samples read out of the (simulated) sensor: sent, or dropped by the transmit buffer."""
+    i2c_errors: int = 0
+    i2c_retries: int = 0
+    status_sent: int = 0
 
 
 class EmulatedNucleo:
@@ -169,6 +190,8 @@ class EmulatedNucleo:
     scenario_params : the scenario's own options.
     share_port : announce the port to other processes of this user too (for
         ``inclinometer simulate``), not only to this one.
+    sends_status : False acts as firmware before the STATUS extension: no STATUS, and
+        GET_STATUS is an unknown command.
     """
 
     def __init__(
@@ -190,6 +213,7 @@ class EmulatedNucleo:
         on_packet_sent: Callable[[int, int, int, float], None] | None = None,
         scenario_params: dict[str, object] | None = None,
         share_port: bool = False,
+        sends_status: bool = True,
     ) -> None:
         odr_code = lsm6dsox.odr_code_for(odr_hz)
         if not odr_fits_link(lsm6dsox.ODR_RATES_HZ[odr_code], baud):
@@ -209,6 +233,7 @@ class EmulatedNucleo:
         self.on_packet_sent = on_packet_sent
         self.scenario_params = dict(scenario_params or {})
         self.share_port = share_port
+        self.sends_status = sends_status
         self.unique_id = bytes.fromhex(unique_id_for_seed(seed).removeprefix("SIM-"))
         self.usb_serial = usb_serial_for_seed(seed)
         self.stats = NucleoStats()
@@ -216,6 +241,7 @@ class EmulatedNucleo:
         self._settings = (odr_code, accel_fs_g, gyro_fs_dps)
         self._lock = threading.Lock()
         self._outgoing: list[bytes] = []  # raw bytes other threads ask to send
+        self._overrun_next = False
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._master = self._slave = -1
@@ -309,6 +335,25 @@ class EmulatedNucleo:
         return p.Config(odr_mhz, sim.options.accel_fs_g, sim.options.gyro_fs_dps,
                         lsm6dsox.tick_ns(freq_fine))
 
+    def status(self) -> p.Status:
+        """The STATUS the board would send now (its counters since power-on)."""
+        now, base = self.stats, self._status_base
+        stats = NucleoStats(**{f.name: getattr(now, f.name) - getattr(base, f.name)
+                               for f in dataclasses.fields(NucleoStats)})
+        flags = p.STATUS_FLAG_SENSOR_OK | (p.STATUS_FLAG_STREAMING if self._streaming else 0)
+        uptime_ms = round((time.monotonic() - self._power_on_wall) * 1000)
+        return p.Status(
+            p.STATUS_VERSION, 1, flags, uptime_ms & 0xFFFFFFFF,
+            stats.tx_dropped_bytes & 0xFFFFFFFF, 0, stats.i2c_errors & 0xFFFFFFFF, 0,
+            stats.i2c_retries & 0xFFFFFFFF, stats.fifo_overruns & 0xFFFFFFFF,
+            stats.samples_read & 0xFFFFFFFF, stats.samples_sent & 0xFFFFFFFF, 0,
+        )
+
+    def inject_fifo_overrun(self) -> None:
+        """Lose the samples of the next SAMPLES packet to a sensor FIFO overrun (thread-safe)."""
+        with self._lock:
+            self._overrun_next = True
+
     @property
     def info(self) -> p.Info:
         name = f"NUCLEO-F746ZG emulated ({self.scenario}, seed {self.seed})"
@@ -330,6 +375,7 @@ class EmulatedNucleo:
     # -- board state ----------------------------------------------------------------------------
     def _power_on(self) -> None:
         self._power_on_wall = time.monotonic()
+        self._status_base = dataclasses.replace(self.stats)  # STATUS counts from power-on
         self._seq = 0
         self._last_end_ticks = self.initial_ticks
         self._sim = self._new_sim(*self._settings)
@@ -395,6 +441,9 @@ class EmulatedNucleo:
                     self._on_frame(frame)
             if self._streaming and time.monotonic() >= next_send:
                 self._send_samples(time.monotonic())
+            if (self._streaming and self.sends_status
+                    and time.monotonic() - self._last_status >= STATUS_INTERVAL_S):
+                self._send_status()
             if self._tx or writable:
                 self._flush_tx()
 
@@ -413,6 +462,16 @@ class EmulatedNucleo:
     def _queue(self, packet: p.Packet) -> None:
         self._tx += encode_packet(packet)
 
+    def _send_status(self) -> None:
+        """The periodic STATUS: never waits, dropped (and counted) when the buffer is full."""
+        self._last_status = time.monotonic()
+        frame = encode_packet(self.status())
+        self.stats.status_sent += 1
+        if len(self._tx) > TX_BUFFER_BYTES:
+            self.stats.tx_dropped_bytes += len(frame)
+            return
+        self._tx += frame
+
     def _next_send_time(self, now: float) -> float:
         odr = self._sim.true_odr_hz
         first_due = self._run_start + self._run_sent / odr
@@ -428,7 +487,8 @@ class EmulatedNucleo:
             return
         command = body[0]
         self.stats.commands += 1
-        if command not in p.HOST_PACKET_TYPES:
+        if command not in p.HOST_PACKET_TYPES or (
+                command == p.GET_STATUS and not self.sends_status):
             self._queue(p.Ack(command, p.ACK_UNSUPPORTED, f"unknown command 0x{command:02X}"))
             return
         try:
@@ -449,6 +509,10 @@ class EmulatedNucleo:
             self._queue(p.Log(1, f"streaming at {lsm6dsox.odr_text(config.odr_hz)}, "
                                  f"+-{config.accel_fs_g} g, "
                                  f"+-{config.gyro_fs_dps} dps"))
+            if self.sends_status:
+                self._last_status = time.monotonic()
+                self.stats.status_sent += 1
+                self._queue(self.status())
         elif isinstance(packet, p.Stop):
             self._streaming = False
             self._queue(p.Ack(p.STOP, p.ACK_OK))
@@ -460,6 +524,9 @@ class EmulatedNucleo:
                 self._queue(self.self_test_result())
         elif isinstance(packet, p.Ping):
             self._queue(p.Pong(packet.token))
+        elif isinstance(packet, p.GetStatus):
+            self.stats.status_sent += 1
+            self._queue(self.status())
 
     def _configure(self, command: p.Configure) -> None:
         problem = ""
@@ -500,6 +567,7 @@ class EmulatedNucleo:
         self._run_sent = 0
         self._last_send = now
         self._run_origin_ticks = max(self._board_ticks(now), math.ceil(self._last_end_ticks))
+        self._last_status = now
 
     # -- samples --------------------------------------------------------------------------------
     def _take_samples(self, count: int) -> np.ndarray:
@@ -552,12 +620,27 @@ class EmulatedNucleo:
     def _send_packet(self, packet: p.Samples, first_sample: int) -> None:
         stats, faults = self.stats, self.faults
         count = packet.count
+        with self._lock:
+            overrun, self._overrun_next = self._overrun_next, False
+        if overrun or packet.seq in faults.overrun_seqs:
+            # Lost inside the sensor: never read, the sequence number skipped, a LOG.
+            stats.fifo_overruns += 1
+            stats.packets_dropped += 1
+            stats.samples_dropped += count
+            self._queue(p.Log(2, "FIFO overrun: samples were lost before they could be read "
+                                 "(the host sees a gap)"))
+            return
+        stats.samples_read += count
+        if packet.seq in faults.i2c_retry_seqs:
+            stats.i2c_errors += 1
+            stats.i2c_retries += 1
         dropped = packet.seq in faults.drop_seqs or (
             faults.drop_probability > 0 and self._fault_rng.random() < faults.drop_probability
         )
         if dropped or len(self._tx) > TX_BUFFER_BYTES:
             stats.packets_dropped += 1
             stats.samples_dropped += count
+            stats.tx_dropped_bytes += len(encode_packet(packet))
             return
         corrupt = packet.seq in faults.corrupt_seqs or (
             faults.corrupt_probability > 0
@@ -569,6 +652,11 @@ class EmulatedNucleo:
             body[1 + p.SAMPLES_HEADER_BYTES] ^= 0x55  # a sample byte: the CRC catches it
             self._tx += cobs.encode(bytes(body)) + b"\x00"
             stats.packets_corrupted += 1
+        elif packet.seq in faults.cut_seqs:
+            frame = encode_packet(packet)
+            start = len(frame) // 3
+            self._tx += frame[:start] + frame[start + max(1, len(frame) // 4):]
+            stats.packets_cut += 1
         else:
             self._tx += encode_packet(packet)
         self._flush_tx()

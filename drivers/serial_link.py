@@ -36,6 +36,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
+import math
 import secrets
 import threading
 import time
@@ -47,6 +48,7 @@ from urllib.parse import parse_qsl, urlencode
 
 import serial
 
+from app.core.devices import BoardStatus
 from app.core.samples import RawBlock
 from drivers import lsm6dsox
 from drivers.base import Device, DeviceDescriptor, DeviceInfo, DeviceMessage
@@ -83,6 +85,8 @@ WRITE_TIMEOUT_S = 1.0
 PROBE_BYTES = 4096
 """Bytes kept from the start of the connection to say what was seen."""
 TEXT_LINES_TO_DECIDE = 3
+LINK_NOTE_INTERVAL_S = 1.0
+"""At most one message a second about frames lost on the link (a bad cable makes many)."""
 
 OPTIONS: dict[str, str] = {
     "baud": "baud rate (default 921600; native USB ignores it)",
@@ -267,6 +271,9 @@ class SerialLinkDevice(Device):
         self._probe = bytearray()
         self._streaming = False
         self._disconnected = False
+        self._board_status: BoardStatus | None = None
+        self._link_losses = [0, 0, 0]  # gaps, corrupt frames, samples not yet reported
+        self._link_note_at = -math.inf
 
     # -- discovery -----------------------------------------------------------------------------
     @classmethod
@@ -299,11 +306,43 @@ class SerialLinkDevice(Device):
         return True
 
     def take_messages(self) -> list[DeviceMessage]:
-        """The board's LOG messages since the last call (thread-safe)."""
+        """The board's LOG messages since the last call, and what was lost on the link
+        (at most one such message a second). Thread-safe."""
         with self._state:
             logs = list(self._unread_logs)
             self._unread_logs.clear()
-        return [DeviceMessage(entry.level, entry.text) for entry in logs]
+            messages = [DeviceMessage(entry.level, entry.text) for entry in logs]
+            gaps, frames, lost = self._link_losses
+            now = time.monotonic()
+            if gaps and now - self._link_note_at >= LINK_NOTE_INTERVAL_S:
+                self._link_note_at = now
+                self._link_losses = [0, 0, 0]
+                messages.append(DeviceMessage(2, link_loss_message(gaps, frames, lost)))
+        return messages
+
+    @property
+    def board_status(self) -> BoardStatus | None:
+        """The latest STATUS the board sent (once a second while streaming). Thread-safe."""
+        with self._state:
+            return self._board_status
+
+    def request_status(self, timeout_s: float = COMMAND_TIMEOUT_S) -> BoardStatus | None:
+        """Ask for a STATUS now (GET_STATUS); None when the firmware predates it. Thread-safe."""
+        self._require_open()
+        with self._command_lock:
+            with self._state:
+                self._replies = deque((r for r in self._replies if not isinstance(r, p.Status)),
+                                      maxlen=self._replies.maxlen)
+            self._send(p.GetStatus())
+            answer = self._wait_for(
+                lambda pkt: isinstance(pkt, p.Status) or (
+                    isinstance(pkt, p.Ack) and pkt.command == p.GET_STATUS), timeout_s)
+        if answer is None:
+            raise DeviceIOError(f"{self.port}: no STATUS within {timeout_s:g} s")
+        if isinstance(answer, p.Ack):
+            return None
+        with self._state:
+            return self._board_status
 
     @property
     def usb_serial(self) -> str | None:
@@ -634,8 +673,17 @@ class SerialLinkDevice(Device):
                     self._logs.append(packet)
                     self._unread_logs.append(packet)
                     log.log(10 + 10 * min(packet.level, 3), "%s: %s", self.port, packet.text)
-                else:
-                    self._replies.append(packet)
+                    continue
+                if isinstance(packet, p.Status):
+                    counters = self._decoder.counters()
+                    self._board_status = board_status_of(
+                        packet, counters.lost_samples - counters.link_lost_samples)
+                self._replies.append(packet)
+            for report in self._decoder.take_gap_reports():
+                if report.cause == "link":
+                    self._link_losses[0] += 1
+                    self._link_losses[1] += report.corrupt_frames
+                    self._link_losses[2] += report.lost_samples
             self._blocks.extend(self._decoder.take_blocks())
             self._state.notify_all()
 
@@ -748,6 +796,25 @@ class PortDevice(SerialLinkDevice):
 
 
 # -- messages ---------------------------------------------------------------------------------
+def board_status_of(packet: p.Status, host_gap_samples: int = 0) -> BoardStatus:
+    """The app's record of a STATUS packet (``host_gap_samples``: see :class:`BoardStatus`)."""
+    return BoardStatus(
+        reset_cause=packet.reset_cause_text, uptime_s=packet.uptime_ms / 1000.0,
+        streaming=packet.streaming, sensor_ok=packet.sensor_ok,
+        clock_fallback=packet.clock_fallback,
+        **{name: getattr(packet, name) for name in BoardStatus.COUNTERS},
+        host_gap_samples=host_gap_samples,
+    )
+
+
+def link_loss_message(gaps: int, corrupt_frames: int, lost_samples: int) -> str:
+    """``link: 3 corrupt frames, ~40 samples lost`` (and how many gaps, when more than one)."""
+    frames = "frame" if corrupt_frames == 1 else "frames"
+    where = f" in {gaps} gaps" if gaps > 1 else ""
+    return (f"link: {corrupt_frames} corrupt {frames}, ~{lost_samples} samples lost{where} "
+            "(bytes lost between the board and this computer)")
+
+
 def disconnected_message(port: str, exc: BaseException) -> str:
     return f"{port} was disconnected (cable unplugged or board reset): {exc}"
 

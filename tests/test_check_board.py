@@ -39,6 +39,12 @@ def test_the_firmware_core_passes_and_says_which_rates_it_refuses(firmware_lib) 
     assert lines["104"].endswith("ok") and lines["1667"].endswith("ok")
     assert "refused by the board" in lines["3333"] and "highest ODR 1667 Hz" in lines["3333"]
     assert "self-test accelerometer pass" in report
+    # The firmware's own counters, and that nothing was lost on the board.
+    assert "health    started by power-on, up " in report
+    overruns = next(line for line in report.splitlines() if "Sensor FIFO overruns" in line)
+    assert overruns.split()[3:] == ["0", "(+0", "during", "the", "check)"]
+    sent = next(line for line in report.splitlines() if "Samples sent" in line)
+    assert int(sent.split()[3].strip("(+").replace(",", "")) > 0.5 * (104 + 1667)
     assert report.rstrip().endswith("PASS: the board works.")
 
 

@@ -48,6 +48,8 @@ def packet_from_fields(vector: dict) -> p.Packet:
         return p.Log(fields["level"], fields["text"])
     if kind == p.PONG:
         return p.Pong(fields["token"])
+    if kind == p.STATUS:
+        return p.Status(**fields)
     raise AssertionError(f"no device packet type {kind}")
 
 
@@ -75,6 +77,7 @@ def test_python_commands_come_out_of_the_c_receiver(firmware_lib, vector) -> Non
     fields = vector["fields"]
     command = {
         p.HELLO: p.Hello, p.START: p.Start, p.STOP: p.Stop, p.SELF_TEST: p.SelfTest,
+        p.GET_STATUS: p.GetStatus,
     }.get(vector["type"])
     if vector["type"] == p.CONFIGURE:
         packet = p.Configure(fields["odr_code"], fields["accel_fs_g"], fields["gyro_fs_dps"])
@@ -122,15 +125,18 @@ def test_cobs_agrees_with_the_python_library(firmware_lib) -> None:
 
 def test_random_device_packets_round_trip_through_both_codecs(firmware_lib) -> None:
     rng = np.random.default_rng(3)
+    status_rng = np.random.default_rng(4)
     for _ in range(300):
         count = int(rng.integers(1, 33))
         samples = p.Samples(int(rng.integers(0, 65536)), int(rng.integers(0, 2**32)),
                             int(rng.integers(-32768, 32768)),
                             rng.integers(-32768, 32768, (count, 6)).astype(np.int16))
         text = "".join(chr(c) for c in rng.integers(32, 127, int(rng.integers(0, 120))))
+        status = p.Status(1, int(status_rng.integers(0, 8)), int(status_rng.integers(0, 8)),
+                          *(int(v) for v in status_rng.integers(0, 2**32, 10)))
         for packet in (samples, p.Log(int(rng.integers(0, 4)), text),
                        p.Ack(int(rng.integers(0x81, 0x87)), int(rng.integers(0, 5)), text),
-                       p.Pong(int(rng.integers(0, 2**32)))):
+                       p.Pong(int(rng.integers(0, 2**32))), status):
             frame = c_encode(firmware_lib, packet)
             assert frame == encode_packet(packet)
             assert parse_frame(frame) == packet

@@ -130,6 +130,8 @@ ROUND_TRIP = [
     p.Log(3, "sensor error ✓"),
     p.Pong(0), p.Pong(2**32 - 1),
     p.Hello(), p.Configure(10, 16, 2000), p.Start(), p.Stop(), p.SelfTest(), p.Ping(12345),
+    p.Status(1, 0, 0, *([0] * 10)), p.Status(3, 7, 7, *([2**32 - 1] * 10), extra=b"\x00\x01"),
+    p.GetStatus(),
 ]
 
 

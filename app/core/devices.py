@@ -7,7 +7,7 @@ metadata read them without importing a driver.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,3 +44,59 @@ class DeviceDescriptor:
     url: str
     description: str
     kind: str
+
+
+@dataclass(frozen=True, slots=True)
+class BoardStatus:
+    """A board's own health counters since its power-on (link protocol v1 STATUS, 0x08).
+
+    Counters wrap at 2**32 on the board; compare two with :meth:`rise`.
+    """
+
+    reset_cause: str
+    """Why the board last started: ``power-on``, ``reset pin``, ``independent watchdog`` ..."""
+    uptime_s: float
+    streaming: bool
+    sensor_ok: bool
+    clock_fallback: bool
+    """The board runs on its internal oscillator (its UART is about 2 % off)."""
+    uart_tx_dropped_bytes: int
+    uart_rx_errors: int
+    i2c_errors: int
+    i2c_recoveries: int
+    i2c_retries: int
+    fifo_overruns: int
+    samples_read: int
+    samples_sent: int
+    watchdog_resets: int
+    host_gap_samples: int = 0
+    """Samples the host had counted lost in sequence gaps that no corrupt frame explains
+    (lost on the board) when this STATUS arrived."""
+
+    COUNTERS: ClassVar[tuple[str, ...]] = (
+        "uart_tx_dropped_bytes", "uart_rx_errors", "i2c_errors", "i2c_recoveries",
+        "i2c_retries", "fifo_overruns", "samples_read", "samples_sent", "watchdog_resets",
+    )
+    TITLES: ClassVar[dict[str, str]] = {
+        "uart_tx_dropped_bytes": "UART bytes dropped", "uart_rx_errors": "UART RX errors",
+        "i2c_errors": "I2C errors", "i2c_recoveries": "I2C bus recoveries",
+        "i2c_retries": "I2C retries", "fifo_overruns": "Sensor FIFO overruns",
+        "samples_read": "Samples read", "samples_sent": "Samples sent",
+        "watchdog_resets": "Watchdog resets",
+    }
+
+    def rise(self, earlier: BoardStatus, name: str) -> int:
+        """How much counter ``name`` rose since ``earlier`` (modulo 2**32, as on the board)."""
+        return (getattr(self, name) - getattr(earlier, name)) % (1 << 32)
+
+    def restarted_since(self, earlier: BoardStatus) -> bool:
+        """True when the board started again between ``earlier`` and this one."""
+        return self.uptime_s < earlier.uptime_s
+
+    def as_dict(self) -> dict[str, Any]:
+        """The fields as JSON-ready values (recording metadata)."""
+        return {
+            "reset_cause": self.reset_cause, "uptime_s": round(self.uptime_s, 3),
+            "clock_fallback": self.clock_fallback,
+            **{name: getattr(self, name) for name in self.COUNTERS},
+        }

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from PySide6.QtCore import Qt, Signal
-from PySide6.QtWidgets import QFormLayout, QLabel, QPushButton, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QFormLayout, QGroupBox, QLabel, QPushButton, QVBoxLayout, QWidget
 
-from app.core.devices import DeviceInfo
+from app.core.devices import BoardStatus, DeviceInfo
 from app.core.self_test import SelfTestReport
 from app.gui import theme
 from app.services.stream_status import StreamStatus
@@ -19,6 +19,11 @@ _FIELDS = (
     ("rate", "Measured rate"), ("samples", "Samples"), ("lost", "Lost samples"),
     ("gaps", "Gaps"), ("load", "Pipeline load"),
 )
+_BOARD_FIELDS = (("reset_cause", "Started by"), ("uptime", "Uptime"),
+                 *((name, BoardStatus.TITLES[name]) for name in BoardStatus.COUNTERS))
+_PROBLEM_COUNTERS = ("uart_tx_dropped_bytes", "uart_rx_errors", "i2c_recoveries",
+                     "fifo_overruns", "watchdog_resets")
+"""Shown in red when not 0 (I2C errors are not: the probe of an empty address counts too)."""
 
 
 class DevicePanel(QWidget):
@@ -42,18 +47,35 @@ class DevicePanel(QWidget):
         self.self_test_result.setWordWrap(True)
         self.self_test_result.setTextInteractionFlags(
             Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.board_box = QGroupBox("Board health (counters since power-on)")
+        self.board_box.setToolTip(
+            "What the board itself counts (NUCLEO firmware STATUS, once a second while "
+            "streaming). A rise is also reported in Messages, with its reason.")
+        board_form = QFormLayout(self.board_box)
+        board_form.setContentsMargins(6, 4, 6, 4)
+        board_form.setVerticalSpacing(1)
+        self.board_box.setVisible(False)
+        layout.addWidget(self.board_box)
         layout.addWidget(self.self_test_button)
         layout.addWidget(self.self_test_result)
         layout.addStretch(1)
         self.values: dict[str, QLabel] = {}
         for key, title in _FIELDS:
-            label = QLabel("—")
-            label.setWordWrap(True)
-            label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
-            self.values[key] = label
-            form.addRow(title, label)
+            form.addRow(title, self._value_label(self.values, key))
+        self.board_values: dict[str, QLabel] = {}
+        for key, title in _BOARD_FIELDS:
+            board_form.addRow(title, self._value_label(self.board_values, key))
+
+    @staticmethod
+    def _value_label(into: dict[str, QLabel], key: str) -> QLabel:
+        label = QLabel("—")
+        label.setWordWrap(True)
+        label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        into[key] = label
+        return label
 
     def show_info(self, info: DeviceInfo | None) -> None:
+        self.board_box.setVisible(False)  # until the (new) device sends its counters
         if info is None:
             for label in self.values.values():
                 label.setText("—")
@@ -92,3 +114,20 @@ class DevicePanel(QWidget):
         self.values["lost"].setText(f"{status.lost_samples:,}")
         self.values["gaps"].setText(f"{status.gaps:,}")
         self.values["load"].setText(f"{100 * status.pipeline_load:.1f} % of a core")
+        if status.board is not None:
+            self.show_board(status.board)
+
+    def show_board(self, board: BoardStatus) -> None:
+        """The board's counters (from its latest STATUS); problems that happened in red."""
+        self.board_box.setVisible(True)
+        values = self.board_values
+        values["reset_cause"].setText(board.reset_cause
+                                      + (", internal oscillator" if board.clock_fallback else ""))
+        minutes, seconds = divmod(int(board.uptime_s), 60)
+        hours, minutes = divmod(minutes, 60)
+        values["uptime"].setText(f"{hours}:{minutes:02d}:{seconds:02d}")
+        for name in BoardStatus.COUNTERS:
+            value = getattr(board, name)
+            values[name].setText(f"{value:,}")
+            bad = name in _PROBLEM_COUNTERS and value > 0
+            values[name].setStyleSheet(f"color: {theme.ALARM_RED};" if bad else "")

@@ -6,6 +6,8 @@
   :mod:`~app.services.recording_control`, :mod:`~app.services.replay_control`,
   :mod:`~app.services.calibration_state`, :mod:`~app.services.stream_status`: those parts,
   without Qt;
+- :mod:`~app.services.board_health`: a board's own counters (STATUS) and the messages a rise
+  brings;
 - :mod:`~app.services.devices`: what the views may ask about devices and the simulator;
 - :mod:`~app.services.recorder`: the headless recording loop (``inclinometer record``);
 - :mod:`~app.services.simulation`: simulator streams for scoring filters.

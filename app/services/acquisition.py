@@ -11,6 +11,7 @@ from collections.abc import Callable
 from app.core.faults import FaultEvent
 from app.core.lookalike import LookAlikeCheck
 from app.core.pipeline import Pipeline
+from app.services.board_health import BoardHealth
 from app.services.connection import Connection
 from app.services.health import HealthMonitor
 from app.services.recording_control import RecordingControl
@@ -24,7 +25,8 @@ class Acquisition:
     ``on_message(level, text)`` gets the device's own messages (a board's LOG packets), and a
     warning when the accelerometer reads 0.5 g or 2 g at rest after a device is opened (a
     look-alike part, :mod:`app.core.lookalike`); ``on_events(events)`` the fault detector's
-    events (``health``), when a block has some.
+    events (``health``), when a block has some. A board's STATUS counters go to ``board``; a
+    rise becomes a message through ``on_message``.
     """
 
     def __init__(self, connection: Connection, pipeline: Pipeline, recording: RecordingControl,
@@ -35,6 +37,7 @@ class Acquisition:
         self.pipeline = pipeline
         self.recording = recording
         self.health = health or HealthMonitor()
+        self.board = BoardHealth()
         self._on_message = on_message
         self._on_events = on_events
         self.lookalike = LookAlikeCheck()
@@ -52,6 +55,8 @@ class Acquisition:
         raw = device.read(timeout_s)
         for message in device.take_messages():
             self._on_message(message.level, message.text)
+        for note in self.board.update(device.board_status):
+            self._on_message(note.level, note.text)
         if raw is None or not len(raw):
             return 0
         self.connection.continue_time_axis(raw)

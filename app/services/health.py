@@ -69,18 +69,21 @@ class HealthMonitor:
     def begin_recording(self) -> None:
         self._recording = []
 
-    def end_recording(self, path: Path | None, on_error: Callable[[str], None]) -> int:
+    def end_recording(self, path: Path | None, on_error: Callable[[str], None],
+                      extra: dict | None = None) -> int:
         """Store the recording's events into ``path`` (in a thread: the whole file is
-        rewritten, which takes a while for a long one); returns how many there are."""
+        rewritten, which takes a while for a long one), with the ``extra`` metadata keys in
+        the same rewrite; returns how many events there are."""
         events, self._recording = self._recording or [], None
-        if path is None or not events:
+        if path is None or not (events or extra):
             return 0
 
         def save() -> None:
             try:
-                save_fault_events(path, events)
+                save_fault_events(path, events, extra)
             except (OSError, RecordingError) as exc:
-                on_error(f"The {len(events)} fault events could not be stored in {path}: {exc}")
+                what = f"The {len(events)} fault events" if events else "The closing metadata"
+                on_error(f"{what} could not be stored in {path}: {exc}")
 
         threading.Thread(target=save, name="save-fault-events", daemon=True).start()
         return len(events)

@@ -4,7 +4,8 @@ The loop is what the GUI's worker does, without Qt: ``raw = device.read()``, han
 :class:`~app.core.recording.writer.RecordingWriter`, ``pipeline.process(raw)``. It ends after
 ``duration_s`` of device time, when ``stop`` is set, on Ctrl-C (KeyboardInterrupt), when the
 device fails or ends (a replay), or when the writer fails (a full disk); the file is closed
-cleanly in every case and keeps every row written.
+cleanly in every case and keeps every row written. A board that reports its health (STATUS)
+has its counters stored at the start and, once the file is closed, at the end.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from app.core.pipeline import Pipeline
 from app.core.recording.format import KEY_REFERENCE, recording_metadata, simulator_metadata
 from app.core.recording.writer import RecordingWriter, WriterStatus
 from app.core.samples import RawBlock
+from app.services.board_health import KEY_STATUS_END, KEY_STATUS_START
 from drivers.errors import DeviceError
 
 READ_TIMEOUT_S = 0.1
@@ -53,6 +55,20 @@ def _cut(raw: RawBlock, count: int) -> RawBlock:
         gap=None if gap is None else gap[:count], lost_samples=raw.lost_samples,
         reference_quat=None if ref is None else ref[:count],
     )
+
+
+def board_status_now(device: Any) -> dict[str, Any] | None:
+    """The board's counters now (asked for when the driver can), as metadata; None for
+    devices without them."""
+    request = getattr(device, "request_status", None)
+    status = None
+    if request is not None:
+        try:
+            status = request()
+        except DeviceError:
+            status = None
+    status = status or getattr(device, "board_status", None)
+    return None if status is None else status.as_dict()
 
 
 def reference_source_of(device: Any) -> str | None:
@@ -104,6 +120,9 @@ def record_device(
         if calibration is not None:
             pipeline.set_calibration(calibration)
         extra = {**simulator_metadata(device), **(extra_metadata or {})}
+        board_start = board_status_now(device)
+        if board_start is not None:
+            extra[KEY_STATUS_START] = board_start
         metadata = recording_metadata(
             device=info, calibration=pipeline.calibration, orientation_filter=pipeline.filter,
             comparison_filters=pipeline.comparisons.values(), note=note,
@@ -148,8 +167,17 @@ def record_device(
     except KeyboardInterrupt:
         reason = "interrupted"
     finally:
+        board_end = board_status_now(device) if device.is_open else None
         status = writer.close()
         device.close()
+    if board_end is not None and status.rows_written and status.state != "failed":
+        from app.core.recording.edit import rewrite_metadata
+        from app.core.recording.errors import RecordingError
+
+        try:
+            rewrite_metadata(status.path, {KEY_STATUS_END: board_end})
+        except (OSError, ValueError, RecordingError) as exc:
+            message = message or f"the board's closing counters were not stored: {exc}"
     if status.state == "failed":
         reason, message = "write", status.error or message
     return RecordOutcome(status, reason, message, pipeline)

@@ -7,6 +7,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from app.core.devices import BoardStatus
 from app.core.recording.index import Overview
 
 RATE_WINDOW_S = 2.0
@@ -33,6 +34,8 @@ class StreamStatus:
     """The fault detector's state per channel (ax..gz, accel, gyro, link): ok, warning, fault."""
     fault: str = ""
     """Why the reading cannot be trusted now ("" when every channel is ok or a warning)."""
+    board: BoardStatus | None = None
+    """The board's health counters (STATUS), when a new one arrived since the last status."""
 
 
 class StatusMeter:

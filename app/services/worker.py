@@ -138,6 +138,7 @@ class DeviceWorker(QObject):
         self.meter.reset(self.pipeline.counters.filter_cpu_s)
         self.overviews.reset()
         self.health.start(info)
+        self.acquisition.board.reset()
         note = recorded_events_note(getattr(self.connection.device.recording, "metadata", {})
                                     if is_replay(self.connection.device) else {})
         if note:
@@ -248,6 +249,7 @@ class DeviceWorker(QObject):
             gaps_s=None if update is None else update[1],
             health=health,
             fault="" if latest is None else f"{latest.channel} {latest.kind}: {latest.message}",
+            board=self.acquisition.board.take_changed(),
         ))
 
     @Slot()
@@ -342,7 +344,8 @@ class DeviceWorker(QObject):
             return
         self.stop_recording()
         try:
-            status = self.recording.start(device, self.pipeline, path, note)
+            status = self.recording.start(device, self.pipeline, path, note,
+                                          extra=self.acquisition.board.start_metadata())
         except (ValueError, RecordingError) as exc:
             self.error.emit(str(exc))
             return
@@ -358,7 +361,8 @@ class DeviceWorker(QObject):
             if status.error:
                 self.error.emit(status.error)
             stored = self.health.end_recording(status.path if status.rows_written else None,
-                                               self.error.emit)
+                                               self.error.emit,
+                                               extra=self.acquisition.board.end_metadata())
             if stored:
                 self.deviceMessage.emit(1, f"{stored} fault event(s) stored in "
                                            f"{status.path.name}")

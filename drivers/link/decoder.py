@@ -27,6 +27,14 @@ Time and sequence rules (also in ``docs/protocol.md``)
 - A CONFIG with another ``tick_ns`` (never sent by a real device) starts a new time base the
   same way: time goes on from the end of the last packet, with a gap.
 - After :meth:`LinkDecoder.arm_start`, SAMPLES are dropped until the ACK of START.
+
+Why a gap happened (docs/protocol.md, "Bytes lost on the way")
+--------------------------------------------------------------
+The ST-LINK has no flow control and loses bytes inside its USB bridge, mid-frame: the host sees
+frames that fail their CRC or COBS. The splitter resynchronises at the next 0x00. When the
+next good SAMPLES packet shows a sequence gap and corrupt frames came since the previous one,
+the gap is the link's (:class:`GapReport` ``cause="link"``, with the count of frames);
+otherwise the board dropped the data (``cause="board"``), and its STATUS says why.
 """
 
 from __future__ import annotations
@@ -77,6 +85,31 @@ class LinkCounters:
     seq_gaps: int = 0
     lost_samples: int = 0
     dropped_samples: int = 0
+    link_gaps: int = 0
+    """Sequence gaps that corrupt frames (bytes lost on the link) came before."""
+    link_lost_samples: int = 0
+    """The samples those gaps held (the rest of ``lost_samples`` was lost on the board)."""
+
+
+@dataclass(frozen=True, slots=True)
+class GapReport:
+    """One sequence gap and what the decoder knows about its cause."""
+
+    t_s: float
+    """Time of the first sample after the gap."""
+    lost_samples: int
+    cause: str
+    """``"link"``: corrupt frames came before it (bytes lost between board and host);
+    ``"board"``: none did (the board dropped the data; its STATUS says why)."""
+    corrupt_frames: int = 0
+
+    @property
+    def message(self) -> str:
+        if self.cause == "link":
+            frames = "frame" if self.corrupt_frames == 1 else "frames"
+            return (f"link: {self.corrupt_frames} corrupt {frames}, "
+                    f"~{self.lost_samples} samples lost")
+        return f"board: ~{self.lost_samples} samples lost (a sequence gap)"
 
 
 def scale_factors(config: p.Config) -> ScaleFactors:
@@ -117,6 +150,12 @@ class LinkDecoder:
         self._seq_gaps = 0
         self._lost = 0
         self._dropped = 0
+        self._link_gaps = 0
+        self._link_lost = 0
+        self._corrupt_since_samples = 0
+        """Frames that failed COBS, length or CRC since the last good SAMPLES packet."""
+        self._oversized_seen = 0
+        self._gap_reports: list[GapReport] = []
         self.last_error = ""
         """What was wrong with the most recent rejected frame (for error messages)."""
         # Stream state.
@@ -160,8 +199,14 @@ class LinkDecoder:
             crc_errors=self._crc_errors,
             undecodable=self._undecodable + self._splitter.oversized,
             unknown_packets=self._unknown, seq_gaps=self._seq_gaps, lost_samples=self._lost,
-            dropped_samples=self._dropped,
+            dropped_samples=self._dropped, link_gaps=self._link_gaps,
+            link_lost_samples=self._link_lost,
         )
+
+    def take_gap_reports(self) -> list[GapReport]:
+        """The sequence gaps found since the last call, with their causes, oldest first."""
+        reports, self._gap_reports = self._gap_reports, []
+        return reports
 
     def feed(self, data: bytes) -> list[p.Packet]:
         """Decode ``data``; returns the packets other than SAMPLES, in arrival order.
@@ -172,6 +217,9 @@ class LinkDecoder:
         self._bytes += len(data)
         packets: list[p.Packet] = []
         for frame in self._splitter.feed(data):
+            if self._splitter.oversized != self._oversized_seen:
+                self._corrupt_since_samples += self._splitter.oversized - self._oversized_seen
+                self._oversized_seen = self._splitter.oversized
             try:
                 body = unframe(frame)
             except FrameError as exc:
@@ -179,6 +227,7 @@ class LinkDecoder:
                     self._crc_errors += 1
                 else:
                     self._undecodable += 1
+                self._corrupt_since_samples += 1
                 self.last_error = str(exc)
                 continue
             packet_type = body[0]
@@ -245,6 +294,7 @@ class LinkDecoder:
     # -- internals ---------------------------------------------------------------------------
     def _reject(self, exc: Exception) -> None:
         self._undecodable += 1
+        self._corrupt_since_samples += 1
         self.last_error = str(exc)
 
     def _apply_config(self, config: p.Config) -> None:
@@ -305,6 +355,14 @@ class LinkDecoder:
                         gap = True
                         self._seq_gaps += 1
                         self._lost += lost
+                        corrupt = self._corrupt_since_samples
+                        if corrupt:
+                            self._link_gaps += 1
+                            self._link_lost += lost
+                        t_gap = self._offset_s + (t_ticks - self._origin_ticks) * self._tick_s
+                        self._gap_reports.append(GapReport(
+                            t_gap, lost, "link" if corrupt else "board", corrupt))
+        self._corrupt_since_samples = 0
         self._last_seq = seq
         self._last_t0 = t0
         self._t_ticks = t_ticks

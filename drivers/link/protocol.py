@@ -39,6 +39,8 @@ ACK = 0x04
 SELFTEST = 0x05
 LOG = 0x06
 PONG = 0x07
+STATUS = 0x08
+"""A v1 extension: the board's health counters (docs/protocol.md, 0x08 STATUS)."""
 # Host -> device.
 HELLO = 0x81
 CONFIGURE = 0x82
@@ -46,14 +48,16 @@ START = 0x83
 STOP = 0x84
 SELF_TEST = 0x85
 PING = 0x86
+GET_STATUS = 0x87
+"""A v1 extension: answered by STATUS (older firmware: ACK status 2)."""
 
 COMMAND_NAMES: dict[int, str] = {
     HELLO: "HELLO", CONFIGURE: "CONFIGURE", START: "START", STOP: "STOP",
-    SELF_TEST: "SELF_TEST", PING: "PING",
+    SELF_TEST: "SELF_TEST", PING: "PING", GET_STATUS: "GET_STATUS",
 }
 PACKET_NAMES: dict[int, str] = {
     INFO: "INFO", CONFIG: "CONFIG", SAMPLES: "SAMPLES", ACK: "ACK", SELFTEST: "SELFTEST",
-    LOG: "LOG", PONG: "PONG", **COMMAND_NAMES,
+    LOG: "LOG", PONG: "PONG", STATUS: "STATUS", **COMMAND_NAMES,
 }
 
 # ACK status codes.
@@ -78,6 +82,16 @@ _INFO_HEAD = struct.Struct("<BBBBB12s")
 _SELFTEST = struct.Struct("<BB3h3h")
 _CONFIGURE = struct.Struct("<BBH")
 _U32 = struct.Struct("<I")
+_STATUS = struct.Struct("<BBB10I")
+
+STATUS_VERSION = 1
+RESET_CAUSES: dict[int, str] = {
+    0: "unknown", 1: "power-on", 2: "reset pin", 3: "brown-out", 4: "software reset",
+    5: "independent watchdog", 6: "window watchdog", 7: "low-power",
+}
+STATUS_FLAG_STREAMING = 0x01
+STATUS_FLAG_SENSOR_OK = 0x02
+STATUS_FLAG_CLOCK_FALLBACK = 0x04
 
 
 class PacketError(ValueError):
@@ -345,6 +359,68 @@ class Pong:
         return cls(_U32.unpack(payload)[0])
 
 
+@dataclass(frozen=True, slots=True)
+class Status:
+    """0x08 STATUS (a v1 extension): the board's health counters since power-on.
+
+    Counters are u32 and wrap; ``extra`` keeps the bytes of fields a later ``version``
+    appended (not decoded here, and sent back unchanged by :meth:`payload`).
+    """
+
+    TYPE: ClassVar[int] = STATUS
+    version: int
+    reset_cause: int
+    flags: int
+    uptime_ms: int
+    uart_tx_dropped_bytes: int
+    uart_rx_errors: int
+    i2c_errors: int
+    i2c_recoveries: int
+    i2c_retries: int
+    fifo_overruns: int
+    samples_read: int
+    samples_sent: int
+    watchdog_resets: int
+    extra: bytes = b""
+
+    COUNTERS: ClassVar[tuple[str, ...]] = (
+        "uptime_ms", "uart_tx_dropped_bytes", "uart_rx_errors", "i2c_errors", "i2c_recoveries",
+        "i2c_retries", "fifo_overruns", "samples_read", "samples_sent", "watchdog_resets",
+    )
+
+    def payload(self) -> bytes:
+        return _STATUS.pack(
+            self.version, self.reset_cause, self.flags,
+            *(getattr(self, name) & 0xFFFFFFFF for name in self.COUNTERS),
+        ) + self.extra
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> Status:
+        if len(payload) < _STATUS.size:
+            raise PacketError(
+                f"STATUS payload is {len(payload)} bytes, at least {_STATUS.size} expected")
+        values = _STATUS.unpack_from(payload)
+        if values[0] == 0:
+            raise PacketError("STATUS with status_version 0")
+        return cls(*values, extra=bytes(payload[_STATUS.size:]))
+
+    @property
+    def reset_cause_text(self) -> str:
+        return RESET_CAUSES.get(self.reset_cause, f"cause {self.reset_cause}")
+
+    @property
+    def streaming(self) -> bool:
+        return bool(self.flags & STATUS_FLAG_STREAMING)
+
+    @property
+    def sensor_ok(self) -> bool:
+        return bool(self.flags & STATUS_FLAG_SENSOR_OK)
+
+    @property
+    def clock_fallback(self) -> bool:
+        return bool(self.flags & STATUS_FLAG_CLOCK_FALLBACK)
+
+
 # -- host to device -------------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
 class _NoPayload:
@@ -422,12 +498,19 @@ class Ping:
         return cls(_U32.unpack(payload)[0])
 
 
+@dataclass(frozen=True, slots=True)
+class GetStatus(_NoPayload):
+    """0x87 GET_STATUS (a v1 extension): the device answers STATUS."""
+
+    TYPE: ClassVar[int] = GET_STATUS
+
+
 PACKET_CLASSES: dict[int, type] = {
     cls.TYPE: cls
-    for cls in (Info, Config, Samples, Ack, SelfTestResult, Log, Pong,
-                Hello, Configure, Start, Stop, SelfTest, Ping)
+    for cls in (Info, Config, Samples, Ack, SelfTestResult, Log, Pong, Status,
+                Hello, Configure, Start, Stop, SelfTest, Ping, GetStatus)
 }
-DEVICE_PACKET_TYPES = frozenset({INFO, CONFIG, SAMPLES, ACK, SELFTEST, LOG, PONG})
+DEVICE_PACKET_TYPES = frozenset({INFO, CONFIG, SAMPLES, ACK, SELFTEST, LOG, PONG, STATUS})
 HOST_PACKET_TYPES = frozenset(COMMAND_NAMES)
 
 

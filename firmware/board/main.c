@@ -21,6 +21,50 @@
 
 static fw_state fw; /* ~2 KB: static, not on the stack */
 
+/* The watchdog-reset count survives a reset in a section the startup code does not zero; the
+ * magic word tells a count from the RAM's random content after a power-on. */
+#define NOINIT_MAGIC 0x57444F47u /* "WDOG" */
+static struct {
+    uint32_t magic;
+    uint32_t watchdog_resets;
+} noinit __attribute__((section(".noinit")));
+static uint8_t s_reset_cause;
+static clock_source s_clock_source;
+
+/* Why the MCU started (RCC_CSR), then clear the flags for the next reset. A power-on also sets
+ * the pin and brown-out flags, so the order of the checks matters. */
+static uint8_t read_reset_cause(void)
+{
+    uint32_t csr = RCC->CSR;
+    RCC->CSR = csr | RCC_CSR_RMVF;
+    if (csr & RCC_CSR_IWDGRSTF)
+        return LINK_RESET_IWDG;
+    if (csr & RCC_CSR_WWDGRSTF)
+        return LINK_RESET_WWDG;
+    if (csr & RCC_CSR_LPWRRSTF)
+        return LINK_RESET_LOW_POWER;
+    if (csr & RCC_CSR_PORRSTF)
+        return LINK_RESET_POWER_ON;
+    if (csr & RCC_CSR_BORRSTF)
+        return LINK_RESET_BROWN_OUT;
+    if (csr & RCC_CSR_SFTRSTF)
+        return LINK_RESET_SOFTWARE;
+    if (csr & RCC_CSR_PINRSTF)
+        return LINK_RESET_PIN;
+    return LINK_RESET_UNKNOWN;
+}
+
+static void count_resets(uint8_t cause)
+{
+    bool power_on = cause == LINK_RESET_POWER_ON || cause == LINK_RESET_BROWN_OUT;
+    if (power_on || noinit.magic != NOINIT_MAGIC) {
+        noinit.magic = NOINIT_MAGIC;
+        noinit.watchdog_resets = 0;
+    }
+    if (cause == LINK_RESET_IWDG)
+        noinit.watchdog_resets++;
+}
+
 /* The X-NUCLEO-IKS01A3 routes the DIL24 sensor's INT1 to Arduino A5 = PF10. An LSM6DSOX that
  * sees INT1 high when it resets (at power-up, or at the firmware's SW_RESET) enters I3C mode
  * and stops answering on I2C; the board's level shifter can hold a '1' across an MCU reset.
@@ -94,6 +138,18 @@ static void plat_tx_write(void *ctx, const uint8_t *data, size_t length)
     uart_write(data, length);
 }
 
+static void plat_board_health(void *ctx, fw_board_health *health)
+{
+    (void)ctx;
+    uart_stats uart = uart_get_stats();
+    health->uart_rx_errors = uart.overruns + uart.framing_errors + uart.rx_dropped;
+    health->uart_tx_dropped_bytes = uart.tx_dropped;
+    health->i2c_recoveries = i2c_recoveries();
+    health->watchdog_resets = noinit.watchdog_resets;
+    health->reset_cause = s_reset_cause;
+    health->clock_fallback = s_clock_source != CLOCK_HSE_BYPASS_PLL;
+}
+
 static const fw_platform platform = {
     .ctx = NULL,
     .i2c_write = plat_i2c_write,
@@ -102,11 +158,15 @@ static const fw_platform platform = {
     .delay_us = plat_delay_us,
     .tx_free = plat_tx_free,
     .tx_write = plat_tx_write,
+    .board_health = plat_board_health,
 };
 
 int main(void)
 {
+    s_reset_cause = read_reset_cause();
+    count_resets(s_reset_cause);
     clock_source source = clock_init();
+    s_clock_source = source;
     led_init();
     led_set(LED_BLUE, source != CLOCK_HSE_BYPASS_PLL); /* blue: not on the ST-LINK clock */
     watchdog_start();

@@ -40,6 +40,16 @@ _Static_assert(offsetof(rcc_regs, APB1ENR) == 0x40, "RCC_APB1ENR offset");
 _Static_assert(offsetof(rcc_regs, DCKCFGR2) == 0x90, "RCC_DCKCFGR2 offset");
 #define RCC ((rcc_regs *)(AHB1_BASE + 0x3800u))
 
+/* RCC_CSR reset flags (RM0385 5.3.21); RMVF clears them. */
+#define RCC_CSR_RMVF (1u << 24)
+#define RCC_CSR_BORRSTF (1u << 25)
+#define RCC_CSR_PINRSTF (1u << 26)
+#define RCC_CSR_PORRSTF (1u << 27)
+#define RCC_CSR_SFTRSTF (1u << 28)
+#define RCC_CSR_IWDGRSTF (1u << 29)
+#define RCC_CSR_WWDGRSTF (1u << 30)
+#define RCC_CSR_LPWRRSTF (1u << 31)
+
 #define RCC_CR_HSION (1u << 0)
 #define RCC_CR_HSIRDY (1u << 1)
 #define RCC_CR_HSEON (1u << 16)

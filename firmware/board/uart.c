@@ -124,6 +124,7 @@ void uart_write(const uint8_t *data, size_t n)
 {
     size_t room = uart_tx_free();
     if (n > room) {
+        stats.tx_dropped += (uint32_t)(n - room);
         n = room;                        /* contract broken by the caller: keep what fits */
     }
     if (n == 0u) {
@@ -147,7 +148,7 @@ void uart_write(const uint8_t *data, size_t n)
 uart_stats uart_get_stats(void)
 {
     uint32_t primask = irq_save();       /* a consistent snapshot */
-    uart_stats copy = {stats.overruns, stats.framing_errors, stats.rx_dropped};
+    uart_stats copy = {stats.overruns, stats.framing_errors, stats.rx_dropped, stats.tx_dropped};
     irq_restore(primask);
     return copy;
 }

@@ -12,6 +12,7 @@ typedef struct uart_stats {
     uint32_t overruns;       /* ORE: a byte arrived before the previous one was read */
     uint32_t framing_errors; /* FE, NE or PE on a received byte (the byte is dropped) */
     uint32_t rx_dropped;     /* bytes lost because the receive ring was full */
+    uint32_t tx_dropped;     /* bytes uart_write could not queue (the ring was full) */
 } uart_stats;
 
 /* Needs clock_init first (the baud rate divisor comes from the system clock). */

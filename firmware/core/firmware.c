@@ -30,8 +30,10 @@ static void send_reply(fw_state *fw, size_t length)
     const fw_platform *p = fw->platform;
     uint32_t start = now_us(fw);
     while (p->tx_free(p->ctx) < length) {
-        if ((uint32_t)(now_us(fw) - start) > FW_REPLY_TIMEOUT_US)
+        if ((uint32_t)(now_us(fw) - start) > FW_REPLY_TIMEOUT_US) {
+            fw->counters.tx_dropped_bytes += (uint32_t)length;
             return;
+        }
         p->delay_us(p->ctx, 100);
     }
     p->tx_write(p->ctx, fw->wire, length);
@@ -73,10 +75,110 @@ static void send_samples(void *ctx, const fifo_packet *packet)
     const fw_platform *p = fw->platform;
     size_t n = link_encode_samples(packet->seq, packet->t0, packet->temperature_raw,
                                    (const int16_t(*)[6])packet->samples, packet->count, fw->wire);
-    if (p->tx_free(p->ctx) >= n)
+    if (p->tx_free(p->ctx) >= n) {
         p->tx_write(p->ctx, fw->wire, n);
-    else
+        fw->counters.samples_sent += packet->count;
+    } else {
         fw->counters.tx_dropped_packets++;
+        fw->counters.tx_dropped_bytes += (uint32_t)n;
+    }
+}
+
+/* ---- STATUS (docs/protocol.md, 0x08) */
+
+void fw_status(fw_state *fw, link_status *status)
+{
+    fw_board_health board = {0};
+    const fw_platform *p = fw->platform;
+    if (p->board_health)
+        p->board_health(p->ctx, &board);
+    memset(status, 0, sizeof *status);
+    status->reset_cause = board.reset_cause;
+    status->flags = (uint8_t)((fw->streaming ? LINK_STATUS_STREAMING : 0u) |
+                              (fw->sensor_ok ? LINK_STATUS_SENSOR_OK : 0u) |
+                              (board.clock_fallback ? LINK_STATUS_CLOCK_FALLBACK : 0u));
+    status->uptime_ms = (uint32_t)(fw->uptime_us / 1000u);
+    status->uart_tx_dropped_bytes = fw->counters.tx_dropped_bytes + board.uart_tx_dropped_bytes;
+    status->uart_rx_errors = board.uart_rx_errors;
+    status->i2c_errors = fw->counters.i2c_errors;
+    status->i2c_recoveries = board.i2c_recoveries;
+    status->i2c_retries = fw->counters.i2c_retries;
+    status->fifo_overruns = fw->stream.counters.overruns;
+    status->samples_read = fw->stream.counters.samples;
+    status->samples_sent = fw->counters.samples_sent;
+    status->watchdog_resets = board.watchdog_resets;
+}
+
+static void update_uptime(fw_state *fw)
+{
+    uint32_t now = now_us(fw);
+    fw->uptime_us += (uint32_t)(now - fw->uptime_last_us);
+    fw->uptime_last_us = now;
+}
+
+/* On request a reply (waits for room); while streaming never waits (dropped when full). */
+static void send_status(fw_state *fw, bool reply)
+{
+    const fw_platform *p = fw->platform;
+    link_status status;
+    update_uptime(fw);
+    fw_status(fw, &status);
+    size_t n = link_encode_status(&status, fw->wire);
+    fw->last_status_us = now_us(fw);
+    fw->counters.status_sent++;
+    if (reply) {
+        send_reply(fw, n);
+    } else if (p->tx_free(p->ctx) >= n) {
+        p->tx_write(p->ctx, fw->wire, n);
+    } else {
+        fw->counters.tx_dropped_bytes += (uint32_t)n;
+    }
+}
+
+/* ---- the sensor's bus: the board's I2C with every failed transfer counted */
+
+static int counted_i2c_write(void *ctx, uint8_t address, uint8_t reg, const uint8_t *data,
+                             size_t length)
+{
+    fw_state *fw = ctx;
+    int err = fw->platform->i2c_write(fw->platform->ctx, address, reg, data, length);
+    if (err)
+        fw->counters.i2c_errors++;
+    return err;
+}
+
+static int counted_i2c_read(void *ctx, uint8_t address, uint8_t reg, uint8_t *data,
+                            size_t length)
+{
+    fw_state *fw = ctx;
+    int err = fw->platform->i2c_read(fw->platform->ctx, address, reg, data, length);
+    if (err)
+        fw->counters.i2c_errors++;
+    return err;
+}
+
+static uint32_t bus_micros(void *ctx)
+{
+    fw_state *fw = ctx;
+    return fw->platform->micros(fw->platform->ctx);
+}
+
+static void bus_delay_us(void *ctx, uint32_t us)
+{
+    fw_state *fw = ctx;
+    fw->platform->delay_us(fw->platform->ctx, us);
+}
+
+static size_t bus_tx_free(void *ctx)
+{
+    fw_state *fw = ctx;
+    return fw->platform->tx_free(fw->platform->ctx);
+}
+
+static void bus_tx_write(void *ctx, const uint8_t *data, size_t length)
+{
+    fw_state *fw = ctx;
+    fw->platform->tx_write(fw->platform->ctx, data, length);
 }
 
 /* ---- the sensor */
@@ -350,6 +452,7 @@ static void on_start(fw_state *fw)
     text_str(&t, " dps from the LSM6DSOX at ");
     text_hex8(&t, fw->chip.address);
     send_log(fw, LINK_LOG_INFO, message);
+    send_status(fw, true); /* the counters at the start, for the host to compare with */
 }
 
 static void on_stop(fw_state *fw)
@@ -422,6 +525,10 @@ static void handle(fw_state *fw, uint8_t type, const uint8_t *payload, size_t le
         if (check_length(fw, type, length, 4))
             send_reply(fw, link_encode_pong(get_u32(payload), fw->wire));
         break;
+    case LINK_GET_STATUS:
+        if (check_length(fw, type, length, 0))
+            send_status(fw, true);
+        break;
     default: {
         char message[MESSAGE_SIZE];
         text t;
@@ -442,8 +549,11 @@ void fw_init(fw_state *fw, const fw_platform *platform, const fw_identity *ident
     memset(fw, 0, sizeof *fw);
     fw->platform = platform;
     fw->identity = *identity;
+    fw->sensor_bus = (fw_platform){fw, counted_i2c_write, counted_i2c_read, bus_micros,
+                                   bus_delay_us, bus_tx_free, bus_tx_write, NULL};
+    fw->uptime_last_us = now_us(fw);
     link_rx_init(&fw->rx);
-    lsm_init(&fw->chip, platform);
+    lsm_init(&fw->chip, &fw->sensor_bus);
     fw->chip.settings = DEFAULT_SETTINGS;
     fifo_stream_init(&fw->stream, FW_FLUSH_AFTER_US);
     platform->delay_us(platform->ctx, FW_SENSOR_BOOT_US); /* powered up with the board */
@@ -461,11 +571,36 @@ void fw_receive(fw_state *fw, const uint8_t *data, size_t length)
         handle(fw, type, payload, payload_length);
 }
 
+/* One glitch on the bus (noise, a recovered bus) must not stop the stream: a failed FIFO
+ * transfer is tried again up to FW_I2C_RETRIES times, each counted, before the sensor is
+ * declared lost. A burst read that failed part-way may have popped words on the chip; the
+ * stream then sees a TAG_CNT jump and cuts the packet there (a measured gap, not a wrong
+ * sample). */
+static int fifo_status_retrying(fw_state *fw, uint16_t *words, bool *overrun)
+{
+    int err = lsm_fifo_status(&fw->chip, words, overrun);
+    for (unsigned i = 0; err && i < FW_I2C_RETRIES; i++) {
+        fw->counters.i2c_retries++;
+        err = lsm_fifo_status(&fw->chip, words, overrun);
+    }
+    return err;
+}
+
+static int fifo_read_retrying(fw_state *fw, uint16_t words)
+{
+    int err = lsm_fifo_read(&fw->chip, fw->burst, words);
+    for (unsigned i = 0; err && i < FW_I2C_RETRIES; i++) {
+        fw->counters.i2c_retries++;
+        err = lsm_fifo_read(&fw->chip, fw->burst, words);
+    }
+    return err;
+}
+
 static void drain_fifo(fw_state *fw)
 {
     uint16_t words = 0;
     bool overrun = false;
-    if (lsm_fifo_status(&fw->chip, &words, &overrun)) {
+    if (fifo_status_retrying(fw, &words, &overrun)) {
         sensor_lost(fw);
         return;
     }
@@ -477,7 +612,7 @@ static void drain_fifo(fw_state *fw)
     /* Read what is there now, in bursts; what arrives meanwhile waits for the next poll. */
     while (words) {
         uint16_t burst = words < FW_FIFO_BURST_WORDS ? words : (uint16_t)FW_FIFO_BURST_WORDS;
-        if (lsm_fifo_read(&fw->chip, fw->burst, burst)) {
+        if (fifo_read_retrying(fw, burst)) {
             sensor_lost(fw);
             return;
         }
@@ -503,6 +638,7 @@ static void report_tx_drops(fw_state *fw)
 
 void fw_poll(fw_state *fw)
 {
+    update_uptime(fw);
     uint32_t now = now_us(fw);
     if (!fw->sensor_ok) {
         if ((uint32_t)(now - fw->last_retry_us) < FW_RETRY_INTERVAL_US)
@@ -525,6 +661,8 @@ void fw_poll(fw_state *fw)
     }
     fifo_stream_flush(&fw->stream, now_us(fw), false, send_samples, fw);
     report_tx_drops(fw);
+    if ((uint32_t)(now_us(fw) - fw->last_status_us) >= FW_STATUS_INTERVAL_US)
+        send_status(fw, false);
 }
 
 fw_led_mode fw_led_mode_now(const fw_state *fw)

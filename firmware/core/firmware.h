@@ -25,6 +25,8 @@
 #define FW_FIFO_BURST_WORDS 128u       /* words per I2C burst */
 #define FW_REPLY_TIMEOUT_US 100000u    /* waiting for transmit room for a reply */
 #define FW_SENSOR_BOOT_US 20000u       /* LSM6DSOX boot after power-up: 10 ms (AN5272) */
+#define FW_STATUS_INTERVAL_US 1000000u /* STATUS while streaming */
+#define FW_I2C_RETRIES 3u              /* a failed FIFO transfer is tried again this often */
 
 typedef struct fw_identity {
     uint8_t unique_id[12]; /* the MCU's 96-bit unique id, in memory order */
@@ -43,6 +45,11 @@ typedef struct fw_counters {
     uint32_t commands;
     uint32_t bus_errors;
     uint32_t tx_dropped_packets; /* SAMPLES dropped for want of transmit room */
+    uint32_t tx_dropped_bytes;   /* every packet's wire bytes dropped for want of room */
+    uint32_t i2c_errors;         /* failed I2C transfers (any, probes included) */
+    uint32_t i2c_retries;        /* failed FIFO transfers tried again while streaming */
+    uint32_t samples_sent;       /* samples in SAMPLES packets queued for the UART */
+    uint32_t status_sent;        /* STATUS packets queued */
 } fw_counters;
 
 typedef struct fw_state {
@@ -58,6 +65,10 @@ typedef struct fw_state {
     uint32_t last_retry_us;
     uint32_t reported_tx_drops;
     fw_counters counters;
+    fw_platform sensor_bus;   /* the board's platform with I2C failures counted (ctx: fw) */
+    uint64_t uptime_us;       /* since fw_init, accumulated across the 32-bit clock's wrap */
+    uint32_t uptime_last_us;
+    uint32_t last_status_us;
     uint8_t wire[LINK_MAX_WIRE];
     uint8_t burst[FW_FIFO_BURST_WORDS * LSM_FIFO_WORD_BYTES];
 } fw_state;
@@ -71,6 +82,9 @@ void fw_receive(fw_state *fw, const uint8_t *data, size_t length);
 /* Call often: drains the FIFO every FW_POLL_INTERVAL_US while streaming, sends packets when
  * due, and looks for a lost sensor again. */
 void fw_poll(fw_state *fw);
+
+/* The STATUS packet's fields now (docs/protocol.md, 0x08). */
+void fw_status(fw_state *fw, link_status *status);
 
 /* What the LED should show, and whether it is lit at `now_ms` in that mode. */
 fw_led_mode fw_led_mode_now(const fw_state *fw);

@@ -109,6 +109,25 @@ size_t link_encode_pong(uint32_t token, uint8_t *wire)
     return link_frame(LINK_PONG, payload, sizeof payload, wire);
 }
 
+size_t link_encode_status(const link_status *status, uint8_t *wire)
+{
+    uint8_t payload[LINK_STATUS_PAYLOAD];
+    const uint32_t counters[] = {
+        status->uptime_ms, status->uart_tx_dropped_bytes, status->uart_rx_errors,
+        status->i2c_errors, status->i2c_recoveries, status->i2c_retries,
+        status->fifo_overruns, status->samples_read, status->samples_sent,
+        status->watchdog_resets,
+    };
+    _Static_assert(3u + 4u * (sizeof counters / sizeof counters[0]) == LINK_STATUS_PAYLOAD,
+                   "STATUS version 1 layout");
+    payload[0] = LINK_STATUS_VERSION;
+    payload[1] = status->reset_cause;
+    payload[2] = status->flags;
+    for (size_t i = 0; i < sizeof counters / sizeof counters[0]; i++)
+        put_u32(payload + 3 + 4 * i, counters[i]);
+    return link_frame(LINK_STATUS, payload, sizeof payload, wire);
+}
+
 void link_rx_init(link_rx *rx)
 {
     memset(rx, 0, sizeof *rx);

@@ -28,6 +28,7 @@ enum {
     LINK_SELFTEST = 0x05,
     LINK_LOG = 0x06,
     LINK_PONG = 0x07,
+    LINK_STATUS = 0x08, /* v1 extension: the board's health counters */
 };
 
 /* Host to device. */
@@ -38,6 +39,7 @@ enum {
     LINK_STOP = 0x84,
     LINK_SELF_TEST = 0x85,
     LINK_PING = 0x86,
+    LINK_GET_STATUS = 0x87, /* v1 extension: answered by STATUS */
 };
 
 /* ACK status. */
@@ -76,6 +78,42 @@ typedef struct link_selftest {
     int16_t gyro_delta_dps[3];
 } link_selftest;
 
+/* STATUS (docs/protocol.md, 0x08): version 1 is 43 bytes of payload; later versions append. */
+#define LINK_STATUS_VERSION 1u
+#define LINK_STATUS_PAYLOAD 43u
+
+enum {
+    LINK_RESET_UNKNOWN = 0,
+    LINK_RESET_POWER_ON = 1,
+    LINK_RESET_PIN = 2,
+    LINK_RESET_BROWN_OUT = 3,
+    LINK_RESET_SOFTWARE = 4,
+    LINK_RESET_IWDG = 5,
+    LINK_RESET_WWDG = 6,
+    LINK_RESET_LOW_POWER = 7,
+};
+
+enum {
+    LINK_STATUS_STREAMING = 0x01,
+    LINK_STATUS_SENSOR_OK = 0x02,
+    LINK_STATUS_CLOCK_FALLBACK = 0x04,
+};
+
+typedef struct link_status {
+    uint8_t reset_cause;
+    uint8_t flags;
+    uint32_t uptime_ms;
+    uint32_t uart_tx_dropped_bytes;
+    uint32_t uart_rx_errors;
+    uint32_t i2c_errors;
+    uint32_t i2c_recoveries;
+    uint32_t i2c_retries;
+    uint32_t fifo_overruns;
+    uint32_t samples_read;
+    uint32_t samples_sent;
+    uint32_t watchdog_resets;
+} link_status;
+
 /* Frame a packet of `type` + `payload` (at most LINK_MAX_PAYLOAD bytes). */
 size_t link_frame(uint8_t type, const uint8_t *payload, size_t length, uint8_t *wire);
 
@@ -89,6 +127,7 @@ size_t link_encode_ack(uint8_t command, uint8_t status, const char *message, uin
 size_t link_encode_selftest(const link_selftest *result, uint8_t *wire);
 size_t link_encode_log(uint8_t level, const char *text, uint8_t *wire);
 size_t link_encode_pong(uint32_t token, uint8_t *wire);
+size_t link_encode_status(const link_status *status, uint8_t *wire);
 
 /* ---- receiver */
 

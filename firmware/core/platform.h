@@ -4,8 +4,19 @@
 #ifndef FW_PLATFORM_H
 #define FW_PLATFORM_H
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+
+/* What only the board knows about its health, for STATUS (docs/protocol.md, 0x08). */
+typedef struct fw_board_health {
+    uint32_t uart_rx_errors;        /* overrun, framing, noise, parity; receive ring full */
+    uint32_t uart_tx_dropped_bytes; /* bytes the board layer itself dropped */
+    uint32_t i2c_recoveries;        /* stuck bus recovered */
+    uint32_t watchdog_resets;       /* since the last power-on */
+    uint8_t reset_cause;            /* LINK_RESET_* */
+    bool clock_fallback;            /* running on the internal oscillator */
+} fw_board_health;
 
 typedef struct fw_platform {
     void *ctx; /* passed back to every function */
@@ -26,6 +37,9 @@ typedef struct fw_platform {
     /* Bytes free in the transmit buffer, and queue `length` bytes (never more than free). */
     size_t (*tx_free)(void *ctx);
     void (*tx_write)(void *ctx, const uint8_t *data, size_t length);
+
+    /* Optional (may be NULL: all zero): the board's own counters and reset cause. */
+    void (*board_health)(void *ctx, fw_board_health *health);
 } fw_platform;
 
 #endif

@@ -24,6 +24,7 @@ typedef struct host_board {
     host_delay_fn delay;
     host_tx_fn tx;
     size_t tx_free; /* what tx_free() reports: a test shrinks it to fill the buffer */
+    fw_board_health health; /* what the board layer reports: a test sets it */
     char name[64];
 } host_board;
 
@@ -58,6 +59,11 @@ static void board_tx_write(void *ctx, const uint8_t *data, size_t n)
     ((host_board *)ctx)->tx(data, n);
 }
 
+static void board_health(void *ctx, fw_board_health *health)
+{
+    *health = ((host_board *)ctx)->health;
+}
+
 /* A board with its core initialised (the sensor is probed and configured at once). */
 host_board *fwh_create(host_i2c_write_fn i2c_write, host_i2c_read_fn i2c_read,
                        host_micros_fn micros, host_delay_fn delay, host_tx_fn tx,
@@ -73,9 +79,11 @@ host_board *fwh_create(host_i2c_write_fn i2c_write, host_i2c_read_fn i2c_read,
     board->delay = delay;
     board->tx = tx;
     board->tx_free = 64u * 1024u;
+    board->health.reset_cause = LINK_RESET_POWER_ON;
     strncpy(board->name, name ? name : "", sizeof board->name - 1);
     board->platform = (fw_platform){board, board_i2c_write, board_i2c_read, board_micros,
-                                    board_delay_us, board_tx_free, board_tx_write};
+                                    board_delay_us, board_tx_free, board_tx_write,
+                                    board_health};
     fw_identity identity = {{0}, board->name, baud, i2c_hz};
     memcpy(identity.unique_id, unique_id, sizeof identity.unique_id);
     fw_init(&board->fw, &board->platform, &identity);
@@ -90,6 +98,15 @@ void fwh_destroy(host_board *board)
 void fwh_set_tx_free(host_board *board, size_t bytes)
 {
     board->tx_free = bytes;
+}
+
+/* What the board layer reports for STATUS (UART, I2C recovery, watchdog, reset cause). */
+void fwh_set_board_health(host_board *board, uint32_t uart_rx_errors,
+                          uint32_t uart_tx_dropped_bytes, uint32_t i2c_recoveries,
+                          uint32_t watchdog_resets, uint8_t reset_cause, int clock_fallback)
+{
+    board->health = (fw_board_health){uart_rx_errors, uart_tx_dropped_bytes, i2c_recoveries,
+                                      watchdog_resets, reset_cause, clock_fallback != 0};
 }
 
 void fwh_receive(host_board *board, const uint8_t *data, size_t n)
@@ -119,7 +136,9 @@ int fwh_streaming(const host_board *board)
 
 /* Counters, in this order: commands, bus_errors, tx_dropped_packets, words, unknown_tags,
  * incomplete_slots, lost_slots, overruns, samples, packets, dropped_packets, rx frames,
- * rx bad_frames, settling (samples discarded as turn-on transient). Returns how many were written (at most `size`). */
+ * rx bad_frames, settling (samples discarded as turn-on transient), tx_dropped_bytes,
+ * i2c_errors, i2c_retries, samples_sent, status_sent.
+ * Returns how many were written (at most `size`). */
 size_t fwh_counters(const host_board *board, uint32_t *out, size_t size)
 {
     const fw_counters *c = &board->fw.counters;
@@ -128,6 +147,7 @@ size_t fwh_counters(const host_board *board, uint32_t *out, size_t size)
         c->commands, c->bus_errors, c->tx_dropped_packets, s->words, s->unknown_tags,
         s->incomplete_slots, s->lost_slots, s->overruns, s->samples, s->packets,
         s->dropped_packets, board->fw.rx.frames, board->fw.rx.bad_frames, s->settling,
+        c->tx_dropped_bytes, c->i2c_errors, c->i2c_retries, c->samples_sent, c->status_sent,
     };
     size_t n = sizeof values / sizeof values[0];
     if (n > size)

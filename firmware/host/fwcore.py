@@ -40,7 +40,8 @@ FIRMWARE_DIR = Path(__file__).resolve().parents[1]
 COUNTER_NAMES = (
     "commands", "bus_errors", "tx_dropped_packets", "words", "unknown_tags", "incomplete_slots",
     "lost_slots", "overruns", "samples", "packets", "dropped_packets", "rx_frames",
-    "rx_bad_frames", "settling",
+    "rx_bad_frames", "settling", "tx_dropped_bytes", "i2c_errors", "i2c_retries",
+    "samples_sent", "status_sent",
 )
 LED_IDLE, LED_STREAMING, LED_ERROR = 0, 1, 2
 POLL_INTERVAL_S = 0.002
@@ -70,6 +71,11 @@ class _LinkConfig(ctypes.Structure):
 class _LinkSelfTest(ctypes.Structure):
     _fields_ = (("accel_pass", ctypes.c_uint8), ("gyro_pass", ctypes.c_uint8),
                 ("accel_delta_mg", ctypes.c_int16 * 3), ("gyro_delta_dps", ctypes.c_int16 * 3))
+
+
+class _LinkStatus(ctypes.Structure):
+    _fields_ = (("reset_cause", ctypes.c_uint8), ("flags", ctypes.c_uint8),
+                *((name, ctypes.c_uint32) for name in p.Status.COUNTERS))
 
 
 class BuildError(RuntimeError):
@@ -103,6 +109,8 @@ def _declare(lib: ctypes.CDLL) -> None:
     lib.fwh_destroy.argtypes = [ctypes.c_void_p]
     lib.fwh_set_tx_free.argtypes = [ctypes.c_void_p, size]
     lib.fwh_receive.argtypes = [ctypes.c_void_p, ctypes.c_char_p, size]
+    lib.fwh_set_board_health.argtypes = [ctypes.c_void_p, *[ctypes.c_uint32] * 4,
+                                         ctypes.c_uint8, ctypes.c_int]
     lib.fwh_poll.argtypes = [ctypes.c_void_p]
     lib.fwh_led_mode.argtypes = [ctypes.c_void_p]
     lib.fwh_led_lit.argtypes = [ctypes.c_int, ctypes.c_uint32]
@@ -138,6 +146,8 @@ def _declare(lib: ctypes.CDLL) -> None:
     lib.link_encode_log.argtypes = [ctypes.c_uint8, ctypes.c_char_p, wire]
     lib.link_encode_pong.restype = size
     lib.link_encode_pong.argtypes = [ctypes.c_uint32, wire]
+    lib.link_encode_status.restype = size
+    lib.link_encode_status.argtypes = [ctypes.POINTER(_LinkStatus), wire]
     lib.fw_rate_fits.restype = ctypes.c_bool
     lib.fw_rate_fits.argtypes = [ctypes.c_uint8, ctypes.c_uint32, ctypes.c_uint32,
                                  ctypes.c_char_p, size]
@@ -200,6 +210,12 @@ def c_encode(lib: ctypes.CDLL, packet: p.Packet) -> bytes:
         n = lib.link_encode_log(packet.level, packet.text.encode(), wire)
     elif isinstance(packet, p.Pong):
         n = lib.link_encode_pong(packet.token, wire)
+    elif isinstance(packet, p.Status):
+        if packet.version != 1 or packet.extra:
+            raise ValueError("the firmware sends STATUS version 1 only")
+        status = _LinkStatus(packet.reset_cause, packet.flags,
+                             *(getattr(packet, name) for name in p.Status.COUNTERS))
+        n = lib.link_encode_status(ctypes.byref(status), wire)
     else:
         raise TypeError(f"the firmware does not send {type(packet).__name__}")
     return bytes(wire[:n])
@@ -326,6 +342,14 @@ class FirmwareCore:
         while self.clock() < end:
             self.bus.delay(step_s)
             self.poll()
+
+    def set_board_health(self, *, uart_rx_errors: int = 0, uart_tx_dropped_bytes: int = 0,
+                         i2c_recoveries: int = 0, watchdog_resets: int = 0,
+                         reset_cause: int = 1, clock_fallback: bool = False) -> None:
+        """What the board layer reports for STATUS (the core counts the rest itself)."""
+        self.lib.fwh_set_board_health(self._handle, uart_rx_errors, uart_tx_dropped_bytes,
+                                      i2c_recoveries, watchdog_resets, reset_cause,
+                                      int(clock_fallback))
 
     def set_tx_free(self, free_bytes: int) -> None:
         """What the transmit buffer reports as free (0: full)."""

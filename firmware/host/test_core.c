@@ -346,6 +346,8 @@ typedef struct fake_chip {
     uint32_t now_us;
     uint8_t tx[1 << 16];
     size_t tx_length;
+    int fail_reads;  /* the next this many reads fail (a glitch on the bus) */
+    bool fifo_empty; /* FIFO_STATUS reads 0 words, no overrun */
 } fake_chip;
 
 static int fake_write(void *ctx, uint8_t address, uint8_t reg, const uint8_t *data, size_t n)
@@ -365,13 +367,17 @@ static int fake_read(void *ctx, uint8_t address, uint8_t reg, uint8_t *data, siz
     fake_chip *chip = ctx;
     if (address != LSM6DSOX_ADDRESS_SA0_HIGH)
         return 1;
+    if (chip->fail_reads > 0) {
+        chip->fail_reads--;
+        return 2;
+    }
     chip->regs[LSM_WHO_AM_I] = LSM6DSOX_WHO_AM_I_VALUE;
     chip->regs[LSM_STATUS_REG] = LSM_STATUS_XLDA | LSM_STATUS_GDA;
     for (size_t i = 0; i < n; i++) /* FIFO reads return random words */
         data[i] = reg == LSM_FIFO_DATA_OUT_TAG ? (uint8_t)rnd() : chip->regs[(uint8_t)(reg + i)];
     if (reg == LSM_FIFO_STATUS1 && n == 2) {
-        data[0] = (uint8_t)rnd();
-        data[1] = (uint8_t)(rnd() & 0x4Bu);
+        data[0] = chip->fifo_empty ? 0u : (uint8_t)rnd();
+        data[1] = chip->fifo_empty ? 0u : (uint8_t)(rnd() & 0x4Bu);
     }
     return 0;
 }
@@ -405,7 +411,7 @@ static void test_core_with_fake_bus(void)
     static fake_chip chip;
     static fw_state fw;
     fw_platform platform = {&chip, fake_write, fake_read, fake_micros, fake_delay,
-                            fake_tx_free, fake_tx_write};
+                            fake_tx_free, fake_tx_write, NULL};
     fw_identity identity = {{1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12}, "NUCLEO-F746ZG", 921600,
                             400000};
     fw_init(&fw, &platform, &identity);
@@ -457,6 +463,88 @@ static void test_uart_divisor(void)
     CHECK(uart_divisor_for(16000000u, 0u).brr == 0);
 }
 
+/* The STATUS packets in chip->tx (decoded by the core's own receiver); returns how many, the
+ * last one's payload in `last`. */
+static int status_packets(const fake_chip *chip, uint8_t last[LINK_STATUS_PAYLOAD])
+{
+    static link_rx rx;
+    link_rx_init(&rx);
+    size_t offset = 0;
+    uint8_t type;
+    const uint8_t *payload;
+    size_t length;
+    int found = 0;
+    while (link_rx_feed(&rx, chip->tx, chip->tx_length, &offset, &type, &payload, &length)) {
+        if (type != LINK_STATUS)
+            continue;
+        CHECK(length == LINK_STATUS_PAYLOAD);
+        memcpy(last, payload, LINK_STATUS_PAYLOAD);
+        found++;
+    }
+    return found;
+}
+
+static void health(void *ctx, fw_board_health *out)
+{
+    (void)ctx;
+    *out = (fw_board_health){7, 100, 2, 1, LINK_RESET_IWDG, true};
+}
+
+static void test_status_and_retries(void)
+{
+    static fake_chip chip;
+    static fw_state fw;
+    memset(&chip, 0, sizeof chip);
+    chip.fifo_empty = true;
+    fw_platform platform = {&chip, fake_write, fake_read, fake_micros, fake_delay,
+                            fake_tx_free, fake_tx_write, health};
+    fw_identity identity = {{0}, "NUCLEO-F746ZG", 921600, 400000};
+    fw_init(&fw, &platform, &identity);
+    CHECK(fw.sensor_ok);
+    link_status status;
+    fw_status(&fw, &status);
+    CHECK(status.i2c_errors >= 1); /* the probe of 0x6A, where nothing answers */
+    CHECK(status.i2c_retries == 0);
+    CHECK(status.reset_cause == LINK_RESET_IWDG && status.watchdog_resets == 1);
+    CHECK(status.uart_rx_errors == 7 && status.i2c_recoveries == 2);
+    CHECK(status.uart_tx_dropped_bytes == 100);
+    CHECK(status.flags == (LINK_STATUS_SENSOR_OK | LINK_STATUS_CLOCK_FALLBACK));
+
+    /* GET_STATUS is answered at once. */
+    uint8_t wire[LINK_MAX_WIRE], last[LINK_STATUS_PAYLOAD];
+    chip.tx_length = 0;
+    fw_receive(&fw, wire, link_frame(LINK_GET_STATUS, NULL, 0, wire));
+    CHECK(status_packets(&chip, last) == 1);
+    CHECK(last[0] == LINK_STATUS_VERSION && last[1] == LINK_RESET_IWDG);
+
+    /* START sends one; streaming sends one a second. */
+    chip.tx_length = 0;
+    fw_receive(&fw, wire, link_frame(LINK_START, NULL, 0, wire));
+    CHECK(fw.streaming && status_packets(&chip, last) == 1);
+    CHECK(last[2] & LINK_STATUS_STREAMING);
+    uint32_t start = chip.now_us;
+    while ((uint32_t)(chip.now_us - start) < 3500000u) {
+        chip.now_us += 1000;
+        fw_poll(&fw);
+    }
+    CHECK(status_packets(&chip, last) == 4);
+    uint32_t uptime = get_u32(last + 3);
+    CHECK(uptime >= 3000u && uptime <= chip.now_us / 1000u); /* the clock started at 0 */
+
+    /* Two failed reads are retried and the stream goes on; four lose the sensor. */
+    uint32_t errors = fw.counters.i2c_errors;
+    chip.fail_reads = 2;
+    chip.now_us += FW_POLL_INTERVAL_US;
+    fw_poll(&fw);
+    CHECK(fw.streaming && fw.sensor_ok);
+    CHECK(fw.counters.i2c_retries == 2 && fw.counters.i2c_errors == errors + 2);
+    chip.fail_reads = (int)FW_I2C_RETRIES + 1;
+    chip.now_us += FW_POLL_INTERVAL_US;
+    fw_poll(&fw);
+    CHECK(!fw.streaming && !fw.sensor_ok);
+    CHECK(fw.counters.i2c_retries == 2 + FW_I2C_RETRIES);
+}
+
 static void test_rates(void)
 {
     /* docs/protocol.md section 6: the highest ODR per baud rate. */
@@ -489,6 +577,7 @@ int main(void)
     test_fifo_stream_timestamps_wrap();
     test_fifo_stream_long_runs_keep_the_rate();
     test_core_with_fake_bus();
+    test_status_and_retries();
     test_rates();
     test_uart_divisor();
     printf("%d checks, %d failed\n", checks, failures);

@@ -55,6 +55,14 @@ VECTORS: list[tuple[str, p.Packet, dict]] = [
       "gyro_delta_dps": [55, -60, 48]}),
     ("LOG", p.Log(2, "FIFO overrun"), {"level": 2, "text": "FIFO overrun"}),
     ("PONG", p.Pong(0xDEADBEEF), {"token": 0xDEADBEEF}),
+    # v1 extensions: appended, the vectors above are unchanged.
+    ("GET_STATUS", p.GetStatus(), {}),
+    ("STATUS after a watchdog reset, streaming",
+     p.Status(1, 5, 0x03, 3_723_000, 512, 2, 4, 1, 3, 1, 387_000, 386_688, 1),
+     {"version": 1, "reset_cause": 5, "flags": 3, "uptime_ms": 3_723_000,
+      "uart_tx_dropped_bytes": 512, "uart_rx_errors": 2, "i2c_errors": 4, "i2c_recoveries": 1,
+      "i2c_retries": 3, "fifo_overruns": 1, "samples_read": 387_000, "samples_sent": 386_688,
+      "watchdog_resets": 1}),
 ]
 
 

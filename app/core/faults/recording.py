@@ -16,12 +16,17 @@ from app.core.faults.events import FaultEvent
 KEY_FAULT_EVENTS = "fault_events"
 
 
-def save_fault_events(path: str | os.PathLike[str], events: Iterable[FaultEvent]) -> None:
-    """Store ``events`` as the finished recording's ``fault_events`` (replacing earlier ones)."""
+def save_fault_events(path: str | os.PathLike[str], events: Iterable[FaultEvent],
+                      extra: Mapping[str, Any] | None = None) -> None:
+    """Store ``events`` as the finished recording's ``fault_events`` (replacing earlier ones;
+    none: the key is left as it is), and the ``extra`` keys, in one rewrite of the file."""
     from app.core.recording.edit import rewrite_metadata
 
     entries = [e.as_dict() for e in sorted(events, key=lambda e: e.t)]
-    rewrite_metadata(path, {KEY_FAULT_EVENTS: entries})
+    changes = dict(extra or {})
+    if entries:
+        changes[KEY_FAULT_EVENTS] = entries
+    rewrite_metadata(path, changes)
 
 
 def recorded_fault_events(metadata: Mapping[str, Any]) -> list[FaultEvent]:
