@@ -343,6 +343,14 @@ class AlarmMonitor:
         self._collect(events)
         return events
 
+    def update_from_buffer(self, orientation: Any, count: int) -> list[AlarmEvent]:
+        """Run the newest ``count`` rows of the pipeline's orientation ring buffer (what the
+        pipeline just wrote for a block): :meth:`update` on its t, roll, pitch, tilt."""
+        if not self._states or count <= 0:
+            return []
+        rows = orientation.latest(count, ["t", "roll", "pitch", "tilt"])
+        return self.update(rows["t"], rows)
+
     # -- a recording's events -----------------------------------------------------------------
     def begin_recording(self) -> None:
         self._recording = []

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from app.core.alarms import AlarmEvent, AlarmMonitor
 from app.core.faults import FaultEvent
 from app.core.pipeline import Pipeline
 from app.services.connection import Connection
@@ -21,19 +22,24 @@ class Acquisition:
     """Moves one block at a time from the connection's device into the pipeline.
 
     ``on_message(level, text)`` gets the device's own messages (a board's LOG packets);
-    ``on_events(events)`` the fault detector's events (``health``), when a block has some.
+    ``on_events(events)`` the fault detector's events (``health``), when a block has some;
+    ``on_alarms(events)`` the alarms' crossings (``alarms``, on the block's filtered angles).
     """
 
     def __init__(self, connection: Connection, pipeline: Pipeline, recording: RecordingControl,
                  on_message: Callable[[int, str], None],
                  health: HealthMonitor | None = None,
-                 on_events: Callable[[list[FaultEvent]], None] | None = None) -> None:
+                 on_events: Callable[[list[FaultEvent]], None] | None = None,
+                 alarms: AlarmMonitor | None = None,
+                 on_alarms: Callable[[list[AlarmEvent]], None] | None = None) -> None:
         self.connection = connection
         self.pipeline = pipeline
         self.recording = recording
         self.health = health or HealthMonitor()
         self._on_message = on_message
         self._on_events = on_events
+        self.alarms = alarms or AlarmMonitor()
+        self._on_alarms = on_alarms
 
     def step(self, timeout_s: float = READ_TIMEOUT_S) -> int:
         """Read at most one block (waiting up to ``timeout_s``); returns its samples.
@@ -52,6 +58,9 @@ class Acquisition:
         self.connection.continue_time_axis(raw)
         self.pipeline.process(raw)
         self.recording.write(raw)
+        crossings = self.alarms.update_from_buffer(self.pipeline.orientation, len(raw))
+        if crossings and self._on_alarms is not None:
+            self._on_alarms(crossings)
         events = self.health.update(raw, self.pipeline.uncalibrated)
         if events and self._on_events is not None:
             self._on_events(events)

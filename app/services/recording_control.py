@@ -36,8 +36,9 @@ class RecordingControl:
         return self._writer is not None
 
     def start(self, device: Device | None, pipeline: Pipeline, path: str,
-              note: str) -> WriterStatus:
-        """Stop any recording, then record ``device``'s stream to ``path``.
+              note: str, extra: dict | None = None) -> WriterStatus:
+        """Stop any recording, then record ``device``'s stream to ``path`` (``extra``: more
+        metadata entries, e.g. the alarms in force).
 
         Raises ValueError when no device is connected and
         :class:`~app.core.recording.errors.RecordingError` when the file cannot be started.
@@ -49,7 +50,7 @@ class RecordingControl:
             device=device.info, calibration=pipeline.calibration,
             orientation_filter=pipeline.filter,
             comparison_filters=list(pipeline.comparisons.values()), note=note,
-            reference_source=reference_source_of(device),
+            reference_source=reference_source_of(device), extra=extra,
         )
         writer = RecordingWriter(path, metadata, on_error=self._on_error,
                                  on_flush=self._on_status)

@@ -33,6 +33,11 @@ class StreamStatus:
     """The fault detector's state per channel (ax..gz, accel, gyro, link): ok, warning, fault."""
     fault: str = ""
     """Why the reading cannot be trusted now ("" when every channel is ok or a warning)."""
+    alarms: tuple[tuple[str, str], ...] = ()
+    """The alarms raised now: (quantity, text form) each."""
+    alarm_marks_s: tuple[float, ...] | None = None
+    """For a replay, with a new overview: where its recording's alarms were raised, s from the
+    start."""
 
 
 class StatusMeter:
