@@ -130,6 +130,10 @@ def test_the_text_form_reads_and_writes_back():
     assert (both.upper, both.lower, both.delay_s) == (2.0, -1.0, 1.0)
     assert parse_alarm(both.spec()) == both
     assert parse_alarm("|pitch|>1.5").spec() == "|pitch|>1.5,hyst=0.1,delay=0.5"
+    assert parse_alarm("|pitch|>1.5").describe() == "pitch outside -1.5° to 1.5°"
+    assert parse_alarm("roll<-1").describe() == "roll below -1°"
+    assert alarm.describe() == "tilt above 2°"
+    assert parse_alarm("level>0.5").describe() == "out of level (tilt beyond 0.5°)"
     for bad, words in (("tilt", "cannot read"), ("yaw>2", "no quantity 'yaw'"),
                        ("tilt>2,roll<1", "one quantity"), ("tilt>2,speed=3", "unknown option"),
                        ("roll>1,roll<2", "must be below"), ("level<1", "tolerance"),

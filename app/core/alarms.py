@@ -95,6 +95,17 @@ class AlarmLimit:
         """The readout this alarm turns red (``level`` is a tilt alarm)."""
         return READOUT_OF[self.quantity]
 
+    def describe(self) -> str:
+        """In words: ``tilt above 2°``, ``roll outside -2° to 2°``, ``out of level (tilt
+        beyond 0.5°)``."""
+        if self.quantity == "level":
+            return f"out of level (tilt beyond {self.upper:g}°)"
+        if self.upper is not None and self.lower is not None:
+            return f"{self.quantity} outside {self.lower:g}° to {self.upper:g}°"
+        if self.upper is not None:
+            return f"{self.quantity} above {self.upper:g}°"
+        return f"{self.quantity} below {self.lower:g}°"
+
     def spec(self) -> str:
         """The text form, e.g. ``tilt>2,hyst=0.2,delay=0.5`` (:func:`parse_alarm` reads it)."""
         parts = []
