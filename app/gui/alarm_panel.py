@@ -9,12 +9,13 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from PySide6.QtCore import Signal
+from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
     QCheckBox,
     QDoubleSpinBox,
     QGridLayout,
     QLabel,
+    QSizePolicy,
     QVBoxLayout,
     QWidget,
 )
@@ -29,6 +30,7 @@ from app.core.alarms import (
 )
 from app.gui import theme
 
+SPIN_MIN_WIDTH_PX = 84
 LIMIT_RANGE_DEG = {"tilt": (0.0, 180.0), "roll": (-180.0, 180.0), "pitch": (-90.0, 90.0),
                    "level": (0.0, 90.0)}
 
@@ -41,6 +43,9 @@ def _spin(low: float, high: float, decimals: int, suffix: str, tip: str) -> QDou
     spin.setSuffix(suffix)
     spin.setKeyboardTracking(False)
     spin.setToolTip(tip)
+    # Narrower than its size hint allows when the dock is narrow (the digits still fit).
+    spin.setMinimumWidth(SPIN_MIN_WIDTH_PX)
+    spin.setSizePolicy(QSizePolicy.Policy.Preferred, QSizePolicy.Policy.Fixed)
     return spin
 
 
@@ -54,10 +59,10 @@ class _AlarmRow:
         self.enabled.setToolTip(
             "Out of level: the tilt beyond the tolerance" if quantity == "level"
             else f"Alarm on the {quantity}")
-        self.below_on = QCheckBox("<")
+        self.below_on = QCheckBox("below")
         self.below_on.setToolTip("Alarm below this limit")
         self.below = _spin(low, high, 2, "°", "Lower limit (degrees)")
-        self.above_on = QCheckBox(">")
+        self.above_on = QCheckBox("above")
         self.above_on.setToolTip("Alarm above this limit" if quantity != "level"
                                  else "Tolerance: alarm when the tilt exceeds it")
         self.above = _spin(low, high, 2, "°", "Upper limit (degrees)")
@@ -66,6 +71,10 @@ class _AlarmRow:
         self.delay = _spin(0.0, MAX_DELAY_S, 1, " s",
                            "The condition must hold this long to raise, and to clear")
         self.state = QLabel("")
+        self.hysteresis_label = QLabel("hyst.")
+        self.delay_label = QLabel("delay")
+        for label in (self.hysteresis_label, self.delay_label):
+            label.setObjectName("dimLabel")
         if quantity == "level":  # a tolerance: upper only
             self.below_on.setVisible(False)
             self.below.setVisible(False)
@@ -78,6 +87,19 @@ class _AlarmRow:
     def widgets(self) -> list[QWidget]:
         return [self.enabled, self.below_on, self.below, self.above_on, self.above,
                 self.hysteresis, self.delay, self.state]
+
+    def place(self, grid: QGridLayout, row: int) -> None:
+        """Three grid lines: the name and state, the limits, the hysteresis and delay."""
+        grid.addWidget(self.enabled, row, 0, 1, 2)
+        grid.addWidget(self.state, row, 2, 1, 2, Qt.AlignmentFlag.AlignRight)
+        grid.addWidget(self.below_on, row + 1, 0)
+        grid.addWidget(self.below, row + 1, 1)
+        grid.addWidget(self.above_on, row + 1, 2)
+        grid.addWidget(self.above, row + 1, 3)
+        grid.addWidget(self.hysteresis_label, row + 2, 0)
+        grid.addWidget(self.hysteresis, row + 2, 1)
+        grid.addWidget(self.delay_label, row + 2, 2)
+        grid.addWidget(self.delay, row + 2, 3)
 
     def show(self, limit: AlarmLimit) -> None:
         self.enabled.setChecked(limit.enabled)
@@ -118,19 +140,16 @@ class AlarmPanel(QWidget):
         intro.setObjectName("dimLabel")
         layout.addWidget(intro)
         grid = QGridLayout()
-        grid.setHorizontalSpacing(4)
-        for column, text in enumerate(("", "", "below", "", "above", "hyst.", "delay", "")):
-            header = QLabel(text)
-            header.setObjectName("dimLabel")
-            grid.addWidget(header, 0, column)
+        grid.setHorizontalSpacing(6)
+        grid.setVerticalSpacing(3)
         self.rows: dict[str, _AlarmRow] = {}
-        for r, quantity in enumerate(QUANTITIES, start=1):
+        for index, quantity in enumerate(QUANTITIES):
             row = _AlarmRow(quantity)
             self.rows[quantity] = row
-            for column, widget in enumerate(row.widgets()):
-                grid.addWidget(widget, r, column)
-        grid.setColumnStretch(2, 1)
-        grid.setColumnStretch(4, 1)
+            row.place(grid, 4 * index)
+            grid.setRowMinimumHeight(4 * index + 3, 6)  # a gap between quantities
+        grid.setColumnStretch(1, 1)
+        grid.setColumnStretch(3, 1)
         layout.addLayout(grid)
         self.sound = QCheckBox("Sound on each alarm")
         self.sound.setToolTip("The system's beep when an alarm is raised")
