@@ -182,3 +182,23 @@ def test_a_corrupt_log_starts_empty_with_a_message_and_is_kept_aside(
         assert kept[0].exists()
     finally:
         window.close()
+
+
+def test_a_replay_shows_its_recorded_crossings_in_messages_and_on_the_overview(
+        qtbot, qapp, tmp_path, log_path):
+    from app.cli import main
+
+    source = tmp_path / "swing.csv"
+    swing = ("sim://slow-tilt?odr=104&realtime=0&amplitude=10&roll_period=4&pitch_period=1000"
+             "&seed=2")
+    assert main(["record", "--device", swing, "--duration", "6", "--quiet",
+                 "--alarm", "roll>5,hyst=0.5,delay=0.2", str(source)]) == 0
+    window = open_window(qtbot, qapp, tmp_path, f"replay://{source}")
+    try:
+        assert "holds 4 alarm crossing(s)" in window.messages.toPlainText()
+        overview = window.replay_bar.overview
+        qtbot.waitUntil(lambda: len(overview.alarm_marks()) == 2, timeout=TIMEOUT_MS)
+        first, second = overview.alarm_marks()
+        assert first == pytest.approx(0.53, abs=0.1) and second == pytest.approx(4.53, abs=0.1)
+    finally:
+        window.close()

@@ -116,6 +116,9 @@ def test_switching_an_alarm_off_while_raised_clears_it_and_unchanged_alarms_keep
     events = monitor.configure(AlarmConfig((parse_alarm("roll>1,delay=0"),)))
     assert [(e.quantity, e.state) for e in events] == [("tilt", "cleared")]
     assert "switched off" in events[0].message()
+    stored = events[0].as_dict()
+    assert stored["value"] is None  # JSON has no NaN
+    assert AlarmEvent.from_dict(stored).message() == events[0].message()
     kept = monitor_of("tilt>1,delay=0")
     run(kept, [2.0] * 3)
     assert kept.configure(AlarmConfig((parse_alarm("tilt>1,delay=0"),))) == []

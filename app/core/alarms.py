@@ -262,14 +262,19 @@ class AlarmEvent:
         return f"{title} alarm {self.state} at {self.t:.2f} s: {how} ({self.alarm})"
 
     def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        """Plain JSON: a value that is not a number (an alarm switched off) becomes null."""
+        data = asdict(self)
+        if not math.isfinite(self.value):
+            data["value"] = None
+        return data
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> AlarmEvent:
         state = str(data["state"])
         if state not in (RAISED, CLEARED):
             raise ValueError(f"alarm event state {state!r}")
-        return cls(float(data["t"]), str(data["quantity"]), state, float(data["value"]),
+        value = math.nan if data["value"] is None else float(data["value"])
+        return cls(float(data["t"]), str(data["quantity"]), state, value,
                    float(data["limit"]), str(data.get("alarm", "")))
 
 
