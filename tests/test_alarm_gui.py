@@ -123,6 +123,10 @@ def test_the_measurement_log_stores_edits_exports_copies_and_survives_a_restart(
     panel.label_edit.setText("north corner")
     window.store_action.trigger()  # what Space does
     qtbot.keyClick(window.level, Qt.Key.Key_Space)  # and Space itself, with the focus elsewhere
+    panel.label_edit.setText("typed")
+    qtbot.keyClick(panel.label_edit, Qt.Key.Key_Space)  # a text field keeps Space for typing
+    assert panel.label_edit.text() == "typed " and len(panel.log) == 2
+    panel.label_edit.clear()
     panel.store("east corner")
     assert len(panel.log) == 3 and panel.table.rowCount() == 3
     first = panel.log.entries[0]

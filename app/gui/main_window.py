@@ -627,6 +627,8 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.docks["messages"], self.docks["log"])
         if problem:
             QTimer.singleShot(0, lambda: self.show_error(problem))
+        # Space stores anywhere in the window, also on a focused button (a digital level's
+        # one key); text and number fields keep it for typing.
         self.store_action = QAction("Store reading", self)
         self.store_action.setShortcut(QKeySequence(Qt.Key.Key_Space))
         self.store_action.triggered.connect(lambda: self.log_panel.store())
