@@ -400,44 +400,43 @@ def _back_inside(limit: AlarmLimit, values: np.ndarray) -> np.ndarray:
 
 
 def _run(state: _AlarmState, t: np.ndarray, values: np.ndarray) -> list[AlarmEvent]:
-    """The state machine over one block, run by runs of the pending condition (not per
-    sample): at most a few transitions per block, each found with array searches."""
+    """The state machine over one block, vectorised over the runs of the pending condition
+    (beyond the limit while quiet, back inside while raised): the first run that lasts the
+    delay is a crossing; then the same from the sample after it, with the other condition.
+    Crossings are rare, so a block costs a few array passes however noisy the values are."""
     limit = state.limit
     events: list[AlarmEvent] = []
-    n = len(t)
     i = 0
-    condition = _back_inside(limit, values) if state.active else _outside(limit, values)
-    while i < n:
-        if state.since is None or not condition[i]:
+    while i < len(t):
+        tail_t, tail_v = t[i:], values[i:]
+        condition = _back_inside(limit, tail_v) if state.active else _outside(limit, tail_v)
+        edges = np.flatnonzero(np.diff(condition.astype(np.int8), prepend=0, append=0))
+        starts, ends = edges[0::2], edges[1::2]  # runs [start, end) where it holds
+        if not len(starts):
             state.since = None
-            ahead = np.flatnonzero(condition[i:])
-            if not len(ahead):
-                break
-            i += int(ahead[0])
-            state.since = float(t[i])
-        # A run of the condition from i: it completes the delay, ends first, or goes on.
-        ends = np.flatnonzero(~condition[i:])
-        end = n if not len(ends) else i + int(ends[0])
-        due = i + int(np.searchsorted(t[i:end], state.since + limit.delay_s, side="left"))
-        if due < end:
-            value = float(values[due])
-            if state.active:
-                events.append(AlarmEvent(float(t[due]), limit.quantity, CLEARED, value,
-                                         state.crossed, limit.spec()))
-            else:
-                state.crossed = float(limit.upper if limit.upper is not None and
-                                      value > limit.upper else limit.lower)  # type: ignore[arg-type]
-                events.append(AlarmEvent(float(t[due]), limit.quantity, RAISED, value,
-                                         state.crossed, limit.spec()))
-            state.active = not state.active
-            state.since = None
-            condition = (_back_inside(limit, values) if state.active
-                         else _outside(limit, values))
-            i = due + 1
-            continue
-        if end < n:
-            state.since = None
-        i = end
+            break
+        begun = tail_t[starts]
+        if starts[0] == 0 and state.since is not None:
+            begun[0] = state.since  # the run began in an earlier block
+        due_t = begun + limit.delay_s
+        complete = np.flatnonzero(tail_t[ends - 1] >= due_t)
+        if not len(complete):
+            state.since = float(begun[-1]) if ends[-1] == len(condition) else None
+            break
+        k = int(complete[0])
+        due = int(starts[k]) + int(np.searchsorted(tail_t[starts[k]:ends[k]], due_t[k]))
+        value = float(tail_v[due])
+        if state.active:
+            events.append(AlarmEvent(float(tail_t[due]), limit.quantity, CLEARED, value,
+                                     state.crossed, limit.spec()))
+        else:
+            above = limit.upper is not None and value > limit.upper
+            state.crossed = float(limit.upper if above else limit.lower)  # type: ignore[arg-type]
+            events.append(AlarmEvent(float(tail_t[due]), limit.quantity, RAISED, value,
+                                     state.crossed, limit.spec()))
+        state.active = not state.active
+        state.since = None
+        i += due + 1
     return events
 
 
