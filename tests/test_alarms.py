@@ -1,4 +1,4 @@
-"""Alarm logic (app/core/alarms.py): limits, hysteresis, delay, clearing, the text form."""
+"""Alarm logic (app/core/alarms/): limits, hysteresis, delay, clearing, the text form."""
 
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 and whether crossings sound.
 
 It only edits an :class:`~app.core.alarms.AlarmConfig` and emits it; the worker evaluates the
-alarms (app/core/alarms.py) and the main window shows them.
+alarms (app/core/alarms/) and the main window shows them.
 """
 
 from __future__ import annotations

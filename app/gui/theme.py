@@ -29,7 +29,7 @@ ACCENT = "#4aa8d8"
 OK_GREEN = "#4cc38a"
 WARN_AMBER = "#e8a93a"
 ALARM_RED = "#e5534b"
-# The alarm state (app/core/alarms.py): readouts and bubble in alarm, the alarm banner. Read when
+# The alarm state (app/core/alarms/): readouts and bubble in alarm, the alarm banner. Read when
 # drawn (not copied at import), so a theme that changes it restyles the alarm.
 ALARM_STATE = ALARM_RED
 
