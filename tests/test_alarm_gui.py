@@ -137,6 +137,19 @@ def test_the_measurement_log_stores_edits_exports_copies_and_survives_a_restart(
     assert first.unit == "deg" and first.window_s == window.presenter.settings.averaging_s
     assert first.filter == window.session.pipeline.filter.name
     assert first.calibration == "uncalibrated" and "SIM-" in first.device
+    # Hold keeps the reading shown: what is stored while the sensor moves on.
+    window.hold_button.setChecked(True)
+    held = window.readouts.readoutText("roll")
+    tilt_simulator(qtbot, window, 3.0, -0.5)
+    latest_roll = lambda: float(window.session.pipeline.orientation.latest(1)["roll"][0])  # noqa: E731
+    qtbot.waitUntil(lambda: latest_roll() > 2.5, timeout=TIMEOUT_MS)
+    on_hold = panel.store("held")
+    assert f"{on_hold.roll:+.2f}" == held.rstrip("°").replace("−", "-")
+    window.hold_button.setChecked(False)
+    window.grab().save(os.path.join(artifacts_dir, "measurement_log.png"))
+    panel.grab().save(os.path.join(artifacts_dir, "measurement_log_dock.png"))
+    panel.table.selectRow(3)
+    qtbot.keyClick(panel.table, Qt.Key.Key_Delete)
     # Edit a label in the table, delete a row.
     panel.table.item(1, 1).setText("south corner")
     assert panel.log.entries[1].label == "south corner"
@@ -152,8 +165,6 @@ def test_the_measurement_log_stores_edits_exports_copies_and_survives_a_restart(
     exported = tmp_path / "log.csv"
     panel.export_csv(str(exported))
     assert list(csv.reader(exported.open()))[1][1] == "north corner"
-    window.grab().save(os.path.join(artifacts_dir, "measurement_log.png"))
-    panel.grab().save(os.path.join(artifacts_dir, "measurement_log_dock.png"))
     window.close()
     # A restart finds the log as it was left.
     stored = json.loads(log_path.read_text())

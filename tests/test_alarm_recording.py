@@ -109,3 +109,53 @@ def test_the_live_acquisition_stores_crossings_with_the_fault_events(tmp_path):
     metadata = read_recording(path).metadata
     assert recorded_alarm_events(metadata) == crossings
     assert metadata["alarms"] == ["roll>5,hyst=0.5,delay=0.2"]
+
+
+@pytest.fixture
+def session(qtbot):
+    from app.services.session import DeviceSession
+
+    session = DeviceSession()
+    yield session
+    session.shutdown()
+
+
+def test_the_session_stores_crossings_and_fault_events_in_one_recording(qtbot, session,
+                                                                         tmp_path):
+    from app.core.faults.recording import recorded_fault_events
+
+    timeout = 15_000
+    crossings, faults, messages = [], [], []
+    session.alarmEvents.connect(crossings.extend)
+    session.faultEvents.connect(faults.extend)
+    session.deviceMessage.connect(lambda _level, text: messages.append(text))
+    with qtbot.waitSignal(session.connected, timeout=timeout):
+        session.requestConnect.emit("sim://interactive?odr=104&roll=4&errors=0"
+                                    "&fault=stuck:gz@2")
+    path = tmp_path / "both.csv"
+    with qtbot.waitSignal(session.recordingChanged, timeout=timeout):
+        session.requestStartRecording.emit(str(path), "")
+    # Watched from now on: the raise comes after the delay, inside the recording.
+    session.requestAlarms.emit(AlarmConfig((parse_alarm("roll>2,delay=0.2"),)))
+    qtbot.waitUntil(lambda: bool(crossings) and bool(faults), timeout=timeout)
+    with qtbot.waitSignal(session.recordingChanged, timeout=timeout):
+        session.requestStopRecording.emit()
+    qtbot.waitUntil(lambda: any("alarm crossing(s) stored in both.csv" in m for m in messages),
+                    timeout=timeout)
+    qtbot.waitUntil(lambda: "alarm_events" in read_recording(path).metadata, timeout=timeout)
+    metadata = read_recording(path).metadata
+    assert recorded_alarm_events(metadata) == crossings[:1]
+    assert crossings[0].raised and crossings[0].value > 2
+    assert [(e.channel, e.kind) for e in recorded_fault_events(metadata)] == [("gz", "stuck")]
+    assert metadata["alarms"] == ["roll>2,hyst=0.1,delay=0.2"]  # in force at the end
+    # Replayed: the note, and the raise marked for the overview.
+    statuses = []
+    session.status.connect(statuses.append)
+    with qtbot.waitSignal(session.connected, timeout=timeout):
+        session.requestConnect.emit(str(path))
+    qtbot.waitUntil(lambda: any("holds 1 alarm crossing(s)" in m for m in messages),
+                    timeout=timeout)
+    qtbot.waitUntil(lambda: any(s.alarm_marks_s for s in statuses), timeout=timeout)
+    marks = next(s.alarm_marks_s for s in statuses if s.alarm_marks_s)
+    start = float(read_recording(path).t_s[0])
+    assert marks == pytest.approx((crossings[0].t - start,))

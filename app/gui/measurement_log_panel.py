@@ -107,6 +107,8 @@ class MeasurementLogPanel(QWidget):
         layout.addLayout(bar)
         self.table = _LogTable(0, len(HEADERS))
         self.table.setHorizontalHeaderLabels(HEADERS)
+        self.table.horizontalHeaderItem(HEADERS.index("Window")).setToolTip(
+            "Averaging time · samples averaged")
         self.table.verticalHeader().setVisible(False)
         self.table.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
         self.table.setEditTriggers(QAbstractItemView.EditTrigger.DoubleClicked
