@@ -73,7 +73,6 @@ class MeasurementLogPanel(QWidget):
     """The stored readings; ``problem(str)`` for whatever the user must be told."""
 
     problem = Signal(str)
-    stored = Signal(object)  # the Measurement just stored
 
     def __init__(self, log: MeasurementLog,
                  reading_source: Callable[[str], Measurement | None],
@@ -147,7 +146,6 @@ class MeasurementLogPanel(QWidget):
         self.label_edit.clear()
         self._refill()
         self.table.scrollToBottom()
-        self.stored.emit(reading)
         return reading
 
     def delete_selected(self) -> None:

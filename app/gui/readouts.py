@@ -229,7 +229,7 @@ class TiltReadouts(QWidget):
         color = theme.ALARM_STATE
         for name, tile in self._tiles.items():
             on = name in alarm
-            tile.setProperty("alarm", on)
+            tile.setProperty("alarm", on)  # for [alarm="true"] selectors in a stylesheet
             tile.setStyleSheet(
                 f"QFrame#ReadoutTile {{ border: 2px solid {color}; }}"
                 f" QLabel#ReadoutValue, QLabel#ReadoutUnit, QLabel#ReadoutCaption"
