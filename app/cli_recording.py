@@ -117,6 +117,15 @@ def add_recording_parsers(commands: argparse._SubParsersAction) -> None:
                              "a crash still leaves a file readable up to its last write); "
                              "also chosen by a name ending in .gz")
     record.add_argument("--quiet", action="store_true", help="no progress lines")
+    record.add_argument(
+        "--alarm", dest="alarms", metavar="SPEC", action="append", default=[],
+        help="watch a limit on the filtered angles (degrees) and print each crossing as it "
+             "happens (also stored in the file); repeatable. SPEC: QUANTITY>LIMIT, "
+             "QUANTITY<LIMIT or |QUANTITY|>LIMIT, both limits as 'roll>2,roll<-1', then "
+             "options hyst=DEG (default 0.1) and delay=S (default 0.5). Quantities: tilt, roll, "
+             "pitch, level (out of level: tilt beyond a tolerance). Raised once beyond the "
+             "limit for the delay; cleared once back inside by the hysteresis for the delay. "
+             "E.g. --alarm 'tilt>2.0,hyst=0.2,delay=0.5' --alarm '|roll|>1'")
 
     replay = commands.add_parser(
         "replay",
@@ -151,6 +160,7 @@ def _error(message: str) -> None:
 
 def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """The ``record`` sub-command."""
+    from app.core.alarms import AlarmMonitor, alarms_from_specs
     from app.core.calibration_procedures.profiles import ProfileError, read_profile_file
     from app.core.filters import FILTERS
     from app.core.recording.errors import RecordingWriteError
@@ -171,6 +181,11 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
         _error(f"{offline[0]!r} is an offline filter (it needs the whole recording) and cannot "
                f"run while recording; record with a live filter, then run it with "
                f"'inclinometer replay OUT.csv --filter {offline[0]} --out ANGLES.csv'")
+        return EXIT_USAGE
+    try:
+        alarm_config = alarms_from_specs(getattr(args, "alarms", None) or [])
+    except ValueError as exc:
+        _error(f"--alarm: {exc}")
         return EXIT_USAGE
     try:
         duration = None if args.duration is None else parse_duration(args.duration)
@@ -212,6 +227,8 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             device, target, duration_s=duration, note=args.note,
             filter_name=args.record_filter, comparisons=comparisons,
             calibration=calibration, overwrite=args.overwrite, stop=stop, on_flush=progress,
+            alarms=AlarmMonitor(alarm_config) if alarm_config.limits else None,
+            on_alarms=lambda events: print_crossings(events, out),
         )
     except (DeviceError, RecordingWriteError) as exc:
         _error(str(exc))
@@ -232,6 +249,12 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     if outcome.message:
         _error(outcome.message)
     return EXIT_FAILED if outcome.reason in ("device", "write") else 0
+
+
+def print_crossings(events: list, out: TextIO) -> None:
+    """One line per alarm crossing, as it happens (stdout: they are results, not progress)."""
+    for event in events:
+        print(event.message(), file=out, flush=True)
 
 
 def _data_rate(target: Path, odr_hz: float, reference: bool) -> str:

@@ -192,7 +192,7 @@ def test_recordings_keep_the_counters_at_start_and_end(tmp_path):
         errors: list[str] = []
         health = HealthMonitor()
         health.begin_recording()
-        health.end_recording(status.path, errors.append, extra=acquisition.board.end_metadata())
+        health.end_recording(status.path, errors.append, also=acquisition.board.end_metadata())
         end = acquisition.board.latest
         deadline = time.monotonic() + DEADLINE_S
         while KEY_STATUS_END not in read_recording(path).metadata:  # stored in a thread

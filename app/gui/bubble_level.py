@@ -5,7 +5,7 @@ from __future__ import annotations
 import enum
 import math
 
-from PySide6.QtCore import QEvent, QPointF, QRectF, QSize, Qt
+from PySide6.QtCore import Property, QEvent, QPointF, QRectF, QSize, Qt
 from PySide6.QtGui import (
     QBrush,
     QColor,
@@ -96,6 +96,7 @@ class BubbleLevel(QWidget):
         self._tolerance_deg = 0.05
         self._valid = False
         self._reference: tuple[float, float] | None = None
+        self._alarm = False
         self._static_layer: QPixmap | None = None
         policy = QSizePolicy(QSizePolicy.Policy.Preferred, QSizePolicy.Policy.Preferred)
         policy.setHeightForWidth(True)
@@ -128,6 +129,20 @@ class BubbleLevel(QWidget):
             raise ValueError(f"tolerance must not be negative, got {tolerance_deg!r}")
         self._tolerance_deg = float(tolerance_deg)
         self.update()
+
+    def setAlarm(self, alarm: bool) -> None:
+        """Show the alarm state: bubble, centre ring and a ring round the vial in
+        ``theme.ALARM_STATE``."""
+        if bool(alarm) != self._alarm:
+            self._alarm = bool(alarm)
+            self.update()
+
+    def isAlarm(self) -> bool:
+        """Whether the alarm state is shown."""
+        return self._alarm
+
+    alarm = Property(bool, isAlarm, setAlarm)
+    """The alarm state as a Qt property (``[alarm="true"]`` in QSS)."""
 
     def setValid(self, valid: bool) -> None:
         """Show the bubble (True) or hide it and print "no data" (False, e.g. disconnected)."""
@@ -259,6 +274,9 @@ class BubbleLevel(QWidget):
 
         state = self.state()
         state_color = _STATE_COLORS[state]
+        if self._alarm and state is not LevelState.NO_DATA:
+            state_color = QColor(theme.ALARM_STATE)
+            self._paint_alarm_ring(painter, geo, state_color)
         self._paint_level_ring(painter, geo, state, state_color)
         self._paint_range_caption(painter, geo, state)
         if state is not LevelState.NO_DATA and self._reference is not None:
@@ -425,6 +443,14 @@ class BubbleLevel(QWidget):
         alpha = 230 if state is LevelState.LEVEL else 170
         painter.setBrush(Qt.BrushStyle.NoBrush)
         painter.setPen(QPen(_with_alpha(color, alpha), width))
+        painter.drawEllipse(geo.center, radius, radius)
+
+    def _paint_alarm_ring(self, painter: QPainter, geo: _VialGeometry, color: QColor) -> None:
+        """A bright ring on the bezel, readable across a room."""
+        width = max(3.0, (geo.outer_radius - geo.vial_radius) * 0.55)
+        radius = (geo.outer_radius + geo.vial_radius) / 2.0
+        painter.setBrush(Qt.BrushStyle.NoBrush)
+        painter.setPen(QPen(_with_alpha(color, 235), width))
         painter.drawEllipse(geo.center, radius, radius)
 
     def _paint_reference(self, painter: QPainter, geo: _VialGeometry) -> None:

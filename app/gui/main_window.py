@@ -10,6 +10,7 @@ from urllib.parse import urlsplit
 from PySide6.QtCore import QSettings, Qt, QTimer
 from PySide6.QtGui import QAction, QCloseEvent, QKeySequence, QShowEvent
 from PySide6.QtWidgets import (
+    QApplication,
     QCheckBox,
     QComboBox,
     QDockWidget,
@@ -29,13 +30,16 @@ from PySide6.QtWidgets import (
 )
 
 from app import __version__
+from app.core.alarms import READOUT_OF, AlarmConfig, parse_alarm
 from app.core.calibration_procedures import CalibrationProfile, ProfileError
 from app.core.calibration_procedures.profiles import read_profile_file
 from app.core.devices import DeviceInfo
 from app.core.filters import DEFAULT_FILTER, FILTERS, ONLINE_FILTERS
+from app.core.measurement_log import MeasurementLog, default_log_path
 from app.core.recording import sample_recordings
 from app.core.self_test import SelfTestReport
 from app.gui import theme
+from app.gui.alarm_panel import AlarmPanel
 from app.gui.bubble_level import BubbleLevel
 from app.gui.calibration_wizard import CalibrationWizard
 from app.gui.device_bar import DeviceBar
@@ -43,6 +47,7 @@ from app.gui.device_panel import DevicePanel
 from app.gui.filter_panel import FilterPanel
 from app.gui.health_lights import HealthLights
 from app.gui.measure_panel import MeasurePanel
+from app.gui.measurement_log_panel import MeasurementLogPanel
 from app.gui.plots import LivePlots
 from app.gui.presenter import UNIT_LABELS, LivePresenter
 from app.gui.readouts import TiltReadouts
@@ -176,6 +181,7 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.docks["simulator"], self.docks["device"])
         self.tabifyDockWidget(self.docks["device"], self.docks["measure"])
         self.tabifyDockWidget(self.docks["plots"], self.docks["messages"])
+        self._build_alarms_and_log()
         self.docks["plots"].raise_()
         self.docks["filter"].raise_()
         self._default_layout_pending = True
@@ -601,6 +607,68 @@ class MainWindow(QMainWindow):
         self.filter_panel.show_filter(name, values)
         self.status_filter.setText(f"Filter: {FILTERS[name].title}")
         self.settings.setValue("filter", name)
+
+    # -- alarms and the measurement log -------------------------------------------------------
+    def _build_alarms_and_log(self) -> None:
+        """The Alarms dock, the alarm banner, and the Measurement log dock (Space stores)."""
+        self.alarm_banner = ErrorBanner()
+        self.centralWidget().layout().insertWidget(1, self.alarm_banner)
+        self._alarms_shown: tuple[tuple[str, str], ...] = ()
+        self.alarm_panel = AlarmPanel()
+        self.alarm_panel.alarmsChanged.connect(self.apply_alarms)
+        self._add_dock("alarms", "Alarms", self.alarm_panel, Qt.DockWidgetArea.RightDockWidgetArea)
+        self.tabifyDockWidget(self.docks["measure"], self.docks["alarms"])
+        log, problem = MeasurementLog.load(default_log_path())
+        self.log_panel = MeasurementLogPanel(
+            log, lambda label: self.presenter.current_reading(label))
+        self.log_panel.problem.connect(self.show_error)
+        self._add_dock("log", "Measurement log", self.log_panel,
+                       Qt.DockWidgetArea.BottomDockWidgetArea)
+        self.tabifyDockWidget(self.docks["messages"], self.docks["log"])
+        if problem:
+            QTimer.singleShot(0, lambda: self.show_error(problem))
+        # Space stores anywhere in the window, also on a focused button (a digital level's
+        # one key); text and number fields keep it for typing.
+        self.store_action = QAction("Store reading", self)
+        self.store_action.setShortcut(QKeySequence(Qt.Key.Key_Space))
+        self.store_action.triggered.connect(lambda: self.log_panel.store())
+        self.addAction(self.store_action)
+        self.session.alarmEvents.connect(self._on_alarm_events)
+        self.session.status.connect(self._on_alarm_status)
+        self.session.disconnected.connect(lambda _reason: self._show_alarms(()))
+        self.apply_alarms(self.alarm_panel.config())
+
+    def apply_alarms(self, config: AlarmConfig) -> None:
+        """Use these alarms (the worker evaluates them) and show them in the panel."""
+        if config != self.alarm_panel.config():
+            self.alarm_panel.set_config(config)
+        self.session.requestAlarms.emit(config)
+
+    def _on_alarm_events(self, events: list) -> None:
+        for event in events:
+            self.log(event.message())
+        if self.alarm_panel.config().sound and any(e.raised for e in events):
+            QApplication.beep()
+
+    def _on_alarm_status(self, status: StreamStatus) -> None:
+        self._show_alarms(status.alarms)
+        if status.alarm_marks_s is not None:
+            self.replay_bar.overview.show_alarm_marks(status.alarm_marks_s)
+
+    def _show_alarms(self, alarms: tuple[tuple[str, str], ...]) -> None:
+        """Readouts and bubble red, and the banner, while any alarm is raised."""
+        if alarms == self._alarms_shown:
+            return
+        self._alarms_shown = alarms
+        quantities = {quantity for quantity, _spec in alarms}
+        self.readouts.setAlarm(READOUT_OF[q] for q in quantities)
+        self.level.setAlarm(bool(alarms))
+        self.alarm_panel.show_active(quantities)
+        if alarms:
+            listed = " · ".join(parse_alarm(spec).describe() for _q, spec in alarms)
+            self.alarm_banner.show_message(f"<b>ALARM</b>&nbsp;&nbsp;{listed}")
+        else:
+            self.alarm_banner.hide()
 
     # -- calibration --------------------------------------------------------------------------
     def open_calibration_wizard(self) -> CalibrationWizard | None:

@@ -17,6 +17,7 @@ from app.core.calibration_procedures import StaticStatistics
 from app.core.comparison import summarize_errors
 from app.core.decimation import IncrementalMinMax, connect_mask, decimation_factor
 from app.core.filters import FILTERS
+from app.core.measurement_log import Measurement, measure
 from app.core.orientation import slope_from_angle
 from app.core.readout import averaged_angles
 from app.core.samples import STANDARD_GRAVITY_M_S2
@@ -78,6 +79,8 @@ class LivePresenter(QObject):
         self._angle_trace: IncrementalMinMax | None = None
         self._comparison_traces: dict[str, IncrementalMinMax] = {}
         self._last_error_update = 0.0
+        self._shown_quat: np.ndarray | None = None
+        """The quaternions behind the readouts' figures (what Hold keeps showing)."""
 
     def start(self) -> None:
         self.timer.start(round(1000.0 / self.settings.frame_rate_hz))
@@ -143,6 +146,7 @@ class LivePresenter(QObject):
             self.level.clearReference()
         if not update_text:
             return
+        self._shown_quat = recent["quat"]
         self.readouts.setValid(True)
         self.readouts.setValues(
             float(slope_from_angle(angles.roll_deg, unit)),
@@ -159,6 +163,25 @@ class LivePresenter(QObject):
             )
         else:
             self.truth_label.setText("")
+
+    def current_reading(self, label: str = "") -> Measurement | None:
+        """The reading the readouts show (held, or over the averaging time up to now) with its
+        mean and standard deviation, unit, filter, calibration and device; None without data."""
+        info = self.session.device_info
+        quat = self._shown_quat
+        if not self.settings.hold or quat is None:
+            quat = self.session.pipeline.orientation.window(self.settings.averaging_s,
+                                                            ["quat"])["quat"]
+        if info is None and not self.settings.hold:
+            return None
+        pipeline = self.session.pipeline
+        calibration = pipeline.calibration.name
+        if pipeline.level_reference is not None:
+            calibration += " + tare"
+        device = "" if info is None else f"{info.name} ({info.unique_id})"
+        return measure(quat, self.settings.unit, self.settings.averaging_s, label=label,
+                       filter_name=pipeline.filter.name, calibration=calibration,
+                       device=device)
 
     def _update_plots(self, samples, orientation) -> None:
         if self._sensor_trace is None or self._sensor_trace.ring is not samples:

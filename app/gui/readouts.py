@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
-from PySide6.QtCore import Qt
+from PySide6.QtCore import Property, Qt
 from PySide6.QtGui import QFont, QFontDatabase, QFontMetricsF, QResizeEvent
 from PySide6.QtWidgets import QFrame, QGridLayout, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
@@ -172,6 +173,7 @@ class TiltReadouts(QWidget):
             self._tiles[name] = tile
             grid.addWidget(tile, index // columns, index % columns)
         self._tiles["direction"].setUnit("°")
+        self._alarm: tuple[str, ...] = ()
 
         self._hold_badge = QLabel("HOLD", self)
         self._hold_badge.setObjectName("HoldBadge")
@@ -215,6 +217,34 @@ class TiltReadouts(QWidget):
         if self._held:
             self._place_hold_badge()
             self._hold_badge.raise_()
+
+    def setAlarm(self, quantities: Iterable[str]) -> None:
+        """Show these readouts (``roll``, ``pitch``, ``tilt``) in the alarm state: digits and
+        frame in ``theme.ALARM_STATE``; an empty list ends it."""
+        wanted = set(quantities)
+        alarm = tuple(q for q in QUANTITIES if q in wanted)
+        if alarm == self._alarm:
+            return
+        self._alarm = alarm
+        color = theme.ALARM_STATE
+        for name, tile in self._tiles.items():
+            on = name in alarm
+            tile.setProperty("alarm", on)  # for [alarm="true"] selectors in a stylesheet
+            tile.setStyleSheet(
+                f"QFrame#ReadoutTile {{ border: 2px solid {color}; }}"
+                f" QLabel#ReadoutValue, QLabel#ReadoutUnit, QLabel#ReadoutCaption"
+                f" {{ color: {color}; }}" if on else ""
+            )
+
+    def alarmQuantities(self) -> tuple[str, ...]:
+        """The readouts shown in the alarm state."""
+        return self._alarm
+
+    def _is_alarm(self) -> bool:
+        return bool(self._alarm)
+
+    alarm = Property(bool, _is_alarm)
+    """Whether any readout is in the alarm state (a Qt property: ``[alarm="true"]`` in QSS)."""
 
     def isValid(self) -> bool:
         """Whether numbers (rather than dashes) are shown."""

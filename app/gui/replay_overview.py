@@ -49,6 +49,7 @@ class ReplayOverview(pg.PlotWidget):
                                         pen=pg.mkPen(theme.TEXT, width=2))
         self.addItem(self.position)
         self._gaps: list[pg.InfiniteLine] = []
+        self._alarm_marks: list[pg.InfiniteLine] = []
         self._duration_s = 0.0
         self.scene().sigMouseClicked.connect(self._on_click)
 
@@ -73,6 +74,21 @@ class ReplayOverview(pg.PlotWidget):
             overview.high)]
         if len(finite[0]) and len(finite[1]):
             self.setYRange(float(finite[0].min()), float(finite[1].max()), padding=0.05)
+
+    def show_alarm_marks(self, positions_s: tuple[float, ...]) -> None:
+        """Mark where the recording's alarms were raised (s from the start), dashed."""
+        for line in self._alarm_marks:
+            self.removeItem(line)
+        self._alarm_marks = []
+        pen = pg.mkPen(theme.ALARM_STATE, width=2, style=Qt.PenStyle.DashLine)
+        for position in positions_s[:200]:
+            line = pg.InfiniteLine(position, angle=90, pen=pen)
+            self.addItem(line)
+            self._alarm_marks.append(line)
+
+    def alarm_marks(self) -> list[float]:
+        """The positions marked as alarms (s from the start)."""
+        return [float(line.value()) for line in self._alarm_marks]
 
     def set_duration(self, duration_s: float) -> None:
         if duration_s > 0 and duration_s != self._duration_s:

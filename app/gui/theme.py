@@ -29,6 +29,9 @@ ACCENT = "#4aa8d8"
 OK_GREEN = "#4cc38a"
 WARN_AMBER = "#e8a93a"
 ALARM_RED = "#e5534b"
+# The alarm state (app/core/alarms/): readouts and bubble in alarm, the alarm banner. Read when
+# drawn (not copied at import), so a theme that changes it restyles the alarm.
+ALARM_STATE = ALARM_RED
 
 # Plot pens: sensor axes (x, y, z in the usual red, green, blue order, softened)...
 AXIS_X = "#e86a5f"
@@ -59,6 +62,7 @@ COLORS: dict[str, str] = {
     "OK_GREEN": OK_GREEN,
     "WARN_AMBER": WARN_AMBER,
     "ALARM_RED": ALARM_RED,
+    "ALARM_STATE": ALARM_STATE,
     "AXIS_X": AXIS_X,
     "AXIS_Y": AXIS_Y,
     "AXIS_Z": AXIS_Z,

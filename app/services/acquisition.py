@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from app.core.alarms import AlarmEvent, AlarmMonitor
 from app.core.faults import FaultEvent
 from app.core.lookalike import LookAlikeCheck
 from app.core.pipeline import Pipeline
@@ -25,14 +26,17 @@ class Acquisition:
     ``on_message(level, text)`` gets the device's own messages (a board's LOG packets), and a
     warning when the accelerometer reads 0.5 g or 2 g at rest after a device is opened (a
     look-alike part, :mod:`app.core.lookalike`); ``on_events(events)`` the fault detector's
-    events (``health``), when a block has some. A board's STATUS counters go to ``board``; a
+    events (``health``), when a block has some; ``on_alarms(events)`` the alarms' crossings
+    (``alarms``, on the block's filtered angles). A board's STATUS counters go to ``board``; a
     rise becomes a message through ``on_message``.
     """
 
     def __init__(self, connection: Connection, pipeline: Pipeline, recording: RecordingControl,
                  on_message: Callable[[int, str], None],
                  health: HealthMonitor | None = None,
-                 on_events: Callable[[list[FaultEvent]], None] | None = None) -> None:
+                 on_events: Callable[[list[FaultEvent]], None] | None = None,
+                 alarms: AlarmMonitor | None = None,
+                 on_alarms: Callable[[list[AlarmEvent]], None] | None = None) -> None:
         self.connection = connection
         self.pipeline = pipeline
         self.recording = recording
@@ -42,6 +46,8 @@ class Acquisition:
         self._on_events = on_events
         self.lookalike = LookAlikeCheck()
         self._checked_device: object | None = None
+        self.alarms = alarms or AlarmMonitor()
+        self._on_alarms = on_alarms
 
     def step(self, timeout_s: float = READ_TIMEOUT_S) -> int:
         """Read at most one block (waiting up to ``timeout_s``); returns its samples.
@@ -63,6 +69,9 @@ class Acquisition:
         self.pipeline.process(raw)
         self._check_lookalike(device)
         self.recording.write(raw)
+        crossings = self.alarms.update_from_buffer(self.pipeline.orientation, len(raw))
+        if crossings and self._on_alarms is not None:
+            self._on_alarms(crossings)
         events = self.health.update(raw, self.pipeline.uncalibrated)
         if events and self._on_events is not None:
             self._on_events(events)

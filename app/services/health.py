@@ -9,14 +9,15 @@ file's ``fault_events`` metadata (docs/recording-format.md) so a replay shows th
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from app.core.devices import DeviceInfo
 from app.core.faults import FaultDetector, FaultEvent, SensorSpec
-from app.core.faults.recording import recorded_fault_events, save_fault_events
+from app.core.faults.recording import KEY_FAULT_EVENTS, recorded_fault_events
 from app.core.recording.errors import RecordingError
 from app.core.samples import RawBlock, SampleBlock, convert_raw_block
 
@@ -70,17 +71,23 @@ class HealthMonitor:
         self._recording = []
 
     def end_recording(self, path: Path | None, on_error: Callable[[str], None],
-                      extra: dict | None = None) -> int:
-        """Store the recording's events into ``path`` (in a thread: the whole file is
-        rewritten, which takes a while for a long one), with the ``extra`` metadata keys in
-        the same rewrite; returns how many events there are."""
+                      also: Mapping[str, Any] | None = None) -> int:
+        """Store the recording's events into ``path``, with the metadata entries ``also``
+        (e.g. the alarms' crossings) in the same rewrite, in a thread: the whole file is
+        rewritten, which takes a while for a long one. Returns how many fault events there are.
+        """
         events, self._recording = self._recording or [], None
-        if path is None or not (events or extra):
+        changes = dict(also or {})
+        if events:
+            changes[KEY_FAULT_EVENTS] = [e.as_dict() for e in sorted(events, key=lambda e: e.t)]
+        if path is None or not changes:
             return 0
 
         def save() -> None:
+            from app.core.recording.edit import rewrite_metadata
+
             try:
-                save_fault_events(path, events, extra)
+                rewrite_metadata(path, changes)
             except (OSError, RecordingError) as exc:
                 what = f"The {len(events)} fault events" if events else "The closing metadata"
                 on_error(f"{what} could not be stored in {path}: {exc}")

@@ -17,9 +17,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from app.core.alarms import AlarmEvent, AlarmMonitor, save_alarm_events
 from app.core.calibration import SensorCalibration
 from app.core.filters import DEFAULT_FILTER
 from app.core.pipeline import Pipeline
+from app.core.recording.errors import RecordingError
 from app.core.recording.format import KEY_REFERENCE, recording_metadata, simulator_metadata
 from app.core.recording.writer import RecordingWriter, WriterStatus
 from app.core.samples import RawBlock
@@ -43,6 +45,8 @@ class RecordOutcome:
     reason: str
     message: str = ""
     pipeline: Pipeline | None = field(default=None, repr=False)
+    alarm_events: list[AlarmEvent] = field(default_factory=list)
+    """The alarms' crossings (stored in the file's ``alarm_events`` when there are any)."""
 
 
 def _cut(raw: RawBlock, count: int) -> RawBlock:
@@ -97,6 +101,8 @@ def record_device(
     on_flush: Callable[[WriterStatus], None] | None = None,
     pipeline: Pipeline | None = None,
     extra_metadata: dict[str, Any] | None = None,
+    alarms: AlarmMonitor | None = None,
+    on_alarms: Callable[[list[AlarmEvent]], None] | None = None,
 ) -> RecordOutcome:
     """Record ``device`` (a :class:`drivers.base.Device`) into ``path``.
 
@@ -104,6 +110,9 @@ def record_device(
     time from the first sample (the last block is cut there); None records until ``stop`` is
     set or Ctrl-C. Raises :class:`~app.core.recording.errors.RecordingWriteError` when the
     file cannot be created, and the device's ``DeviceError`` when it cannot be opened.
+
+    ``alarms`` watch the filtered angles of every block; ``on_alarms`` gets each block's
+    crossings as they happen, and the file stores them all when it is closed.
     """
     info = device.open()
     try:
@@ -123,6 +132,10 @@ def record_device(
         board_start = board_status_now(device)
         if board_start is not None:
             extra[KEY_STATUS_START] = board_start
+        if alarms is not None and alarms.watching:
+            extra["alarms"] = [limit.spec() for limit in alarms.config.enabled]
+            alarms.reset()
+            alarms.begin_recording()
         metadata = recording_metadata(
             device=info, calibration=pipeline.calibration, orientation_filter=pipeline.filter,
             comparison_filters=pipeline.comparisons.values(), note=note,
@@ -159,6 +172,10 @@ def record_device(
                     reason, message = "write", writer.status.error or "the recording stopped"
                     break
                 pipeline.process(raw)
+                if alarms is not None:
+                    crossings = alarms.update_from_buffer(pipeline.orientation, len(raw))
+                    if crossings and on_alarms is not None:
+                        on_alarms(crossings)
             if done:
                 reason = "duration"
                 break
@@ -172,7 +189,6 @@ def record_device(
         device.close()
     if board_end is not None and status.rows_written and status.state != "failed":
         from app.core.recording.edit import rewrite_metadata
-        from app.core.recording.errors import RecordingError
 
         try:
             rewrite_metadata(status.path, {KEY_STATUS_END: board_end})
@@ -180,7 +196,14 @@ def record_device(
             message = message or f"the board's closing counters were not stored: {exc}"
     if status.state == "failed":
         reason, message = "write", status.error or message
-    return RecordOutcome(status, reason, message, pipeline)
+    crossings = alarms.end_recording() if alarms is not None else []
+    if crossings and status.rows_written:
+        try:
+            save_alarm_events(status.path, crossings, alarms.config)  # type: ignore[union-attr]
+        except (OSError, RecordingError) as exc:
+            message = (message + "; " if message else "") + (
+                f"the {len(crossings)} alarm crossings could not be stored in the file: {exc}")
+    return RecordOutcome(status, reason, message, pipeline, crossings)
 
 
 def parse_duration(text: str) -> float:

@@ -38,7 +38,7 @@ class RecordingControl:
     def start(self, device: Device | None, pipeline: Pipeline, path: str,
               note: str, extra: dict | None = None) -> WriterStatus:
         """Stop any recording, then record ``device``'s stream to ``path`` (``extra``: more
-        metadata keys, such as the board's counters at the start).
+        metadata entries, such as the board's counters at the start or the alarms in force).
 
         Raises ValueError when no device is connected and
         :class:`~app.core.recording.errors.RecordingError` when the file cannot be started.

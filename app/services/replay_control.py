@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from app.core.alarms import recorded_alarm_events
 from app.core.filters import known_parameters
 from app.core.filters.base import OrientationFilter
 from app.core.pipeline import Pipeline
@@ -132,3 +133,23 @@ class OverviewTracker:
             return None
         self._seen = key
         return overview, tuple(device.gap_positions_s)  # type: ignore[union-attr]
+
+
+def recorded_alarm_marks(device: Device | None) -> tuple[float, ...]:
+    """Where the replayed recording's alarms were raised, s from its start (for the overview)."""
+    if not is_replay(device):
+        return ()
+    metadata = getattr(device.recording, "metadata", None) or {}  # type: ignore[union-attr]
+    start = device.start_t_s  # type: ignore[union-attr]
+    return tuple(e.t - start for e in recorded_alarm_events(metadata) if e.raised)
+
+
+def recorded_alarms_note(metadata: dict) -> str:
+    """A replay's note on the alarm crossings its recording holds ("" when none)."""
+    events = recorded_alarm_events(metadata)
+    if not events:
+        return ""
+    shown = "; ".join(e.message() for e in events[:8])
+    more = f"; and {len(events) - 8} more" if len(events) > 8 else ""
+    return (f"This recording holds {len(events)} alarm crossing(s) (marked on the replay "
+            f"bar): {shown}{more}")

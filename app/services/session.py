@@ -35,6 +35,7 @@ class DeviceSession(QObject):
     selfTestAvailable = Signal(bool)
     selfTestFinished = Signal(object, str)
     faultEvents = Signal(list)  # FaultEvents, as the detector declares them
+    alarmEvents = Signal(list)  # AlarmEvents: the alarms' crossings
 
     requestConnect = Signal(str)
     requestDisconnect = Signal()
@@ -52,6 +53,7 @@ class DeviceSession(QObject):
     requestReplayControl = Signal(str, object)
     requestSelfTest = Signal()
     requestHealthReset = Signal()
+    requestAlarms = Signal(object)  # AlarmConfig
 
     def __init__(
         self,
@@ -83,6 +85,7 @@ class DeviceSession(QObject):
         self.requestReplayControl.connect(self.worker.replay_control)
         self.requestSelfTest.connect(self.worker.run_self_test)
         self.requestHealthReset.connect(self.worker.reset_health)
+        self.requestAlarms.connect(self.worker.set_alarms)
         self.device_info: DeviceInfo | None = None
         # Queued into the GUI thread (this object lives there).
         self.worker.connected.connect(self.connected)
@@ -99,6 +102,7 @@ class DeviceSession(QObject):
         self.worker.selfTestAvailable.connect(self.selfTestAvailable)
         self.worker.selfTestFinished.connect(self.selfTestFinished)
         self.worker.faultEvents.connect(self.faultEvents)
+        self.worker.alarmEvents.connect(self.alarmEvents)
         self.connected.connect(self._on_connected)
         self.disconnected.connect(self._on_disconnected)
         self.thread.start()

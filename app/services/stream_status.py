@@ -36,6 +36,11 @@ class StreamStatus:
     """Why the reading cannot be trusted now ("" when every channel is ok or a warning)."""
     board: BoardStatus | None = None
     """The board's health counters (STATUS), when a new one arrived since the last status."""
+    alarms: tuple[tuple[str, str], ...] = ()
+    """The alarms raised now: (quantity, text form) each."""
+    alarm_marks_s: tuple[float, ...] | None = None
+    """For a replay, with a new overview: where its recording's alarms were raised, s from the
+    start."""
 
 
 class StatusMeter:

@@ -17,6 +17,7 @@ from typing import Any
 
 from PySide6.QtCore import QObject, QTimer, Signal, Slot
 
+from app.core.alarms import AlarmConfig, AlarmMonitor, alarm_events_metadata
 from app.core.calibration_procedures import CalibrationProfile, ProfileStore, TareReference
 from app.core.pipeline import Pipeline
 from app.core.recording import RecordingError
@@ -28,6 +29,8 @@ from app.services.recording_control import RecordingControl
 from app.services.replay_control import (
     OverviewTracker,
     is_replay,
+    recorded_alarm_marks,
+    recorded_alarms_note,
     replay_command,
     replay_position,
     restore_recorded_filter,
@@ -58,6 +61,7 @@ class DeviceWorker(QObject):
     selfTestAvailable = Signal(bool)  # the connected device can run the sensor's self-test
     selfTestFinished = Signal(object, str)  # SelfTestReport or None, and an error message
     faultEvents = Signal(list)  # FaultEvents the detector declared in a block
+    alarmEvents = Signal(list)  # AlarmEvents: the alarms' crossings in a block
 
     def __init__(self, pipeline: Pipeline, profile_store: ProfileStore | None = None,
                  connection: Connection | None = None) -> None:
@@ -68,9 +72,11 @@ class DeviceWorker(QObject):
         self.recording = RecordingControl(on_error=self.error.emit,
                                           on_status=self.recordingChanged.emit)
         self.health = HealthMonitor()
+        self.alarms = AlarmMonitor()
         self.acquisition = Acquisition(self.connection, pipeline, self.recording,
                                        on_message=self.deviceMessage.emit, health=self.health,
-                                       on_events=self.faultEvents.emit)
+                                       on_events=self.faultEvents.emit, alarms=self.alarms,
+                                       on_alarms=self.alarmEvents.emit)
         self.meter = StatusMeter()
         self.overviews = OverviewTracker()
         self._poll_timer: QTimer | None = None
@@ -139,10 +145,12 @@ class DeviceWorker(QObject):
         self.overviews.reset()
         self.health.start(info)
         self.acquisition.board.reset()
-        note = recorded_events_note(getattr(self.connection.device.recording, "metadata", {})
-                                    if is_replay(self.connection.device) else {})
-        if note:
-            self.deviceMessage.emit(1, note)
+        self.alarms.reset()
+        recorded = (getattr(self.connection.device.recording, "metadata", {})
+                    if is_replay(self.connection.device) else {})
+        for note in (recorded_events_note(recorded), recorded_alarms_note(recorded)):
+            if note:
+                self.deviceMessage.emit(1, note)
         self._streaming(True)
         self.connected.emit(info)
         self.selfTestAvailable.emit(bool(device and device.supports_self_test))
@@ -250,12 +258,23 @@ class DeviceWorker(QObject):
             health=health,
             fault="" if latest is None else f"{latest.channel} {latest.kind}: {latest.message}",
             board=self.acquisition.board.take_changed(),
+            alarms=tuple((limit.quantity, limit.spec()) for limit in self.alarms.active()),
+            alarm_marks_s=None if update is None else recorded_alarm_marks(device),
         ))
 
     @Slot()
     def reset_health(self) -> None:
         """Forget latched faults (bias, gravity) and what the detector learnt."""
         self.health.reset()
+
+    # -- alarms -------------------------------------------------------------------------------
+    @Slot(object)
+    def set_alarms(self, config: AlarmConfig) -> None:
+        """Use these alarms from the next block on (an alarm switched off while raised
+        clears)."""
+        events = self.alarms.configure(config)
+        if events:
+            self.alarmEvents.emit(events)
 
     # -- filters ----------------------------------------------------------------------------
     def _emit_filter(self) -> None:
@@ -343,13 +362,16 @@ class DeviceWorker(QObject):
             self.error.emit("Connect a device before recording.")
             return
         self.stop_recording()
+        alarms = [limit.spec() for limit in self.alarms.config.enabled]
         try:
             status = self.recording.start(device, self.pipeline, path, note,
-                                          extra=self.acquisition.board.start_metadata())
+                                          extra={**self.acquisition.board.start_metadata(),
+                                                 **({"alarms": alarms} if alarms else {})})
         except (ValueError, RecordingError) as exc:
             self.error.emit(str(exc))
             return
         self.health.begin_recording()
+        self.alarms.begin_recording()
         self.recordingChanged.emit(status)
 
     @Slot()
@@ -360,9 +382,15 @@ class DeviceWorker(QObject):
             self.recordingChanged.emit(None)
             if status.error:
                 self.error.emit(status.error)
+            crossings = self.alarms.end_recording()
+            also = alarm_events_metadata(crossings, self.alarms.config) if crossings else None
             stored = self.health.end_recording(status.path if status.rows_written else None,
                                                self.error.emit,
-                                               extra=self.acquisition.board.end_metadata())
+                                               {**self.acquisition.board.end_metadata(),
+                                                **(also or {})})
             if stored:
                 self.deviceMessage.emit(1, f"{stored} fault event(s) stored in "
+                                           f"{status.path.name}")
+            if crossings and status.rows_written:
+                self.deviceMessage.emit(1, f"{len(crossings)} alarm crossing(s) stored in "
                                            f"{status.path.name}")
