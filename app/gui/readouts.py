@@ -179,6 +179,7 @@ class TiltReadouts(QWidget):
         self._value_px = value_px
         self._auto_scale = False
         self._max_px = value_px
+        self._min_px = value_px
 
         self._tiles: dict[str, _ReadoutTile] = {}
         self._grid = QGridLayout(self)
@@ -227,11 +228,14 @@ class TiltReadouts(QWidget):
         """Tiles per row."""
         return self._columns
 
-    def setAutoScale(self, enabled: bool, maximum_px: int | None = None) -> None:
-        """Let the digits grow (up to ``maximum_px``) to fill the widget; off: back to the
-        size given at construction."""
+    def setAutoScale(
+        self, enabled: bool, maximum_px: int | None = None, minimum_px: int | None = None
+    ) -> None:
+        """Let the digits fill the widget, from ``minimum_px`` (the widget asks for room
+        for these) up to ``maximum_px``; off: back to the size given at construction."""
         self._auto_scale = bool(enabled)
         self._max_px = maximum_px or self._base_px * 6
+        self._min_px = minimum_px or self._base_px
         policy = QSizePolicy.Policy.Expanding if enabled else QSizePolicy.Policy.Preferred
         self.setSizePolicy(policy, policy)
         if enabled:
@@ -357,7 +361,7 @@ class TiltReadouts(QWidget):
         tile_h = (self.height() - spacing * (self._rows() - 1)) / self._rows()
         fixed_w, fixed_h = self._tile_overhead()
         fit = min((tile_w - fixed_w) / self._per_px[0], (tile_h - fixed_h) / self._per_px[1])
-        self._set_value_px(int(max(self._base_px, min(self._max_px, fit))))
+        self._set_value_px(int(max(self._min_px, min(self._max_px, fit))))
 
     def _set_value_px(self, value_px: int) -> None:
         if value_px == self._value_px:
@@ -371,13 +375,13 @@ class TiltReadouts(QWidget):
         return self.minimumSizeHint() if self._auto_scale else super().sizeHint()
 
     def minimumSizeHint(self) -> QSize:
-        """Auto scale: room for the digits at the size given at construction."""
+        """Auto scale: room for the smallest digits allowed."""
         if not self._auto_scale:
             return super().minimumSizeHint()
         spacing = self._grid.spacing()
         fixed_w, fixed_h = self._tile_overhead()
-        tile_w = fixed_w + self._per_px[0] * self._base_px
-        tile_h = fixed_h + self._per_px[1] * self._base_px
+        tile_w = fixed_w + self._per_px[0] * self._min_px
+        tile_h = fixed_h + self._per_px[1] * self._min_px
         return QSize(
             math.ceil(tile_w * self._columns + spacing * (self._columns - 1)),
             math.ceil(tile_h * self._rows() + spacing * (self._rows() - 1)),

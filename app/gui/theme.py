@@ -331,13 +331,23 @@ def apply_theme(app: QApplication, choice_name: str | None = None) -> Theme:
 
 
 def _apply(app: QApplication, theme: Theme) -> Theme:
+    changed = theme is not _current
     _make_current(theme)
-    if app.style().name().lower() != "fusion":
+    # Under a stylesheet the style reports no name; the base is Fusion when no stylesheet
+    # is set yet (a new style would re-polish every widget: only when needed).
+    if not app.styleSheet() and app.style().name().lower() != "fusion":
         app.setStyle("Fusion")
-    app.setPalette(palette(theme))
-    app.setStyleSheet(load_stylesheet(theme))
-    app.setWindowIcon(app_icon())
-    notifier().changed.emit(theme.name)
+    # Setting an equal stylesheet again would still re-polish every widget: skip it.
+    stylesheet = load_stylesheet(theme)
+    if app.styleSheet() != stylesheet:
+        app.setPalette(palette(theme))
+        app.setStyleSheet(stylesheet)
+    elif app.palette() != palette(theme):
+        app.setPalette(palette(theme))
+    if app.windowIcon().isNull():
+        app.setWindowIcon(app_icon())
+    if changed:
+        notifier().changed.emit(theme.name)
     return theme
 
 
