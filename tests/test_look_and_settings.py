@@ -211,6 +211,9 @@ def test_theme_switch_is_live_for_plots_bubble_and_stylesheet(qtbot, tmp_path, q
         window.set_theme("high-contrast")
         assert plots.graphics.backgroundBrush().color() == QColor("#000000")
         assert window.settings.value("theme") == "high-contrast"
+        # A new stylesheet would put back the labels' first fonts: the digits keep their size.
+        digits = window.readouts.valueLabel("roll").font().pixelSize()
+        assert digits == window.readouts.valuePixelSize()
     finally:
         window.close()
 
@@ -307,17 +310,21 @@ def test_f11_shows_only_bubble_and_digits_and_esc_restores_the_layout(qtbot, tmp
 # ---- Visual fixes ---------------------------------------------------------------------------
 
 
+@pytest.mark.parametrize("side", [180, 340])
 @pytest.mark.parametrize(("roll", "pitch"), [(3.0, 0.0), (2.9, 0.4), (-3.0, 0.0), (0.0, 0.0),
                                               (7.0, 0.0), (-9.0, 0.2)])
-def test_the_full_scale_caption_never_covers_the_bubble(qtbot, roll, pitch):
+def test_the_full_scale_caption_never_covers_the_bubble(qtbot, roll, pitch, side):
     level = BubbleLevel()
     qtbot.addWidget(level)
-    level.resize(340, 340)
-    level.setRange(5.0)
+    level.resize(side, side)
+    level.setRange(2.0)  # four rings, whose labels are in the lower right
     level.setValid(True)
     for step in range(11):  # the bubble moves there from the centre
         level.setTilt(roll * step / 10, pitch * step / 10)
-        assert not level.captionRect().intersects(level.bubbleRect()), (step, roll, pitch)
+        caption = level.captionRect()
+        assert not caption.intersects(level.bubbleRect()), (step, roll, pitch)
+        for _, label, box in level._ring_labels(level._geometry()):
+            assert not caption.intersects(box), label
     assert not level.captionRect().isEmpty()
 
 
@@ -381,14 +388,14 @@ def test_screenshots_of_every_theme_and_mode(qtbot, tmp_path, artifacts_dir):
             for width, height in sizes:
                 window.resize(width, height)
                 shoot(f"window-{name}-{width}x{height}")
-            if name == "high-contrast":
-                continue
-            window.set_instrument_mode(True)
+        window.set_instrument_mode(True)
+        for name in ("high-contrast", "light", "dark"):
+            window.set_theme(name)
             for width, height in sizes:
                 window.resize(width, height)  # whatever the offscreen screen's size
                 qtbot.waitUntil(lambda w=width: window.width() == w, timeout=TIMEOUT_MS)
                 shoot(f"fullscreen-{name}-{width}x{height}")
-            window.set_instrument_mode(False)
+        window.set_instrument_mode(False)
         for path in saved:
             assert os.path.getsize(path) > 10_000
     finally:

@@ -371,27 +371,35 @@ class BubbleLevel(QWidget):
         painter.setBrush(wall)
         painter.drawEllipse(c, r, r)
 
-    def _paint_graduations(self, painter: QPainter, geo: _VialGeometry) -> None:
+    def _ring_labels(self, geo: _VialGeometry) -> list[tuple[float, str, QRectF]]:
+        """Each graduation ring: radius, label and the label's box (lower-right diagonal)."""
         step = _ring_step(self._full_scale_deg)
         ring_count = round(self._full_scale_deg / step)
-        font = self._label_font(geo)
-        painter.setFont(font)
-        metrics = QFontMetricsF(font)
-        ring_pen = QPen(_with_alpha(theme.TEXT_DIM, 110), max(1.0, geo.outer_radius / 200))
-        outer_pen = QPen(_with_alpha(theme.TEXT_DIM, 190), max(1.2, geo.outer_radius / 130))
-        label_angle = math.radians(-45.0)  # labels along the lower-right diagonal
+        metrics = QFontMetricsF(self._label_font(geo))
+        label_angle = math.radians(-45.0)
+        rings = []
         for index in range(1, ring_count + 1):
             radius = geo.scale_radius * index / ring_count
-            painter.setPen(outer_pen if index == ring_count else ring_pen)
-            painter.setBrush(Qt.BrushStyle.NoBrush)
-            painter.drawEllipse(geo.center, radius, radius)
             label = f"{step * index:g}°"
             anchor = QPointF(
                 geo.center.x() + radius * math.cos(label_angle),
                 geo.center.y() - radius * math.sin(label_angle),
             )
             width = metrics.horizontalAdvance(label)
-            box = QRectF(anchor.x() + 3, anchor.y() + 1, width + 2, metrics.height())
+            rings.append(
+                (radius, label, QRectF(anchor.x() + 3, anchor.y() + 1, width + 2, metrics.height()))
+            )
+        return rings
+
+    def _paint_graduations(self, painter: QPainter, geo: _VialGeometry) -> None:
+        painter.setFont(self._label_font(geo))
+        ring_pen = QPen(_with_alpha(theme.TEXT_DIM, 110), max(1.0, geo.outer_radius / 200))
+        outer_pen = QPen(_with_alpha(theme.TEXT_DIM, 190), max(1.2, geo.outer_radius / 130))
+        rings = self._ring_labels(geo)
+        for index, (radius, label, box) in enumerate(rings):
+            painter.setPen(outer_pen if index == len(rings) - 1 else ring_pen)
+            painter.setBrush(Qt.BrushStyle.NoBrush)
+            painter.drawEllipse(geo.center, radius, radius)
             painter.setPen(QColor(theme.TEXT_DIM))
             painter.drawText(box, Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignTop, label)
 
@@ -564,10 +572,18 @@ class BubbleLevel(QWidget):
         painter.drawText(box, Qt.AlignmentFlag.AlignCenter, text)
 
     def _caption_text(self, state: LevelState) -> tuple[str, QColor]:
+        """The caption, short ("±5°") where the long one would run into a ring's label."""
         full_scale = f"{self._full_scale_deg:g}°"
         if state is LevelState.OVER_RANGE:
-            return f"OVER RANGE  > {full_scale}", QColor(theme.ALARM_RED)
-        return f"FULL SCALE ±{full_scale}", _with_alpha(theme.TEXT_DIM, 230)
+            long, short, colour = f"OVER RANGE  > {full_scale}", f"> {full_scale}", theme.ALARM_RED
+        else:
+            long, short, colour = f"FULL SCALE ±{full_scale}", f"±{full_scale}", theme.TEXT_DIM
+        geo = self._geometry()
+        if geo.outer_radius >= 20:
+            box = self._caption_box(geo, long)
+            if any(box.intersects(label) for _, _, label in self._ring_labels(geo)):
+                long = short
+        return long, _with_alpha(colour, 230)
 
     def _caption_font(self, geo: _VialGeometry) -> QFont:
         font = self._label_font(geo)

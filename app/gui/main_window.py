@@ -69,7 +69,7 @@ from app.services.session import DeviceSession
 from app.services.stream_status import StreamStatus
 
 PLOT_WINDOWS_S = (2, 5, 10, 20, 30, 60)
-READOUT_MIN_PX, READOUT_MAX_PX = 28, 72
+READOUT_MIN_PX, READOUT_MAX_PX = 28, 96
 """Smallest and largest digits beside the level in the usual layout."""
 INSTRUMENT_MAX_PX = 400
 """Largest digits in the full-screen instrument mode (they fill the half screen)."""
@@ -302,7 +302,7 @@ class MainWindow(QMainWindow):
         row.addWidget(self.level, 3)
         side = QVBoxLayout()
         # The digits grow into the height beside the level (no empty space under them).
-        self.readouts.setAutoScale(True, READOUT_MAX_PX, READOUT_MIN_PX)
+        self.readouts.setAutoScale(True, READOUT_MAX_PX, READOUT_MIN_PX, (2, 1))
         side.addWidget(self.readouts, 1)
         self.controls = QWidget()
         controls = QHBoxLayout(self.controls)
@@ -802,16 +802,14 @@ class MainWindow(QMainWindow):
                 self.statusBar(), self.controls, self.truth_label, self.banner,
             ):
                 widget.hide()
-            self.readouts.setColumns(1)
-            self.readouts.setAutoScale(True, INSTRUMENT_MAX_PX, READOUT_MIN_PX)
+            self.readouts.setAutoScale(True, INSTRUMENT_MAX_PX, READOUT_MIN_PX, (1, 2))
             self._level_row.setStretch(0, 1)
             self._level_row.setStretch(1, 1)
             self.showFullScreen()
             return
         saved = self._layout_before_instrument or {}
         self._layout_before_instrument = None
-        self.readouts.setColumns(2)
-        self.readouts.setAutoScale(True, READOUT_MAX_PX, READOUT_MIN_PX)
+        self.readouts.setAutoScale(True, READOUT_MAX_PX, READOUT_MIN_PX, (2, 1))
         self._level_row.setStretch(0, 3)
         self._level_row.setStretch(1, 2)
         window_state = saved.get("window_state", Qt.WindowState.WindowNoState)

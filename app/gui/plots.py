@@ -29,10 +29,12 @@ _SAMPLES = {
 """How a pen style looks in a legend line."""
 
 
-def _make_plot(title: str, unit: str) -> pg.PlotItem:
+def _make_plot() -> pg.PlotItem:
     plot = pg.PlotItem()
-    plot.setLabel("left", title, units=unit)
-    plot.getAxis("left").setWidth(62)
+    # The plot's name and unit lead its header line: a rotated axis label does not fit a
+    # short plot. Values stay in the named unit (no "m°" prefixes).
+    plot.getAxis("left").setWidth(48)
+    plot.getAxis("left").enableAutoSIPrefix(False)
     plot.showGrid(x=False, y=False)
     # Traces arrive already min/max-decimated to the pixel width (app.core.decimation), so
     # pyqtgraph's own per-frame downsampling would only repeat the work.
@@ -42,14 +44,16 @@ def _make_plot(title: str, unit: str) -> pg.PlotItem:
     return plot
 
 
-def legend_html(entries: list[tuple[str, str, Qt.PenStyle]]) -> str:
-    """One legend line: a short sample of each (label, colour, pen style), then its label."""
+def legend_html(title: str, entries: list[tuple[str, str, Qt.PenStyle]]) -> str:
+    """A plot's header line: its title, then a short sample of each (label, colour, pen
+    style) and the label."""
     dim = theme.TEXT_DIM
-    return "&nbsp;&nbsp;&nbsp;".join(
+    items = [f'<span style="color:{theme.TEXT}"><b>{escape(title)}</b></span>'] + [
         f'<span style="color:{colour}">{_SAMPLES.get(style, "━━")}</span>'
         f'&nbsp;<span style="color:{dim}">{escape(label)}</span>'
         for label, colour, style in entries
-    )
+    ]
+    return "&nbsp;&nbsp;&nbsp;&nbsp;".join(items)
 
 
 class LivePlots(QWidget):
@@ -66,9 +70,9 @@ class LivePlots(QWidget):
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addWidget(self.graphics)
 
-        self.accel_plot = _make_plot("accel", "g")
-        self.gyro_plot = _make_plot("rate", "°/s")
-        self.angle_plot = _make_plot("angle", "°")
+        self.accel_plot = _make_plot()
+        self.gyro_plot = _make_plot()
+        self.angle_plot = _make_plot()
         for row, plot in enumerate((self.accel_plot, self.gyro_plot, self.angle_plot)):
             self.graphics.addItem(plot, row=row, col=0)
             if plot is not self.accel_plot:
@@ -82,6 +86,10 @@ class LivePlots(QWidget):
         # entries of each plot, so that a theme switch can redraw them.
         self._pens: dict[pg.PlotDataItem, tuple[Callable[[], str], Qt.PenStyle]] = {}
         self._legends: dict[pg.PlotItem, list[tuple[str, pg.PlotDataItem]]] = {}
+        self._titles: dict[pg.PlotItem, str] = {
+            self.accel_plot: "acceleration (g)", self.gyro_plot: "angular rate (°/s)",
+            self.angle_plot: "roll, pitch (°)",
+        }
         solid, dash = Qt.PenStyle.SolidLine, Qt.PenStyle.DashLine
 
         def axis_colour(index: int) -> Callable[[], str]:
@@ -107,7 +115,8 @@ class LivePlots(QWidget):
         self.comparison_curves: dict[str, tuple[pg.PlotDataItem, pg.PlotDataItem]] = {}
 
         # Inclination error against the reference, shown only when the source has one.
-        self.error_plot = _make_plot("error", "°")
+        self.error_plot = _make_plot()
+        self._titles[self.error_plot] = "inclination error (°)"
         self.error_plot.setXLink(self.accel_plot)
         self.error_curve = self._curve(
             self.error_plot, "main filter", lambda: theme.TRACE_TILT, solid
@@ -149,7 +158,7 @@ class LivePlots(QWidget):
             (label, self._pens[curve][0](), self._pens[curve][1])
             for label, curve in self._legends.get(plot, [])
         ]
-        plot.setTitle(legend_html(entries), size="8pt", justify="right")
+        plot.setTitle(legend_html(self._titles[plot], entries), size="8pt", justify="left")
         # A compact header: pyqtgraph gives titles 30 px.
         plot.layout.setRowFixedHeight(0, HEADER_PX)
         plot.titleLabel.setMaximumHeight(HEADER_PX)

@@ -105,6 +105,7 @@ class _ReadoutTile(QFrame):
 
         value_row = QHBoxLayout()
         self._value_row = value_row
+        self._value_px = 0
         value_row.addStretch(1)
         value_row.addWidget(self.value, 0, Qt.AlignmentFlag.AlignBaseline)
         value_row.addWidget(self.unit, 0, Qt.AlignmentFlag.AlignBaseline)
@@ -122,6 +123,7 @@ class _ReadoutTile(QFrame):
 
     def setValuePixelSize(self, value_px: int) -> None:
         """Size the digits (and with them caption, unit and note) to ``value_px`` pixels."""
+        self._value_px = value_px
         caption_font = QFont(self.font())
         caption_font.setPixelSize(max(10, round(value_px * 0.28)))
         caption_font.setBold(True)
@@ -180,6 +182,8 @@ class TiltReadouts(QWidget):
         self._auto_scale = False
         self._max_px = value_px
         self._min_px = value_px
+        self._resizing_tiles = False
+        self._auto_columns: tuple[int, ...] = ()
 
         self._tiles: dict[str, _ReadoutTile] = {}
         self._grid = QGridLayout(self)
@@ -197,6 +201,7 @@ class TiltReadouts(QWidget):
             for font in (_readout_font(100), _readout_font(30), _readout_font(28))
         )
         self._per_px = (width_100 / 100.0, height_100 / 100.0)
+        theme.notifier().changed.connect(self._restore_fonts)
 
         self._hold_badge = QLabel("HOLD", self)
         self._hold_badge.setObjectName("HoldBadge")
@@ -229,11 +234,18 @@ class TiltReadouts(QWidget):
         return self._columns
 
     def setAutoScale(
-        self, enabled: bool, maximum_px: int | None = None, minimum_px: int | None = None
+        self, enabled: bool, maximum_px: int | None = None, minimum_px: int | None = None,
+        columns: tuple[int, ...] = (),
     ) -> None:
         """Let the digits fill the widget, from ``minimum_px`` (the widget asks for room
-        for these) up to ``maximum_px``; off: back to the size given at construction."""
+        for these) up to ``maximum_px``; with several ``columns`` (e.g. ``(2, 1)``) the tiles
+        are arranged in whichever gives the largest digits (the first when equal). Off: back
+        to the size given at construction."""
         self._auto_scale = bool(enabled)
+        self._auto_columns = tuple(columns) if enabled else ()
+        if self._auto_columns and self._columns != self._auto_columns[0]:
+            self._columns = self._auto_columns[0]
+            self._place_tiles()
         self._max_px = maximum_px or self._base_px * 6
         self._min_px = minimum_px or self._base_px
         policy = QSizePolicy.Policy.Expanding if enabled else QSizePolicy.Policy.Preferred
@@ -345,30 +357,52 @@ class TiltReadouts(QWidget):
                 self._tiles[name], index // self._columns, index % self._columns
             )
 
-    def _rows(self) -> int:
-        return math.ceil(len(QUANTITIES) / self._columns)
-
     def _tile_overhead(self) -> tuple[float, float]:
         """Width and height of a tile that do not grow with the digits (margins, spacing)."""
         return 40.0, 32.0
+
+    def _fit(self, columns: int) -> float:
+        """The digit size at which tiles in ``columns`` fill the widget."""
+        rows = math.ceil(len(QUANTITIES) / columns)
+        spacing = self._grid.spacing()
+        tile_w = (self.width() - spacing * (columns - 1)) / columns
+        tile_h = (self.height() - spacing * (rows - 1)) / rows
+        fixed_w, fixed_h = self._tile_overhead()
+        return min((tile_w - fixed_w) / self._per_px[0], (tile_h - fixed_h) / self._per_px[1])
 
     def _fit_digits(self) -> None:
         """Auto scale: the largest digits for which every tile fits the widget."""
         if not self._auto_scale:
             return
-        spacing = self._grid.spacing()
-        tile_w = (self.width() - spacing * (self._columns - 1)) / self._columns
-        tile_h = (self.height() - spacing * (self._rows() - 1)) / self._rows()
-        fixed_w, fixed_h = self._tile_overhead()
-        fit = min((tile_w - fixed_w) / self._per_px[0], (tile_h - fixed_h) / self._per_px[1])
+        if self._auto_columns:
+            best = max(self._auto_columns, key=self._fit)  # the first of equals
+            if best != self._columns:
+                self._columns = best
+                self._place_tiles()
+        fit = self._fit(self._columns)
         self._set_value_px(int(max(self._min_px, min(self._max_px, fit))))
+
+    def _restore_fonts(self, _theme_name: str = "") -> None:
+        """A new application stylesheet puts back the fonts the labels had when they were
+        first styled: size them again."""
+        for tile in self._tiles.values():
+            tile.setValuePixelSize(self._value_px)
 
     def _set_value_px(self, value_px: int) -> None:
         if value_px == self._value_px:
             return
         self._value_px = value_px
-        for tile in self._tiles.values():
-            tile.setValuePixelSize(value_px)
+        if self._resizing_tiles:  # a resize while the fonts change: the loop below takes it
+            return
+        self._resizing_tiles = True
+        try:
+            applied = None
+            while applied != self._value_px:
+                applied = self._value_px
+                for tile in self._tiles.values():
+                    tile.setValuePixelSize(applied)
+        finally:
+            self._resizing_tiles = False
 
     def sizeHint(self) -> QSize:
         """Auto scale: the size at the smallest digits (the layout gives what it can)."""
@@ -378,13 +412,15 @@ class TiltReadouts(QWidget):
         """Auto scale: room for the smallest digits allowed."""
         if not self._auto_scale:
             return super().minimumSizeHint()
+        columns = self._auto_columns[0] if self._auto_columns else self._columns
+        rows = math.ceil(len(QUANTITIES) / columns)
         spacing = self._grid.spacing()
         fixed_w, fixed_h = self._tile_overhead()
         tile_w = fixed_w + self._per_px[0] * self._min_px
         tile_h = fixed_h + self._per_px[1] * self._min_px
         return QSize(
-            math.ceil(tile_w * self._columns + spacing * (self._columns - 1)),
-            math.ceil(tile_h * self._rows() + spacing * (self._rows() - 1)),
+            math.ceil(tile_w * columns + spacing * (columns - 1)),
+            math.ceil(tile_h * rows + spacing * (rows - 1)),
         )
 
     def _place_hold_badge(self) -> None:
