@@ -307,6 +307,22 @@ def test_f11_shows_only_bubble_and_digits_and_esc_restores_the_layout(qtbot, tmp
         window.close()
 
 
+def test_closing_in_full_screen_remembers_the_usual_layout(qtbot, tmp_path):
+    path = tmp_path / "settings.ini"
+    window = open_window(qtbot, path, FIRST_DEVICE)
+    window.docks["measure"].hide()
+    window.set_instrument_mode(True)
+    window.close()
+    again = open_window(qtbot, path, FIRST_DEVICE)
+    try:
+        assert not again.instrument_mode and not again.isFullScreen()
+        assert again.docks["filter"].isVisible() and again.docks["plots"].isVisible()
+        assert not again.docks["measure"].isVisible()
+        assert again.menuBar().isVisible() and again.device_bar.isVisible()
+    finally:
+        again.close()
+
+
 # ---- Visual fixes ---------------------------------------------------------------------------
 
 

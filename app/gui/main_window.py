@@ -924,7 +924,9 @@ class MainWindow(QMainWindow):
 
     def _apply_default_layout(self) -> None:
         height = max(300, int(self.height() * 0.45))
-        self.resizeDocks([self.docks["filter"]], [400], Qt.Orientation.Horizontal)
+        # The panels take at most a third of a narrow window (1024 px: the level keeps room).
+        width = min(400, int(self.width() * 0.3))
+        self.resizeDocks([self.docks["filter"]], [width], Qt.Orientation.Horizontal)
         self.resizeDocks([self.docks["plots"]], [height], Qt.Orientation.Vertical)
 
     def closeEvent(self, event: QCloseEvent) -> None:
