@@ -416,3 +416,19 @@ def test_screenshots_of_every_theme_and_mode(qtbot, tmp_path, artifacts_dir):
             assert os.path.getsize(path) > 10_000
     finally:
         window.close()
+
+
+def test_status_texts_are_cut_with_an_ellipsis_in_a_narrow_window(qtbot, tmp_path):
+    window = open_window(qtbot, tmp_path / "settings.ini", SECOND_DEVICE)
+    try:
+        window.resize(760, 600)
+        qtbot.waitUntil(lambda: "samples" in window.status_rate.text(), timeout=TIMEOUT_MS)
+        labels = (window.status_device, window.status_rate, window.status_filter,
+                  window.status_calibration)
+        qtbot.waitUntil(lambda: any(label.isElided() for label in labels), timeout=TIMEOUT_MS)
+        # Every field keeps its whole text in the tooltip, and the lights stay in view.
+        assert all(label.toolTip() for label in labels if label.isElided())
+        lights = window.health_lights.geometry()
+        assert window.statusBar().rect().contains(lights)
+    finally:
+        window.close()

@@ -49,6 +49,7 @@ from app.gui.bubble_level import BubbleLevel
 from app.gui.calibration_wizard import CalibrationWizard
 from app.gui.device_bar import DeviceBar
 from app.gui.device_panel import DevicePanel
+from app.gui.elided_label import ElidedLabel
 from app.gui.filter_panel import FilterPanel
 from app.gui.health_lights import HealthLights
 from app.gui.measure_panel import MeasurePanel
@@ -207,11 +208,11 @@ class MainWindow(QMainWindow):
         self._default_layout_pending = True
 
         # Status bar.
-        self.status_device = QLabel("No device")
-        self.status_rate = QLabel()
-        self.status_filter = QLabel()
+        self.status_device = ElidedLabel("No device")
+        self.status_rate = ElidedLabel()
+        self.status_filter = ElidedLabel()
         self.status_fps = QLabel()
-        self.status_calibration = QLabel()
+        self.status_calibration = ElidedLabel()
         self.status_calibration.setObjectName("calibrationStatus")
         self.status_tare = QLabel()
         self.status_recording = QLabel()
