@@ -287,6 +287,10 @@ def test_f11_shows_only_bubble_and_digits_and_esc_restores_the_layout(qtbot, tmp
                   window.statusBar(), window.controls, window.truth_label]
         assert not any(widget.isVisible() for widget in hidden)
         assert window.level.isVisible() and window.readouts.isVisible()
+        qtbot.keyClick(window, Qt.Key.Key_H)  # Hold works without its button
+        assert window.presenter.settings.hold and window.readouts.isHeld()
+        qtbot.keyClick(window, Qt.Key.Key_H)
+        assert not window.presenter.settings.hold
         window.resize(1920, 1080)  # the offscreen screen is smaller than a real one
         qtbot.waitUntil(lambda: window.readouts.valuePixelSize() >= 100, timeout=TIMEOUT_MS)
         assert window.readouts.valuePixelSize() > 2 * digits

@@ -322,9 +322,13 @@ class MainWindow(QMainWindow):
         self.range_combo.setToolTip("Full scale of the bubble level")
         self.hold_button = QPushButton("Hold")
         self.hold_button.setCheckable(True)
-        self.hold_button.setShortcut(QKeySequence("H"))
         self.hold_button.setToolTip("Freeze the readouts (H)")
         self.hold_button.toggled.connect(lambda on: self.presenter.set_hold(on))
+        # H is the window's (the button is hidden in the full-screen instrument).
+        self.hold_action = QAction("Hold", self)
+        self.hold_action.setShortcut(QKeySequence("H"))
+        self.hold_action.triggered.connect(self.hold_button.toggle)
+        self.addAction(self.hold_action)
         for widget in (self.unit_combo, self.averaging_combo, self.range_combo, self.hold_button):
             controls.addWidget(widget)
         side.addWidget(self.controls)
