@@ -64,3 +64,24 @@ def test_every_unit_converts_and_has_a_title():
         assert math.isfinite(slope_from_angle(5.0, key))
     with pytest.raises(ValueError, match="unknown slope unit"):
         slope_from_angle(1.0, "furlongs")
+
+
+def test_readouts_show_ratios_and_copy_what_they_show(qtbot):
+    from app.gui.readouts import TiltReadouts
+
+    readouts = TiltReadouts()
+    qtbot.addWidget(readouts)
+    readouts.setValid(True)
+    roll, pitch, tilt = (slope_from_angle(a, "ratio") for a in (-1.0, 0.0, 1.0))
+    readouts.setValues(roll, pitch, tilt, 270.0, "ratio")
+    assert readouts.readoutText("roll") == "−1:57.3"
+    assert readouts.readoutText("pitch") == "1:∞"
+    assert readouts.readoutText("tilt") == "1:57.3"
+    assert readouts.reading() == "Roll -1:57.3 Pitch 1:∞ Tilt 1:57.3"
+    readouts.setValues(1.0, 12.0, 12.04, 85.0, "in/ft")
+    assert readouts.readoutText("pitch") == "+12.00 in/ft"
+    assert readouts.reading() == "Roll 1.00 in/ft Pitch 12.00 in/ft Tilt 12.04 in/ft"
+    readouts.setValues(math.nan, 0.0, 0.0, 0.0, "ratio")
+    assert readouts.reading() == ""
+    readouts.setValid(False)
+    assert readouts.reading() == ""

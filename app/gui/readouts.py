@@ -264,8 +264,7 @@ class TiltReadouts(QWidget):
         """The values shown as one line for the clipboard (``Roll 1.23° Pitch -0.45° Tilt
         1.31°``), or ``""`` when no numbers are shown."""
         if not self._valid or not all(
-            math.isfinite(self._values[name]) or self._unit == "ratio"
-            for name in ("roll", "pitch", "tilt")
+            format_slope(self._values[name], self._unit) for name in ("roll", "pitch", "tilt")
         ):
             return ""
         return reading_text(
