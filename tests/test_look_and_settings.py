@@ -214,6 +214,11 @@ def test_theme_switch_is_live_for_plots_bubble_and_stylesheet(qtbot, tmp_path, q
         # A new stylesheet would put back the labels' first fonts: the digits keep their size.
         digits = window.readouts.valueLabel("roll").font().pixelSize()
         assert digits == window.readouts.valuePixelSize()
+        # Text coloured in the note follows too, also while the readouts are held.
+        window.hold_button.setChecked(True)
+        window.set_theme("light")
+        note = window.readouts._tiles["direction"].note.text()
+        assert f"color:{theme.LIGHT.TEXT}" in note
     finally:
         window.close()
 
@@ -411,6 +416,7 @@ def test_screenshots_of_every_theme_and_mode(qtbot, tmp_path, artifacts_dir):
         window.set_instrument_mode(True)
         for name in ("high-contrast", "light", "dark"):
             window.set_theme(name)
+            window.hold_button.setChecked(name == "dark")  # the HOLD badge, once
             for width, height in sizes:
                 window.resize(width, height)  # whatever the offscreen screen's size
                 qtbot.waitUntil(lambda w=width: window.width() == w, timeout=TIMEOUT_MS)

@@ -205,11 +205,7 @@ class TiltReadouts(QWidget):
 
         self._hold_badge = QLabel("HOLD", self)
         self._hold_badge.setObjectName("HoldBadge")
-        badge_font = QFont(self.font())
-        badge_font.setPixelSize(max(10, round(value_px * 0.3)))
-        badge_font.setBold(True)
-        badge_font.setLetterSpacing(QFont.SpacingType.PercentageSpacing, 115)
-        self._hold_badge.setFont(badge_font)
+        self._size_badge()
         self._hold_badge.setAlignment(Qt.AlignmentFlag.AlignCenter)
         # Readable even without the application stylesheet.
         self._hold_badge.setStyleSheet(
@@ -381,11 +377,23 @@ class TiltReadouts(QWidget):
         fit = self._fit(self._columns)
         self._set_value_px(int(max(self._min_px, min(self._max_px, fit))))
 
+    def _size_badge(self) -> None:
+        badge_font = QFont(self.font())
+        badge_font.setPixelSize(max(10, round(self._value_px * 0.3)))
+        badge_font.setBold(True)
+        badge_font.setLetterSpacing(QFont.SpacingType.PercentageSpacing, 115)
+        self._hold_badge.setFont(badge_font)
+        if self._held:
+            self._place_hold_badge()
+
     def _restore_fonts(self, _theme_name: str = "") -> None:
-        """A new application stylesheet puts back the fonts the labels had when they were
-        first styled: size them again."""
+        """After a theme switch: a new application stylesheet puts back the fonts the labels
+        had when they were first styled, so size them again; and the raised side's colour
+        is the new theme's (the texts are not redrawn while held)."""
         for tile in self._tiles.values():
             tile.setValuePixelSize(self._value_px)
+        self._size_badge()
+        self._show_texts()
 
     def _set_value_px(self, value_px: int) -> None:
         if value_px == self._value_px:
@@ -400,6 +408,7 @@ class TiltReadouts(QWidget):
                 applied = self._value_px
                 for tile in self._tiles.values():
                     tile.setValuePixelSize(applied)
+                self._size_badge()
         finally:
             self._resizing_tiles = False
 
