@@ -12,9 +12,9 @@ from app.core.orientation import (
     inclination_error_deg,
     quaternion_from_roll_pitch,
     quaternion_from_up,
-    slope_from_angle,
     up_in_sensor_frame,
 )
+from app.core.readout import slope_from_angle
 
 G = 9.80665
 

@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from app.core.orientation import angles_from_up, slope_from_angle, up_in_sensor_frame
-from app.core.readout import averaged_angles
+from app.core.orientation import angles_from_up, up_in_sensor_frame
+from app.core.readout import averaged_angles, slope_from_angle
 
 LOG_FORMAT = "inclinometer-measurement-log"
 LOG_VERSION = 1

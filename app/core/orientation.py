@@ -105,14 +105,3 @@ def inclination_error_deg(q_estimate: np.ndarray, q_reference: np.ndarray) -> np
     dot = np.sum(u_est * u_ref, axis=-1)
     return np.degrees(np.arctan2(cross, dot))
 
-
-def slope_from_angle(angle_deg: np.ndarray | float, unit: str) -> np.ndarray | float:
-    """Express an inclination in a levelling unit: ``deg``, ``percent`` (grade) or ``mm/m``."""
-    if unit == "deg":
-        return angle_deg
-    tangent = np.tan(np.radians(angle_deg))
-    if unit == "percent":
-        return 100.0 * tangent
-    if unit == "mm/m":
-        return 1000.0 * tangent
-    raise ValueError(f"unknown slope unit {unit!r}; use 'deg', 'percent' or 'mm/m'")

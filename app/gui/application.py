@@ -4,22 +4,15 @@ from __future__ import annotations
 
 import sys
 
-from PySide6.QtCore import QSettings
 from PySide6.QtWidgets import QApplication
 
 from app import __version__
 from app.gui import theme
 from app.gui.main_window import MainWindow
+from app.gui.user_settings import APPLICATION, ORGANIZATION, create_settings
 from app.services.session import DeviceSession
 
-ORGANIZATION = "Inclinometer"
-APPLICATION = "Inclinometer"
-
-
-def create_settings() -> QSettings:
-    """User settings in the platform's user configuration directory."""
-    ini, user = QSettings.Format.IniFormat, QSettings.Scope.UserScope
-    return QSettings(ini, user, ORGANIZATION, APPLICATION)
+__all__ = ["APPLICATION", "ORGANIZATION", "create_settings", "run_gui"]
 
 
 def run_gui(device_url: str | None = None, filter_name: str | None = None) -> int:
@@ -29,7 +22,7 @@ def run_gui(device_url: str | None = None, filter_name: str | None = None) -> in
     app.setApplicationName(APPLICATION)
     app.setApplicationVersion(__version__)
     app.setDesktopFileName("org.inclinometer.Inclinometer")  # Wayland finds the icon by it
-    theme.apply_theme(app)
+    theme.apply_theme(app)  # the window then applies the remembered theme
     session = DeviceSession()
     window = MainWindow(session, create_settings(), device_url, filter_name)
     window.show()

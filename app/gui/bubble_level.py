@@ -102,6 +102,8 @@ class BubbleLevel(QWidget):
         policy.setHeightForWidth(True)
         self.setSizePolicy(policy)
         self.setMinimumSize(160, 160)
+        self._caption_below = False
+        theme.notifier().changed.connect(self._on_theme_changed)
 
     # ---- API -----------------------------------------------------------------------------
 
@@ -113,6 +115,7 @@ class BubbleLevel(QWidget):
         self._roll_deg = float(roll_deg)
         self._pitch_deg = float(pitch_deg)
         self._tilt_deg = None if tilt_deg is None else float(tilt_deg)
+        self._place_caption()
         self.update()
 
     def setRange(self, full_scale_deg: float) -> None:
@@ -121,6 +124,7 @@ class BubbleLevel(QWidget):
             raise ValueError(f"full scale must be positive, got {full_scale_deg!r}")
         self._full_scale_deg = float(full_scale_deg)
         self._static_layer = None
+        self._place_caption()
         self.update()
 
     def setLevelTolerance(self, tolerance_deg: float) -> None:
@@ -147,6 +151,7 @@ class BubbleLevel(QWidget):
     def setValid(self, valid: bool) -> None:
         """Show the bubble (True) or hide it and print "no data" (False, e.g. disconnected)."""
         self._valid = bool(valid)
+        self._place_caption()
         self.update()
 
     def setReference(self, roll_deg: float, pitch_deg: float) -> None:
@@ -207,6 +212,35 @@ class BubbleLevel(QWidget):
         pin = self.state() is LevelState.OVER_RANGE
         return self._position(self._roll_deg, self._pitch_deg, self._geometry(), pin)
 
+    def captionRect(self) -> QRectF:
+        """Where the full-scale caption is printed, in widget pixels (empty when none)."""
+        geo = self._geometry()
+        if geo.outer_radius < 20:
+            return QRectF()
+        return self._caption_box(geo, self._caption_text(self.state())[0])
+
+    def bubbleRect(self) -> QRectF:
+        """The bubble's bounding square in widget pixels (empty when no data)."""
+        if self.state() is LevelState.NO_DATA:
+            return QRectF()
+        geo = self._geometry()
+        center, r = self.bubbleCenter(), geo.bubble_radius * 1.25  # with its meniscus
+        return QRectF(center.x() - r, center.y() - r, 2 * r, 2 * r)
+
+    def _place_caption(self) -> None:
+        """Move the caption to the other side if the bubble now covers it (hysteresis: it
+        stays where it is until the bubble reaches it)."""
+        geo = self._geometry()
+        if geo.outer_radius < 20 or self.state() is LevelState.NO_DATA:
+            return
+        text = self._caption_text(self.state())[0]
+        if self._caption_box(geo, text).intersects(self.bubbleRect()):
+            self._caption_below = not self._caption_below
+
+    def _on_theme_changed(self, _name: str) -> None:
+        self._static_layer = None
+        self.update()
+
     # ---- Qt size handling ----------------------------------------------------------------
 
     def sizeHint(self) -> QSize:
@@ -229,6 +263,7 @@ class BubbleLevel(QWidget):
         """Drop the cached static drawing; it is redrawn at the new size."""
         self._static_layer = None
         super().resizeEvent(event)
+        self._place_caption()
 
     def changeEvent(self, event: QEvent) -> None:
         """Redraw the cached engraving when the widget's font changes."""
@@ -273,7 +308,7 @@ class BubbleLevel(QWidget):
         painter.drawPixmap(0, 0, self._static_pixmap(geo))
 
         state = self.state()
-        state_color = _STATE_COLORS[state]
+        state_color = _state_color(state)
         if self._alarm and state is not LevelState.NO_DATA:
             state_color = QColor(theme.ALARM_STATE)
             self._paint_alarm_ring(painter, geo, state_color)
@@ -321,21 +356,17 @@ class BubbleLevel(QWidget):
         painter.setBrush(shadow)
         painter.drawEllipse(c, r_out * 1.04, r_out * 1.04)
         # Turned-metal ring: a conical gradient gives the machined sheen.
+        t = theme.current()
         metal = QConicalGradient(c, 135)
-        metal.setColorAt(0.00, QColor("#8d959e"))
-        metal.setColorAt(0.20, QColor("#4b525a"))
-        metal.setColorAt(0.45, QColor("#2e3339"))
-        metal.setColorAt(0.55, QColor("#3a4047"))
-        metal.setColorAt(0.75, QColor("#2a2e33"))
-        metal.setColorAt(0.90, QColor("#5c646d"))
-        metal.setColorAt(1.00, QColor("#8d959e"))
+        for stop, colour in zip((0.0, 0.2, 0.45, 0.55, 0.75, 0.9, 1.0), t.BEZEL_STOPS):
+            metal.setColorAt(stop, QColor(colour))
         painter.setBrush(metal)
-        painter.setPen(QPen(QColor("#0c0e10"), 1.2))
+        painter.setPen(QPen(QColor(t.BEZEL_EDGE), 1.2))
         painter.drawEllipse(c, r_out, r_out)
         # A darker inner chamfer between the metal and the glass.
         chamfer = QLinearGradient(c - QPointF(0, r_in), c + QPointF(0, r_in))
-        chamfer.setColorAt(0.0, QColor("#0e1013"))
-        chamfer.setColorAt(1.0, QColor("#5a626b"))
+        chamfer.setColorAt(0.0, QColor(t.CHAMFER[0]))
+        chamfer.setColorAt(1.0, QColor(t.CHAMFER[1]))
         painter.setPen(Qt.PenStyle.NoPen)
         painter.setBrush(chamfer)
         chamfer_radius = r_in + (r_out - r_in) * 0.3
@@ -343,43 +374,50 @@ class BubbleLevel(QWidget):
 
     def _paint_glass(self, painter: QPainter, geo: _VialGeometry) -> None:
         c, r = geo.center, geo.vial_radius
+        t = theme.current()
         liquid = QRadialGradient(c - QPointF(r * 0.15, r * 0.2), r * 1.2)
-        liquid.setColorAt(0.0, QColor("#26343c"))
-        liquid.setColorAt(0.55, QColor("#19232a"))
-        liquid.setColorAt(0.85, QColor("#11181d"))
-        liquid.setColorAt(1.0, QColor("#0a0e11"))
+        for stop, colour in zip((0.0, 0.55, 0.85, 1.0), t.VIAL_STOPS):
+            liquid.setColorAt(stop, QColor(colour))
         painter.setBrush(liquid)
-        painter.setPen(QPen(QColor("#07090b"), 1.5))
+        painter.setPen(QPen(QColor(t.VIAL_EDGE), 1.5))
         painter.drawEllipse(c, r, r)
         # Inner shadow along the wall where the glass meets the bezel.
         wall = QRadialGradient(c, r)
         wall.setColorAt(0.88, QColor(0, 0, 0, 0))
-        wall.setColorAt(1.0, QColor(0, 0, 0, 120))
+        wall.setColorAt(1.0, QColor(0, 0, 0, 120 if t.dark else 60))
         painter.setPen(Qt.PenStyle.NoPen)
         painter.setBrush(wall)
         painter.drawEllipse(c, r, r)
 
-    def _paint_graduations(self, painter: QPainter, geo: _VialGeometry) -> None:
+    def _ring_labels(self, geo: _VialGeometry) -> list[tuple[float, str, QRectF]]:
+        """Each graduation ring: radius, label and the label's box (lower-right diagonal)."""
         step = _ring_step(self._full_scale_deg)
         ring_count = round(self._full_scale_deg / step)
-        font = self._label_font(geo)
-        painter.setFont(font)
-        metrics = QFontMetricsF(font)
-        ring_pen = QPen(_with_alpha(theme.TEXT_DIM, 110), max(1.0, geo.outer_radius / 200))
-        outer_pen = QPen(_with_alpha(theme.TEXT_DIM, 190), max(1.2, geo.outer_radius / 130))
-        label_angle = math.radians(-45.0)  # labels along the lower-right diagonal
+        metrics = QFontMetricsF(self._label_font(geo))
+        label_angle = math.radians(-45.0)
+        rings = []
         for index in range(1, ring_count + 1):
             radius = geo.scale_radius * index / ring_count
-            painter.setPen(outer_pen if index == ring_count else ring_pen)
-            painter.setBrush(Qt.BrushStyle.NoBrush)
-            painter.drawEllipse(geo.center, radius, radius)
             label = f"{step * index:g}°"
             anchor = QPointF(
                 geo.center.x() + radius * math.cos(label_angle),
                 geo.center.y() - radius * math.sin(label_angle),
             )
             width = metrics.horizontalAdvance(label)
-            box = QRectF(anchor.x() + 3, anchor.y() + 1, width + 2, metrics.height())
+            rings.append(
+                (radius, label, QRectF(anchor.x() + 3, anchor.y() + 1, width + 2, metrics.height()))
+            )
+        return rings
+
+    def _paint_graduations(self, painter: QPainter, geo: _VialGeometry) -> None:
+        painter.setFont(self._label_font(geo))
+        ring_pen = QPen(_with_alpha(theme.TEXT_DIM, 110), max(1.0, geo.outer_radius / 200))
+        outer_pen = QPen(_with_alpha(theme.TEXT_DIM, 190), max(1.2, geo.outer_radius / 130))
+        rings = self._ring_labels(geo)
+        for index, (radius, label, box) in enumerate(rings):
+            painter.setPen(outer_pen if index == len(rings) - 1 else ring_pen)
+            painter.setBrush(Qt.BrushStyle.NoBrush)
+            painter.drawEllipse(geo.center, radius, radius)
             painter.setPen(QColor(theme.TEXT_DIM))
             painter.drawText(box, Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignTop, label)
 
@@ -420,9 +458,9 @@ class BubbleLevel(QWidget):
         for text, direction in (("+X", QPointF(1, 0)), ("+Y", QPointF(0, -1))):
             spot = geo.center + direction * band
             box = QRectF(spot.x() - size, spot.y() - size / 2, size * 2, size)
-            painter.setPen(QColor(0, 0, 0, 150))
+            painter.setPen(_with_alpha(theme.current().BEZEL_TEXT_SHADOW, 150))
             painter.drawText(box.translated(0, 1), Qt.AlignmentFlag.AlignCenter, text)
-            painter.setPen(QColor("#d5dae0"))
+            painter.setPen(QColor(theme.current().BEZEL_TEXT))
             painter.drawText(box, Qt.AlignmentFlag.AlignCenter, text)
 
     def _paint_level_ring(
@@ -485,7 +523,8 @@ class BubbleLevel(QWidget):
         body.setColorAt(0.8, _with_alpha(_mix(color, "#ffffff", 0.2), 165))
         body.setColorAt(1.0, _with_alpha(_mix(color, "#000000", 0.2), 210))
         painter.setBrush(body)
-        painter.setPen(QPen(_with_alpha(_mix(color, "#ffffff", 0.55), 220), max(1.0, r / 14)))
+        rim = _mix(color, "#ffffff", theme.current().BUBBLE_RIM_WHITE)
+        painter.setPen(QPen(_with_alpha(rim, 220), max(1.0, r / 14)))
         painter.drawEllipse(center, r, r)
         # Specular highlight, upper left.
         highlight = QRadialGradient(center - QPointF(r * 0.38, r * 0.42), r * 0.42)
@@ -553,36 +592,57 @@ class BubbleLevel(QWidget):
         height = metrics.height() * 1.5
         box = QRectF(geo.center.x() - width / 2, geo.center.y() - height / 2, width, height)
         painter.setPen(QPen(_with_alpha(theme.TEXT_DIM, 120), 1.0))
-        painter.setBrush(QColor(14, 18, 21, 220))
+        painter.setBrush(_with_alpha(theme.current().VIAL_PLATE, 220))
         painter.drawRoundedRect(box, 4, 4)
         painter.setPen(QColor(theme.TEXT_DIM))
         painter.drawText(box, Qt.AlignmentFlag.AlignCenter, text)
 
+    def _caption_text(self, state: LevelState) -> tuple[str, QColor]:
+        """The caption, short ("±5°") where the long one would run into a ring's label."""
+        full_scale = f"{self._full_scale_deg:g}°"
+        if state is LevelState.OVER_RANGE:
+            long, short, colour = f"OVER RANGE  > {full_scale}", f"> {full_scale}", theme.ALARM_RED
+        else:
+            long, short, colour = f"FULL SCALE ±{full_scale}", f"±{full_scale}", theme.TEXT_DIM
+        geo = self._geometry()
+        if geo.outer_radius >= 20:
+            box = self._caption_box(geo, long)
+            if any(box.intersects(label) for _, _, label in self._ring_labels(geo)):
+                long = short
+        return long, _with_alpha(colour, 230)
+
+    def _caption_font(self, geo: _VialGeometry) -> QFont:
+        font = self._label_font(geo)
+        font.setLetterSpacing(QFont.SpacingType.PercentageSpacing, 108)
+        return font
+
+    def _caption_box(self, geo: _VialGeometry, text: str, below: bool | None = None) -> QRectF:
+        """The caption's plate: high on the glass, or as low when the bubble is up there."""
+        metrics = QFontMetricsF(self._caption_font(geo))
+        width = metrics.horizontalAdvance(text) + metrics.height()
+        height = metrics.height() * 1.2
+        below = self._caption_below if below is None else below
+        offset = geo.scale_radius * 0.6 * (1.0 if below else -1.0)
+        return QRectF(
+            geo.center.x() - width / 2, geo.center.y() + offset - height / 2, width, height
+        )
+
     def _paint_range_caption(
         self, painter: QPainter, geo: _VialGeometry, state: LevelState
     ) -> None:
-        """Full-scale legend printed high on the glass ("OVER RANGE" in red when exceeded)."""
-        font = self._label_font(geo)
-        font.setLetterSpacing(QFont.SpacingType.PercentageSpacing, 108)
-        painter.setFont(font)
-        metrics = QFontMetricsF(font)
-        full_scale = f"{self._full_scale_deg:g}°"
-        if state is LevelState.OVER_RANGE:
-            text, color = f"OVER RANGE  > {full_scale}", QColor(theme.ALARM_RED)
-        else:
-            text, color = f"FULL SCALE ±{full_scale}", _with_alpha(theme.TEXT_DIM, 220)
-        width = metrics.horizontalAdvance(text) + metrics.height()
-        height = metrics.height() * 1.2
-        box = QRectF(
-            geo.center.x() - width / 2,
-            geo.center.y() - geo.scale_radius * 0.6 - height / 2,
-            width,
-            height,
-        )
+        """Full-scale legend printed on the glass ("OVER RANGE" in red when exceeded).
+
+        It sits high on the glass and moves as low only while the bubble would cover it
+        there (and back only when the bubble would cover it below), so it never hides
+        the bubble and does not flicker.
+        """
+        text, color = self._caption_text(state)
+        box = self._caption_box(geo, text)
+        painter.setFont(self._caption_font(geo))
         # A plate of liquid colour, so crosshair and rings do not run through the letters.
         painter.setPen(Qt.PenStyle.NoPen)
-        painter.setBrush(QColor(22, 31, 37, 235))
-        painter.drawRoundedRect(box, height / 2, height / 2)
+        painter.setBrush(_with_alpha(theme.current().VIAL_PLATE, 235))
+        painter.drawRoundedRect(box, box.height() / 2, box.height() / 2)
         painter.setPen(color)
         painter.drawText(box, Qt.AlignmentFlag.AlignCenter, text)
 
@@ -607,9 +667,11 @@ class _VialGeometry:
         self.scale_radius = self.vial_radius - self.bubble_radius - 1.0
 
 
-_STATE_COLORS: dict[LevelState, QColor] = {
-    LevelState.NO_DATA: QColor(theme.TEXT_DISABLED),
-    LevelState.LEVEL: QColor(theme.OK_GREEN),
-    LevelState.OFF_LEVEL: QColor(theme.WARN_AMBER),
-    LevelState.OVER_RANGE: QColor(theme.ALARM_RED),
-}
+def _state_color(state: LevelState) -> QColor:
+    """The current theme's colour for what the vial signals."""
+    return QColor({
+        LevelState.NO_DATA: theme.TEXT_DISABLED,
+        LevelState.LEVEL: theme.OK_GREEN,
+        LevelState.OFF_LEVEL: theme.WARN_AMBER,
+        LevelState.OVER_RANGE: theme.ALARM_RED,
+    }[state])

@@ -13,7 +13,8 @@ from PySide6.QtWidgets import QHBoxLayout, QLabel, QWidget
 from app.gui import theme
 
 CHANNELS = ("ax", "ay", "az", "gx", "gy", "gz", "link")
-COLOURS = {"ok": theme.OK_GREEN, "warning": theme.WARN_AMBER, "fault": theme.ALARM_RED}
+COLOUR_NAMES = {"ok": "OK_GREEN", "warning": "WARN_AMBER", "fault": "ALARM_RED"}
+"""The theme colour of each state (looked up when drawn, so a theme switch shows)."""
 WORDS = {"ok": "working", "warning": "warning", "fault": "FAULT"}
 
 
@@ -35,13 +36,14 @@ class HealthLights(QWidget):
             self.lights[channel] = label
         self.state: dict[str, str] = {}
         self.show_health(None)
+        theme.notifier().changed.connect(self._on_theme_changed)
 
     def show_health(self, health: dict[str, str] | None) -> None:
         """Colour each light (None: no device, all dim)."""
         self.state = dict(health or {})
         for channel, label in self.lights.items():
             state = self.state.get(channel)
-            colour = COLOURS.get(state or "", theme.TEXT_DISABLED)
+            colour = theme.COLORS[COLOUR_NAMES.get(state or "", "TEXT_DISABLED")]
             label.setStyleSheet(
                 f"color: {theme.BASE_BG if state in ('warning', 'fault') else colour};"
                 f"background: {colour if state in ('warning', 'fault') else 'transparent'};"
@@ -50,6 +52,9 @@ class HealthLights(QWidget):
         lines = [f"{c}: {WORDS.get(self.state.get(c, ''), 'no data')}" for c in CHANNELS]
         self.setToolTip("Sensor health (the fault detector)\n" + "\n".join(lines)
                         + "\nClick to reset latched faults")
+
+    def _on_theme_changed(self, _name: str) -> None:
+        self.show_health(self.state)
 
     def mousePressEvent(self, event: QMouseEvent) -> None:
         if event.button() == Qt.MouseButton.LeftButton:

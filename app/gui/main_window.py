@@ -8,7 +8,14 @@ from pathlib import Path
 from urllib.parse import urlsplit
 
 from PySide6.QtCore import QSettings, Qt, QTimer
-from PySide6.QtGui import QAction, QCloseEvent, QKeySequence, QShowEvent
+from PySide6.QtGui import (
+    QAction,
+    QActionGroup,
+    QCloseEvent,
+    QGuiApplication,
+    QKeySequence,
+    QShowEvent,
+)
 from PySide6.QtWidgets import (
     QApplication,
     QCheckBox,
@@ -36,6 +43,7 @@ from app.core.calibration_procedures.profiles import read_profile_file
 from app.core.devices import DeviceInfo
 from app.core.filters import DEFAULT_FILTER, FILTERS, ONLINE_FILTERS
 from app.core.measurement_log import MeasurementLog, default_log_path
+from app.core.readout import SLOPE_UNITS
 from app.core.recording import sample_recordings
 from app.core.self_test import SelfTestReport
 from app.gui import theme
@@ -44,6 +52,7 @@ from app.gui.bubble_level import BubbleLevel
 from app.gui.calibration_wizard import CalibrationWizard
 from app.gui.device_bar import DeviceBar
 from app.gui.device_panel import DevicePanel
+from app.gui.elided_label import ElidedLabel
 from app.gui.filter_panel import FilterPanel
 from app.gui.health_lights import HealthLights
 from app.gui.measure_panel import MeasurePanel
@@ -53,6 +62,7 @@ from app.gui.presenter import UNIT_LABELS, LivePresenter
 from app.gui.readouts import TiltReadouts
 from app.gui.replay_bar import ReplayBar
 from app.gui.simulator_panel import SimulatorPanel
+from app.gui.user_settings import SettingsSections, check_settings, read_json, write_json
 from app.services.devices import (
     DEFAULT_DEVICE_URL,
     available_devices,
@@ -64,6 +74,10 @@ from app.services.session import DeviceSession
 from app.services.stream_status import StreamStatus
 
 PLOT_WINDOWS_S = (2, 5, 10, 20, 30, 60)
+READOUT_MIN_PX, READOUT_MAX_PX = 28, 96
+"""Smallest and largest digits beside the level in the usual layout."""
+INSTRUMENT_MAX_PX = 400
+"""Largest digits in the full-screen instrument mode (they fill the half screen)."""
 AVERAGING_S = (0.05, 0.2, 0.5, 1.0, 2.0, 5.0)
 LEVEL_RANGES_DEG = (0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 90.0)
 DEVICE_MESSAGE_WARNING = 2
@@ -98,10 +112,8 @@ class ErrorBanner(QFrame):
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.setObjectName("errorBanner")
-        self.setStyleSheet(
-            f"#errorBanner {{ background: {theme.ALARM_RED}33; border: 1px solid {theme.ALARM_RED};"
-            " border-radius: 4px; }"
-        )
+        self.restyle()
+        theme.notifier().changed.connect(self.restyle)
         layout = QHBoxLayout(self)
         layout.setContentsMargins(10, 4, 4, 4)
         self.label = QLabel()
@@ -118,6 +130,13 @@ class ErrorBanner(QFrame):
         self.label.setText(text)
         self.show()
 
+    def restyle(self, _theme_name: str = "") -> None:
+        """The current theme's alarm colour."""
+        self.setStyleSheet(
+            f"#errorBanner {{ background: {theme.ALARM_RED}33; border: 1px solid {theme.ALARM_RED};"
+            " border-radius: 4px; }"
+        )
+
 
 class MainWindow(QMainWindow):
     """The instrument window. It owns the device session and the live presenter."""
@@ -132,6 +151,13 @@ class MainWindow(QMainWindow):
         super().__init__()
         self.session = session
         self.settings = settings
+        settings_problem = check_settings(settings)
+        self.sections = SettingsSections(settings, self.show_error)
+        """Components that keep a dict of settings register here (e.g. the alarms:
+        ``window.sections.register("alarms", config.to_dict, load)``)."""
+        self._instrument_mode = False
+        self._layout_before_instrument: dict | None = None
+        self._calibration_profile: CalibrationProfile | None = None
         self.setWindowTitle("Inclinometer")
         self.setWindowIcon(theme.app_icon())
         self.setDockOptions(
@@ -187,11 +213,11 @@ class MainWindow(QMainWindow):
         self._default_layout_pending = True
 
         # Status bar.
-        self.status_device = QLabel("No device")
-        self.status_rate = QLabel()
-        self.status_filter = QLabel()
+        self.status_device = ElidedLabel("No device")
+        self.status_rate = ElidedLabel()
+        self.status_filter = ElidedLabel()
         self.status_fps = QLabel()
-        self.status_calibration = QLabel()
+        self.status_calibration = ElidedLabel()
         self.status_calibration.setObjectName("calibrationStatus")
         self.status_tare = QLabel()
         self.status_recording = QLabel()
@@ -258,8 +284,17 @@ class MainWindow(QMainWindow):
         if compared:
             session.requestComparisons.emit(compared)
         url = device_url or str(self.settings.value("device_url", DEFAULT_DEVICE_URL))
+        saved_parameters = read_json(self.settings, f"filter_parameters/{chosen_filter}")
+        if isinstance(saved_parameters, dict):
+            names = {spec.name for spec in FILTERS[chosen_filter].parameters}
+            for key, value in saved_parameters.items():
+                if key in names:
+                    session.requestFilterParameter.emit(key, value)
         self.presenter.start()
         self.connect_device(url)
+        theme.notifier().changed.connect(self._on_theme_changed)
+        if settings_problem:
+            self.show_error(settings_problem)
 
     # -- construction -----------------------------------------------------------------------
     def _build_level_view(self) -> QWidget:
@@ -268,14 +303,19 @@ class MainWindow(QMainWindow):
         outer.setContentsMargins(12, 8, 12, 8)
         outer.addWidget(self.banner)
         row = QHBoxLayout()
+        self._level_row = row
         self.level.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
         row.addWidget(self.level, 3)
         side = QVBoxLayout()
-        side.addWidget(self.readouts)
-        controls = QHBoxLayout()
+        # The digits grow into the height beside the level (no empty space under them).
+        self.readouts.setAutoScale(True, READOUT_MAX_PX, READOUT_MIN_PX, (2, 1))
+        side.addWidget(self.readouts, 1)
+        self.controls = QWidget()
+        controls = QHBoxLayout(self.controls)
+        controls.setContentsMargins(0, 0, 0, 0)
         self.unit_combo = QComboBox()
-        for unit, label in (("deg", "degrees"), ("percent", "% grade"), ("mm/m", "mm/m")):
-            self.unit_combo.addItem(label, unit)
+        for unit in SLOPE_UNITS.values():
+            self.unit_combo.addItem(unit.title, unit.key)
         self.unit_combo.setToolTip("Units of roll, pitch and tilt")
         self.averaging_combo = QComboBox()
         for seconds in AVERAGING_S:
@@ -287,13 +327,16 @@ class MainWindow(QMainWindow):
         self.range_combo.setToolTip("Full scale of the bubble level")
         self.hold_button = QPushButton("Hold")
         self.hold_button.setCheckable(True)
-        self.hold_button.setShortcut(QKeySequence("H"))
         self.hold_button.setToolTip("Freeze the readouts (H)")
         self.hold_button.toggled.connect(lambda on: self.presenter.set_hold(on))
+        # H is the window's (the button is hidden in the full-screen instrument).
+        self.hold_action = QAction("Hold", self)
+        self.hold_action.setShortcut(QKeySequence("H"))
+        self.hold_action.triggered.connect(self.hold_button.toggle)
+        self.addAction(self.hold_action)
         for widget in (self.unit_combo, self.averaging_combo, self.range_combo, self.hold_button):
             controls.addWidget(widget)
-        side.addLayout(controls)
-        side.addStretch(1)
+        side.addWidget(self.controls)
         row.addLayout(side, 2)
         outer.addLayout(row, 1)
         outer.addWidget(self.truth_label)
@@ -309,9 +352,7 @@ class MainWindow(QMainWindow):
         for seconds in PLOT_WINDOWS_S:
             self.window_combo.addItem(f"{seconds} s", seconds)
         self.window_combo.setCurrentIndex(self.window_combo.findData(10))
-        self.window_combo.currentIndexChanged.connect(
-            lambda _: self.plots.set_window(self.window_combo.currentData())
-        )
+        self.window_combo.currentIndexChanged.connect(self._on_plot_window_changed)
         bar.addWidget(self.window_combo)
         self.range_box = QCheckBox("Select range")
         self.range_box.setToolTip("Drag a time range on the angle plot for its statistics")
@@ -390,9 +431,39 @@ class MainWindow(QMainWindow):
                 calibration_menu.addSeparator()
             else:
                 calibration_menu.addAction(action)
+        edit_menu = self.menuBar().addMenu("&Edit")
+        self.copy_action = QAction("&Copy reading", self)
+        self.copy_action.setShortcut(QKeySequence.StandardKey.Copy)
+        self.copy_action.setToolTip("Copy roll, pitch and tilt as text, in the chosen units")
+        self.copy_action.triggered.connect(self.copy_reading)
+        edit_menu.addAction(self.copy_action)
         view_menu = self.menuBar().addMenu("&View")
         for dock in self.docks.values():
             view_menu.addAction(dock.toggleViewAction())
+        view_menu.addSeparator()
+        self.instrument_action = QAction("&Full-screen instrument", self)
+        self.instrument_action.setCheckable(True)
+        self.instrument_action.setShortcut(QKeySequence("F11"))
+        self.instrument_action.setToolTip("Big digits and the bubble only (F11 or Esc leaves)")
+        self.instrument_action.toggled.connect(self.set_instrument_mode)
+        view_menu.addAction(self.instrument_action)
+        self.leave_instrument_action = QAction("Leave full screen", self)
+        self.leave_instrument_action.setShortcut(QKeySequence(Qt.Key.Key_Escape))
+        self.leave_instrument_action.setEnabled(False)
+        self.leave_instrument_action.triggered.connect(lambda: self.set_instrument_mode(False))
+        theme_menu = view_menu.addMenu("&Theme")
+        self.theme_actions: dict[str, QAction] = {}
+        group = QActionGroup(self)
+        for name, title in theme.CHOICES:
+            action = QAction(title, self)
+            action.setCheckable(True)
+            action.triggered.connect(lambda _=False, n=name: self.set_theme(n))
+            group.addAction(action)
+            theme_menu.addAction(action)
+            self.theme_actions[name] = action
+        # The window keeps these working while the menu bar is hidden (full screen).
+        for action in (self.copy_action, self.instrument_action, self.leave_instrument_action):
+            self.addAction(action)
         help_menu = self.menuBar().addMenu("&Help")
         about = QAction("&About Inclinometer", self)
         about.triggered.connect(self._show_about)
@@ -607,6 +678,7 @@ class MainWindow(QMainWindow):
         self.filter_panel.show_filter(name, values)
         self.status_filter.setText(f"Filter: {FILTERS[name].title}")
         self.settings.setValue("filter", name)
+        write_json(self.settings, f"filter_parameters/{name}", values)
 
     # -- alarms and the measurement log -------------------------------------------------------
     def _build_alarms_and_log(self) -> None:
@@ -636,7 +708,11 @@ class MainWindow(QMainWindow):
         self.session.alarmEvents.connect(self._on_alarm_events)
         self.session.status.connect(self._on_alarm_status)
         self.session.disconnected.connect(lambda _reason: self._show_alarms(()))
-        self.apply_alarms(self.alarm_panel.config())
+        remembered = self.sections.register(
+            "alarms", lambda: self.alarm_panel.config().to_dict(),
+            lambda stored: self.apply_alarms(AlarmConfig.from_dict(stored)))
+        if not remembered:
+            self.apply_alarms(self.alarm_panel.config())
 
     def apply_alarms(self, config: AlarmConfig) -> None:
         """Use these alarms (the worker evaluates them) and show them in the panel."""
@@ -747,12 +823,96 @@ class MainWindow(QMainWindow):
             return
         self.log(f"Exported the calibration profile to {path}")
 
+    # -- display: theme, clipboard, full-screen instrument ---------------------------------------
+    def set_theme(self, choice: str) -> None:
+        """Use a theme (``dark``, ``light``, ``high-contrast``) or follow the system."""
+        app = QApplication.instance()
+        if isinstance(app, QApplication):
+            theme.apply_theme(app, choice)
+        self.theme_actions[theme.choice()].setChecked(True)
+        self.settings.setValue("theme", theme.choice())
+
+    def _on_theme_changed(self, _name: str) -> None:
+        """Colours set on single widgets follow the theme."""
+        self._show_calibration(self._calibration_profile)
+        self.status_tare.setStyleSheet(f"color: {theme.ACCENT}; font-weight: bold;")
+        self.status_recording.setStyleSheet(f"color: {theme.ALARM_RED}; font-weight: bold;")
+
+    def copy_reading(self) -> str:
+        """Put the reading shown (roll, pitch, tilt in the chosen units) on the clipboard."""
+        text = self.readouts.reading()
+        if not text:
+            self.statusBar().showMessage("No reading to copy", 3000)
+            return ""
+        QGuiApplication.clipboard().setText(text)
+        self.statusBar().showMessage(f"Copied: {text}", 3000)
+        return text
+
+    @property
+    def instrument_mode(self) -> bool:
+        """Whether the window shows only the big digits and the bubble, full screen."""
+        return self._instrument_mode
+
+    def set_instrument_mode(self, enabled: bool) -> None:
+        """Full-screen instrument (F11): bubble and big digits only, readable across a room;
+        leaving (F11 or Esc) brings back the layout exactly as it was."""
+        if enabled == self._instrument_mode:
+            return
+        self._instrument_mode = enabled
+        self.instrument_action.setChecked(enabled)
+        self.leave_instrument_action.setEnabled(enabled)
+        if enabled:
+            self._layout_before_instrument = {
+                "state": self.saveState(),
+                "geometry": self.saveGeometry(),
+                "window_state": self.windowState(),
+                "visible": [
+                    widget for widget in (
+                        self.menuBar(), self.statusBar(), self.controls, self.truth_label,
+                        self.banner,
+                    ) if widget.isVisible()
+                ],
+            }
+            for widget in (
+                *self.docks.values(), self.device_bar, self.replay_bar, self.menuBar(),
+                self.statusBar(), self.controls, self.truth_label, self.banner,
+            ):
+                widget.hide()
+            self.readouts.setAutoScale(True, INSTRUMENT_MAX_PX, READOUT_MIN_PX, (1, 2))
+            self._level_row.setStretch(0, 1)
+            self._level_row.setStretch(1, 1)
+            self.showFullScreen()
+            return
+        saved = self._layout_before_instrument or {}
+        self._layout_before_instrument = None
+        self.readouts.setAutoScale(True, READOUT_MAX_PX, READOUT_MIN_PX, (2, 1))
+        self._level_row.setStretch(0, 3)
+        self._level_row.setStretch(1, 2)
+        window_state = saved.get("window_state", Qt.WindowState.WindowNoState)
+        if window_state & Qt.WindowState.WindowFullScreen:
+            self.showFullScreen()
+        elif window_state & Qt.WindowState.WindowMaximized:
+            self.showMaximized()
+        else:
+            self.showNormal()
+        if "geometry" in saved:
+            self.restoreGeometry(saved["geometry"])
+        for widget in saved.get("visible", ()):
+            widget.show()
+        if "state" in saved:
+            self.restoreState(saved["state"])
+
+    def _on_plot_window_changed(self, _index: int) -> None:
+        self.plots.set_window(self.window_combo.currentData())
+        self.settings.setValue("plot_window_s", self.window_combo.currentData())
+
     def _on_calibration_changed(self, profile: CalibrationProfile | None) -> None:
         self._show_calibration(profile)
         if profile is not None:
             self.log(f"Calibration applied: {profile.calibration.name} ({profile.method})")
 
     def _show_calibration(self, profile: CalibrationProfile | None) -> None:
+        self._calibration_profile = profile
         if profile is None:
             self.status_calibration.setText("Uncalibrated")
             self.status_calibration.setStyleSheet(f"color: {theme.WARN_AMBER};")
@@ -822,6 +982,13 @@ class MainWindow(QMainWindow):
             combo.setCurrentIndex(index if index >= 0 else combo.findData(default))
             combo.currentIndexChanged.connect(self._on_display_changed)
         self._on_display_changed()
+        try:
+            window_s = int(self.settings.value("plot_window_s", 10))
+        except (TypeError, ValueError):
+            window_s = 10
+        if self.window_combo.findData(window_s) >= 0:
+            self.window_combo.setCurrentIndex(self.window_combo.findData(window_s))
+        self.set_theme(str(self.settings.value("theme", theme.DEFAULT_CHOICE)))
 
     def showEvent(self, event: QShowEvent) -> None:
         super().showEvent(event)
@@ -833,13 +1000,18 @@ class MainWindow(QMainWindow):
 
     def _apply_default_layout(self) -> None:
         height = max(300, int(self.height() * 0.45))
-        self.resizeDocks([self.docks["filter"]], [400], Qt.Orientation.Horizontal)
+        # The panels take at most a third of a narrow window (1024 px: the level keeps room).
+        width = min(400, int(self.width() * 0.3))
+        self.resizeDocks([self.docks["filter"]], [width], Qt.Orientation.Horizontal)
         self.resizeDocks([self.docks["plots"]], [height], Qt.Orientation.Vertical)
 
     def closeEvent(self, event: QCloseEvent) -> None:
         self.presenter.stop()
         self.measure_panel.stop()
-        self.settings.setValue("geometry", self.saveGeometry())
-        self.settings.setValue("window_state", self.saveState())
+        saved = self._layout_before_instrument  # full screen: remember the usual layout
+        self.settings.setValue("geometry", saved["geometry"] if saved else self.saveGeometry())
+        self.settings.setValue("window_state", saved["state"] if saved else self.saveState())
+        self.sections.save_all()
+        self.settings.sync()
         self.session.shutdown()
         super().closeEvent(event)

@@ -1,10 +1,14 @@
 """Live strip charts: acceleration, angular rate and angles against time.
 
 The widget only draws arrays it is handed (:meth:`LivePlots.set_data`); the presenter pulls
-them from the ring buffers and decimates them to the pixel width first.
+them from the ring buffers and decimates them to the pixel width first. Each plot's legend is
+a one-line header above its data (never on the traces); colours follow the theme.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from html import escape
 
 import numpy as np
 import pyqtgraph as pg
@@ -15,20 +19,41 @@ from app.gui import theme
 
 pg.setConfigOptions(antialias=False, background=theme.BASE_BG, foreground=theme.TEXT_DIM)
 
+HEADER_PX = 16
+"""Height of the legend line above each plot."""
+_SAMPLES = {
+    Qt.PenStyle.SolidLine: "━━",
+    Qt.PenStyle.DashLine: "╺╸╺╸",
+    Qt.PenStyle.DotLine: "┅┅",
+}
+"""How a pen style looks in a legend line."""
 
-def _make_plot(title: str, unit: str) -> pg.PlotItem:
+
+def _make_plot() -> pg.PlotItem:
     plot = pg.PlotItem()
-    plot.setLabel("left", title, units=unit)
-    plot.getAxis("left").setWidth(62)
+    # The plot's name and unit lead its header line: a rotated axis label does not fit a
+    # short plot. Values stay in the named unit (no "m°" prefixes).
+    plot.getAxis("left").setWidth(48)
+    plot.getAxis("left").enableAutoSIPrefix(False)
     plot.showGrid(x=False, y=False)
     # Traces arrive already min/max-decimated to the pixel width (app.core.decimation), so
     # pyqtgraph's own per-frame downsampling would only repeat the work.
     plot.setClipToView(True)
     plot.setMouseEnabled(x=False, y=True)
     plot.hideButtons()
-    legend = plot.addLegend(offset=(-8, 4), labelTextSize="8pt", colCount=4)
-    legend.setBrush(pg.mkBrush(theme.PANEL_BG + "c0"))
     return plot
+
+
+def legend_html(title: str, entries: list[tuple[str, str, Qt.PenStyle]]) -> str:
+    """A plot's header line: its title, then a short sample of each (label, colour, pen
+    style) and the label."""
+    dim = theme.TEXT_DIM
+    items = [f'<span style="color:{theme.TEXT}"><b>{escape(title)}</b></span>'] + [
+        f'<span style="color:{colour}">{_SAMPLES.get(style, "━━")}</span>'
+        f'&nbsp;<span style="color:{dim}">{escape(label)}</span>'
+        for label, colour, style in entries
+    ]
+    return "&nbsp;&nbsp;&nbsp;&nbsp;".join(items)
 
 
 class LivePlots(QWidget):
@@ -45,9 +70,9 @@ class LivePlots(QWidget):
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addWidget(self.graphics)
 
-        self.accel_plot = _make_plot("accel", "g")
-        self.gyro_plot = _make_plot("rate", "°/s")
-        self.angle_plot = _make_plot("angle", "°")
+        self.accel_plot = _make_plot()
+        self.gyro_plot = _make_plot()
+        self.angle_plot = _make_plot()
         for row, plot in enumerate((self.accel_plot, self.gyro_plot, self.angle_plot)):
             self.graphics.addItem(plot, row=row, col=0)
             if plot is not self.accel_plot:
@@ -57,32 +82,45 @@ class LivePlots(QWidget):
             plot.getAxis("bottom").setStyle(showValues=False)
             plot.getAxis("bottom").setHeight(4)
 
-        def pen(color: str, style: Qt.PenStyle = Qt.PenStyle.SolidLine) -> pg.QtGui.QPen:
-            return pg.mkPen(color, width=1, style=style)
+        # Each curve's colour (read from the current theme) and pen style, and the legend
+        # entries of each plot, so that a theme switch can redraw them.
+        self._pens: dict[pg.PlotDataItem, tuple[Callable[[], str], Qt.PenStyle]] = {}
+        self._legends: dict[pg.PlotItem, list[tuple[str, pg.PlotDataItem]]] = {}
+        self._titles: dict[pg.PlotItem, str] = {
+            self.accel_plot: "acceleration (g)", self.gyro_plot: "angular rate (°/s)",
+            self.angle_plot: "roll, pitch (°)",
+        }
+        solid, dash = Qt.PenStyle.SolidLine, Qt.PenStyle.DashLine
+
+        def axis_colour(index: int) -> Callable[[], str]:
+            return lambda: theme.AXIS_COLORS[index]
 
         axes = ("x", "y", "z")
         self.accel_curves = [
-            self.accel_plot.plot(pen=pen(c), name=a) for c, a in zip(theme.AXIS_COLORS, axes)
+            self._curve(self.accel_plot, name, axis_colour(i)) for i, name in enumerate(axes)
         ]
         self.gyro_curves = [
-            self.gyro_plot.plot(pen=pen(c), name=a) for c, a in zip(theme.AXIS_COLORS, axes)
+            self._curve(self.gyro_plot, name, axis_colour(i)) for i, name in enumerate(axes)
         ]
         self.angle_curves = {
-            "roll": self.angle_plot.plot(pen=pen(theme.TRACE_ROLL), name="roll"),
-            "pitch": self.angle_plot.plot(pen=pen(theme.TRACE_PITCH), name="pitch"),
-            "ref_roll": self.angle_plot.plot(
-                pen=pen(theme.TRACE_ROLL, Qt.PenStyle.DashLine), name="true roll"
+            "roll": self._curve(self.angle_plot, "roll", lambda: theme.TRACE_ROLL),
+            "pitch": self._curve(self.angle_plot, "pitch", lambda: theme.TRACE_PITCH),
+            "ref_roll": self._curve(
+                self.angle_plot, "true roll", lambda: theme.TRACE_ROLL, dash
             ),
-            "ref_pitch": self.angle_plot.plot(
-                pen=pen(theme.TRACE_PITCH, Qt.PenStyle.DashLine), name="true pitch"
+            "ref_pitch": self._curve(
+                self.angle_plot, "true pitch", lambda: theme.TRACE_PITCH, dash
             ),
         }
         self.comparison_curves: dict[str, tuple[pg.PlotDataItem, pg.PlotDataItem]] = {}
 
         # Inclination error against the reference, shown only when the source has one.
-        self.error_plot = _make_plot("error", "°")
+        self.error_plot = _make_plot()
+        self._titles[self.error_plot] = "inclination error (°)"
         self.error_plot.setXLink(self.accel_plot)
-        self.error_curve = self.error_plot.plot(pen=pen(theme.TRACE_TILT), name="main filter")
+        self.error_curve = self._curve(
+            self.error_plot, "main filter", lambda: theme.TRACE_TILT, solid
+        )
         self.comparison_error_curves: dict[str, pg.PlotDataItem] = {}
         self._error_shown = False
 
@@ -92,16 +130,73 @@ class LivePlots(QWidget):
         self.region.sigRegionChangeFinished.connect(self._emit_range)
         self._region_shown = False
         self.set_window(self._window_s)
+        self.apply_theme()
+        theme.notifier().changed.connect(self.apply_theme)
+
+    # -- colours and legends ------------------------------------------------------------------
+    def _curve(
+        self, plot: pg.PlotItem, label: str, colour: Callable[[], str],
+        style: Qt.PenStyle = Qt.PenStyle.SolidLine,
+    ) -> pg.PlotDataItem:
+        """A new curve on ``plot`` with a legend entry."""
+        curve = plot.plot(pen=pg.mkPen(colour(), width=1, style=style))
+        self._pens[curve] = (colour, style)
+        self._legends.setdefault(plot, []).append((label, curve))
+        return curve
+
+    def _drop_curve(self, plot: pg.PlotItem, curve: pg.PlotDataItem) -> None:
+        plot.removeItem(curve)
+        self._pens.pop(curve, None)
+        self._legends[plot] = [entry for entry in self._legends[plot] if entry[1] is not curve]
+
+    def legend_entries(self, plot: pg.PlotItem) -> list[str]:
+        """The labels in ``plot``'s legend line, in order."""
+        return [label for label, _ in self._legends.get(plot, [])]
+
+    def _show_legend(self, plot: pg.PlotItem) -> None:
+        entries = [
+            (label, self._pens[curve][0](), self._pens[curve][1])
+            for label, curve in self._legends.get(plot, [])
+        ]
+        plot.setTitle(legend_html(self._titles[plot], entries), size="8pt", justify="left")
+        # A compact header: pyqtgraph gives titles 30 px.
+        plot.layout.setRowFixedHeight(0, HEADER_PX)
+        plot.titleLabel.setMaximumHeight(HEADER_PX)
+
+    def apply_theme(self, _name: str = "") -> None:
+        """Background, axes, curves and legends in the current theme's colours."""
+        pg.setConfigOptions(background=theme.BASE_BG, foreground=theme.TEXT_DIM)
+        self.graphics.setBackground(theme.BASE_BG)
+        width = theme.current().LINE_WIDTH
+        for curve, (colour, style) in self._pens.items():
+            curve.setPen(pg.mkPen(colour(), width=width, style=style))
+        for plot in (self.accel_plot, self.gyro_plot, self.angle_plot, self.error_plot):
+            for side in ("left", "bottom"):
+                axis = plot.getAxis(side)
+                axis.setPen(pg.mkPen(theme.BORDER))
+                axis.setTextPen(pg.mkPen(theme.TEXT_DIM))  # also the axis label
+            self._show_legend(plot)
+        self.region.setBrush(pg.mkBrush(theme.ACCENT + "30"))
+        for line in self.region.lines:
+            line.setPen(pg.mkPen(theme.ACCENT, width=1))
 
     def set_error_visible(self, visible: bool) -> None:
         """Add or remove the inclination-error plot (below the angles)."""
         if visible == self._error_shown:
             return
         self._error_shown = visible
+        # One time axis, under the lowest plot.
+        angle_axis = self.angle_plot.getAxis("bottom")
+        angle_axis.setStyle(showValues=not visible)
         if visible:
+            self.angle_plot.setLabel("bottom", None)
+            angle_axis.setHeight(4)
             self.graphics.addItem(self.error_plot, row=3, col=0)
+            self.error_plot.setLabel("bottom", "time", units="s")
         else:
             self.graphics.removeItem(self.error_plot)
+            angle_axis.setHeight(None)
+            self.angle_plot.setLabel("bottom", "time", units="s")
 
     @property
     def error_visible(self) -> bool:
@@ -137,24 +232,23 @@ class LivePlots(QWidget):
         for name in list(self.comparison_curves):
             if name not in wanted:
                 for curve in self.comparison_curves.pop(name):
-                    self.angle_plot.removeItem(curve)
+                    self._drop_curve(self.angle_plot, curve)
         for index, (name, title) in enumerate(filters):
             if name in self.comparison_curves:
                 continue
-            colour = theme.COMPARISON_COLORS[index % len(theme.COMPARISON_COLORS)]
-            roll = self.angle_plot.plot(
-                pen=pg.mkPen(colour, width=1), name=f"{title} roll"
-            )
-            pitch = self.angle_plot.plot(
-                pen=pg.mkPen(colour, width=1, style=Qt.PenStyle.DotLine), name=f"{title} pitch"
+            def colour(i: int = index) -> str:
+                return theme.COMPARISON_COLORS[i % len(theme.COMPARISON_COLORS)]
+
+            roll = self._curve(self.angle_plot, f"{title} roll", colour)
+            pitch = self._curve(
+                self.angle_plot, f"{title} pitch", colour, Qt.PenStyle.DotLine
             )
             self.comparison_curves[name] = (roll, pitch)
-            self.comparison_error_curves[name] = self.error_plot.plot(
-                pen=pg.mkPen(colour, width=1), name=title
-            )
+            self.comparison_error_curves[name] = self._curve(self.error_plot, title, colour)
         for name in list(self.comparison_error_curves):
             if name not in wanted:
-                self.error_plot.removeItem(self.comparison_error_curves.pop(name))
+                self._drop_curve(self.error_plot, self.comparison_error_curves.pop(name))
+        self.apply_theme()
 
     def set_comparison_data(
         self, name: str, t_rel: np.ndarray, roll: np.ndarray, pitch: np.ndarray,

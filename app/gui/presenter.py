@@ -18,8 +18,7 @@ from app.core.comparison import summarize_errors
 from app.core.decimation import IncrementalMinMax, connect_mask, decimation_factor
 from app.core.filters import FILTERS
 from app.core.measurement_log import Measurement, measure
-from app.core.orientation import slope_from_angle
-from app.core.readout import averaged_angles
+from app.core.readout import SLOPE_UNITS, averaged_angles, slope_from_angle
 from app.core.samples import STANDARD_GRAVITY_M_S2
 from app.gui.bubble_level import BubbleLevel
 from app.gui.filter_panel import FilterPanel
@@ -29,7 +28,7 @@ from app.services.session import DeviceSession
 
 ANGLE_TRACES = ["roll", "pitch", "ref_roll", "ref_pitch"]
 ERROR_TABLE_INTERVAL_S = 0.5
-UNIT_LABELS = {"deg": "°", "percent": "%", "mm/m": "mm/m"}
+UNIT_LABELS = {key: unit.suffix or "1:n" for key, unit in SLOPE_UNITS.items()}
 
 
 @dataclass(slots=True)
@@ -153,7 +152,7 @@ class LivePresenter(QObject):
             float(slope_from_angle(angles.pitch_deg, unit)),
             float(slope_from_angle(angles.tilt_deg, unit)),
             angles.direction_deg,
-            UNIT_LABELS[unit],
+            unit,
         )
         if has_reference:
             rms = float(np.sqrt(np.nanmean(recent["incl_error"] ** 2)))

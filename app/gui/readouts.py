@@ -5,10 +5,19 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 
-from PySide6.QtCore import Property, Qt
+from PySide6.QtCore import Property, QSize, Qt
 from PySide6.QtGui import QFont, QFontDatabase, QFontMetricsF, QResizeEvent
-from PySide6.QtWidgets import QFrame, QGridLayout, QHBoxLayout, QLabel, QVBoxLayout, QWidget
+from PySide6.QtWidgets import (
+    QFrame,
+    QGridLayout,
+    QHBoxLayout,
+    QLabel,
+    QSizePolicy,
+    QVBoxLayout,
+    QWidget,
+)
 
+from app.core.readout import SLOPE_UNITS, format_slope, reading_text
 from app.gui import theme
 
 NO_VALUE = "—"
@@ -30,6 +39,7 @@ _NOTES = {
 _SIDES = ("+x", "+x+y", "+y", "−x+y", "−x", "−x−y", "−y", "+x−y")
 # The widest text a readout is sized for, so the layout does not jump as digits change.
 _WIDEST_VALUE = "−000.00"
+_WIDEST_UNIT = "in/ft"
 _FIXED_FAMILIES = (
     "JetBrains Mono",
     "Cascadia Mono",
@@ -51,17 +61,14 @@ def _readout_font(pixel_size: int, bold: bool = False) -> QFont:
     return font
 
 
-def _format_signed(value: float) -> str:
-    """``+1.23`` / ``−1.23``: two decimals, sign always shown, no negative zero."""
-    text = f"{value:+.2f}"
-    if text == "-0.00":
-        text = "+0.00"
-    return text.replace("-", MINUS)
-
-
-def _format_unsigned(value: float) -> str:
-    """``1.23``: two decimals."""
-    return f"{value:.2f}".replace("-", MINUS)
+def _unit_key(unit: str) -> str:
+    """A unit's key from its key or its suffix ("°" is "deg")."""
+    if unit in SLOPE_UNITS:
+        return unit
+    for key, slope_unit in SLOPE_UNITS.items():
+        if slope_unit.suffix == unit and unit:
+            return key
+    raise ValueError(f"unknown unit {unit!r}")
 
 
 def _format_direction(direction_deg: float) -> str:
@@ -86,40 +93,20 @@ class _ReadoutTile(QFrame):
 
         self.caption = QLabel(caption)
         self.caption.setObjectName("ReadoutCaption")
-        caption_font = QFont(self.font())
-        caption_font.setPixelSize(max(10, round(value_px * 0.28)))
-        caption_font.setBold(True)
-        caption_font.setLetterSpacing(QFont.SpacingType.PercentageSpacing, 115)
-        self.caption.setFont(caption_font)
-
         self.value = QLabel(NO_VALUE)
         self.value.setObjectName("ReadoutValue")
-        value_font = _readout_font(value_px)
-        self.value.setFont(value_font)
         self.value.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignBaseline)
         self.value.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
-        widest = QFontMetricsF(value_font).horizontalAdvance(_WIDEST_VALUE)
-        self.value.setMinimumWidth(math.ceil(widest) + 2)
-
         self.unit = QLabel("")
         self.unit.setObjectName("ReadoutUnit")
-        self.unit.setFont(_readout_font(max(12, round(value_px * 0.45))))
         self.unit.setAlignment(Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignBaseline)
-        unit_widest = QFontMetricsF(self.unit.font()).horizontalAdvance("mm/m")
-        self.unit.setMinimumWidth(math.ceil(unit_widest) + 2)
-
         self.note = QLabel(note)
         self.note.setObjectName("ReadoutSide")
         self.note.setTextFormat(Qt.TextFormat.RichText)
-        note_font = QFont(self.font())
-        note_font.setPixelSize(max(10, round(value_px * 0.3)))
-        self.note.setFont(note_font)
-
-        self._value_font = value_font
-        self._unit_font = self.unit.font()
 
         value_row = QHBoxLayout()
-        value_row.setSpacing(max(2, value_px // 16))
+        self._value_row = value_row
+        self._value_px = 0
         value_row.addStretch(1)
         value_row.addWidget(self.value, 0, Qt.AlignmentFlag.AlignBaseline)
         value_row.addWidget(self.unit, 0, Qt.AlignmentFlag.AlignBaseline)
@@ -129,8 +116,33 @@ class _ReadoutTile(QFrame):
         layout.setContentsMargins(14, 10, 14, 10)
         layout.setSpacing(2)
         layout.addWidget(self.caption)
+        layout.addStretch(1)
         layout.addLayout(value_row)
+        layout.addStretch(1)
         layout.addWidget(self.note)
+        self.setValuePixelSize(value_px)
+
+    def setValuePixelSize(self, value_px: int) -> None:
+        """Size the digits (and with them caption, unit and note) to ``value_px`` pixels."""
+        self._value_px = value_px
+        caption_font = QFont(self.font())
+        caption_font.setPixelSize(max(10, round(value_px * 0.28)))
+        caption_font.setBold(True)
+        caption_font.setLetterSpacing(QFont.SpacingType.PercentageSpacing, 115)
+        self.caption.setFont(caption_font)
+        value_font = _readout_font(value_px)
+        self.value.setFont(value_font)
+        widest = QFontMetricsF(value_font).horizontalAdvance(_WIDEST_VALUE)
+        self.value.setMinimumWidth(math.ceil(widest) + 2)
+        self._value_font = value_font
+        self._unit_font = _readout_font(max(12, round(value_px * 0.45)))
+        unit_widest = QFontMetricsF(self._unit_font).horizontalAdvance(_WIDEST_UNIT)
+        self.unit.setMinimumWidth(math.ceil(unit_widest) + 2)
+        self.unit.setFont(self._value_font if self.unit.text() == "°" else self._unit_font)
+        note_font = QFont(self.font())
+        note_font.setPixelSize(max(10, round(value_px * 0.3)))
+        self.note.setFont(note_font)
+        self._value_row.setSpacing(max(2, value_px // 16))
 
     def setUnit(self, unit_label: str) -> None:
         """Show ``unit_label``; a degree sign is set as large as the digits, like "+1.23°"."""
@@ -143,9 +155,11 @@ class _ReadoutTile(QFrame):
 class TiltReadouts(QWidget):
     """Instrument-style numeric readouts for roll, pitch, tilt and tilt direction.
 
-    Values arrive already in the display unit (degrees, mm/m or %) and are shown to 0.01;
+    Values arrive already in the display unit (a key of ``app.core.readout.SLOPE_UNITS`` or
+    its suffix: degrees, %, mm/m, in/ft, 1:n) and are shown as ``format_slope`` writes them;
     roll and pitch always carry a sign. The direction is in degrees (0.1) with the raised
-    side as a short compass label. The widget formats what it is given and nothing more.
+    side as a short compass label. The widget shows what it is given and nothing more.
+    With :meth:`setAutoScale` the digits grow to fill the space the widget is given.
 
     Parameters
     ----------
@@ -161,27 +175,39 @@ class TiltReadouts(QWidget):
             raise ValueError(f"columns must be 1, 2 or 4, got {columns!r}")
         self._valid = False
         self._held = False
-        self._unit_label = "°"
+        self._unit = "deg"
         self._values: dict[str, float] = dict.fromkeys(QUANTITIES, math.nan)
+        self._columns = columns
+        self._base_px = value_px
+        self._value_px = value_px
+        self._auto_scale = False
+        self._max_px = value_px
+        self._min_px = value_px
+        self._resizing_tiles = False
+        self._auto_columns: tuple[int, ...] = ()
 
         self._tiles: dict[str, _ReadoutTile] = {}
-        grid = QGridLayout(self)
-        grid.setContentsMargins(0, 0, 0, 0)
-        grid.setSpacing(8)
-        for index, name in enumerate(QUANTITIES):
-            tile = _ReadoutTile(_CAPTIONS[name], _NOTES[name], value_px, self)
-            self._tiles[name] = tile
-            grid.addWidget(tile, index // columns, index % columns)
+        self._grid = QGridLayout(self)
+        self._grid.setContentsMargins(0, 0, 0, 0)
+        self._grid.setSpacing(8)
+        for name in QUANTITIES:
+            self._tiles[name] = _ReadoutTile(_CAPTIONS[name], _NOTES[name], value_px, self)
+        self._place_tiles()
         self._tiles["direction"].setUnit("°")
         self._alarm: tuple[str, ...] = ()
+        # Space a tile needs per pixel of digit size, measured once on the fonts.
+        width_100 = QFontMetricsF(_readout_font(100)).horizontalAdvance(_WIDEST_VALUE)
+        width_100 += QFontMetricsF(_readout_font(45)).horizontalAdvance(_WIDEST_UNIT)
+        height_100 = sum(
+            QFontMetricsF(font).height()
+            for font in (_readout_font(100), _readout_font(30), _readout_font(28))
+        )
+        self._per_px = (width_100 / 100.0, height_100 / 100.0)
+        theme.notifier().changed.connect(self._restore_fonts)
 
         self._hold_badge = QLabel("HOLD", self)
         self._hold_badge.setObjectName("HoldBadge")
-        badge_font = QFont(self.font())
-        badge_font.setPixelSize(max(10, round(value_px * 0.3)))
-        badge_font.setBold(True)
-        badge_font.setLetterSpacing(QFont.SpacingType.PercentageSpacing, 115)
-        self._hold_badge.setFont(badge_font)
+        self._size_badge()
         self._hold_badge.setAlignment(Qt.AlignmentFlag.AlignCenter)
         # Readable even without the application stylesheet.
         self._hold_badge.setStyleSheet(
@@ -192,17 +218,69 @@ class TiltReadouts(QWidget):
 
     # ---- API -----------------------------------------------------------------------------
 
+    def setColumns(self, columns: int) -> None:
+        """Tiles per row: 1 (a column), 2 (a 2 x 2 block) or 4 (a strip)."""
+        if columns not in (1, 2, 4):
+            raise ValueError(f"columns must be 1, 2 or 4, got {columns!r}")
+        if columns != self._columns:
+            self._columns = columns
+            self._place_tiles()
+            self._fit_digits()
+
+    def columns(self) -> int:
+        """Tiles per row."""
+        return self._columns
+
+    def setAutoScale(
+        self, enabled: bool, maximum_px: int | None = None, minimum_px: int | None = None,
+        columns: tuple[int, ...] = (),
+    ) -> None:
+        """Let the digits fill the widget, from ``minimum_px`` (the widget asks for room
+        for these) up to ``maximum_px``; with several ``columns`` (e.g. ``(2, 1)``) the tiles
+        are arranged in whichever gives the largest digits (the first when equal). Off: back
+        to the size given at construction."""
+        self._auto_scale = bool(enabled)
+        self._auto_columns = tuple(columns) if enabled else ()
+        if self._auto_columns and self._columns != self._auto_columns[0]:
+            self._columns = self._auto_columns[0]
+            self._place_tiles()
+        self._max_px = maximum_px or self._base_px * 6
+        self._min_px = minimum_px or self._base_px
+        policy = QSizePolicy.Policy.Expanding if enabled else QSizePolicy.Policy.Preferred
+        self.setSizePolicy(policy, policy)
+        if enabled:
+            self._fit_digits()
+        else:
+            self._set_value_px(self._base_px)
+        self.updateGeometry()
+
+    def valuePixelSize(self) -> int:
+        """Pixel size of the digits now."""
+        return self._value_px
+
+    def reading(self) -> str:
+        """The values shown as one line for the clipboard (``Roll 1.23° Pitch -0.45° Tilt
+        1.31°``), or ``""`` when no numbers are shown."""
+        if not self._valid or not all(
+            format_slope(self._values[name], self._unit) for name in ("roll", "pitch", "tilt")
+        ):
+            return ""
+        return reading_text(
+            self._values["roll"], self._values["pitch"], self._values["tilt"], self._unit
+        )
+
     def setValues(
         self, roll: float, pitch: float, tilt: float, direction_deg: float, unit_label: str
     ) -> None:
-        """Show new values: roll, pitch and tilt in ``unit_label`` units, direction in degrees."""
+        """Show new values: roll, pitch and tilt in ``unit_label`` (a unit's key or suffix),
+        direction in degrees."""
         self._values = {
             "roll": float(roll),
             "pitch": float(pitch),
             "tilt": float(tilt),
             "direction": float(direction_deg),
         }
-        self._unit_label = unit_label
+        self._unit = _unit_key(unit_label)
         self._show_texts()
 
     def setValid(self, valid: bool) -> None:
@@ -283,23 +361,104 @@ class TiltReadouts(QWidget):
         return raised_side_label(direction)
 
     def _show_texts(self) -> None:
-        formatters = {
-            "roll": _format_signed,
-            "pitch": _format_signed,
-            "tilt": _format_unsigned,
-            "direction": _format_direction,
-        }
+        suffix = SLOPE_UNITS[self._unit].suffix
         for name, tile in self._tiles.items():
             value = self._values[name]
-            if self._valid and math.isfinite(value):
-                tile.value.setText(formatters[name](value))
+            if name == "direction":
+                text = _format_direction(value) if math.isfinite(value) else ""
             else:
-                tile.value.setText(NO_VALUE)
-            if name != "direction":
-                tile.setUnit(self._unit_label)
+                text = format_slope(value, self._unit, signed=name != "tilt")
+                tile.setUnit(suffix)
+            tile.value.setText(text.replace("-", MINUS) if self._valid and text else NO_VALUE)
         self._tiles["direction"].note.setText(
             f'{_NOTES["direction"]}&nbsp;&nbsp;<span style="color:{theme.TEXT};">'
             f"<b>{self._side_text()}</b></span>"
+        )
+
+    def _place_tiles(self) -> None:
+        for index, name in enumerate(QUANTITIES):
+            self._grid.removeWidget(self._tiles[name])
+            self._grid.addWidget(
+                self._tiles[name], index // self._columns, index % self._columns
+            )
+
+    def _tile_overhead(self) -> tuple[float, float]:
+        """Width and height of a tile that do not grow with the digits (margins, spacing)."""
+        return 40.0, 32.0
+
+    def _fit(self, columns: int) -> float:
+        """The digit size at which tiles in ``columns`` fill the widget."""
+        rows = math.ceil(len(QUANTITIES) / columns)
+        spacing = self._grid.spacing()
+        tile_w = (self.width() - spacing * (columns - 1)) / columns
+        tile_h = (self.height() - spacing * (rows - 1)) / rows
+        fixed_w, fixed_h = self._tile_overhead()
+        return min((tile_w - fixed_w) / self._per_px[0], (tile_h - fixed_h) / self._per_px[1])
+
+    def _fit_digits(self) -> None:
+        """Auto scale: the largest digits for which every tile fits the widget."""
+        if not self._auto_scale:
+            return
+        if self._auto_columns:
+            best = max(self._auto_columns, key=self._fit)  # the first of equals
+            if best != self._columns:
+                self._columns = best
+                self._place_tiles()
+        fit = self._fit(self._columns)
+        self._set_value_px(int(max(self._min_px, min(self._max_px, fit))))
+
+    def _size_badge(self) -> None:
+        badge_font = QFont(self.font())
+        badge_font.setPixelSize(max(10, round(self._value_px * 0.3)))
+        badge_font.setBold(True)
+        badge_font.setLetterSpacing(QFont.SpacingType.PercentageSpacing, 115)
+        self._hold_badge.setFont(badge_font)
+        if self._held:
+            self._place_hold_badge()
+
+    def _restore_fonts(self, _theme_name: str = "") -> None:
+        """After a theme switch: a new application stylesheet puts back the fonts the labels
+        had when they were first styled, so size them again; and the raised side's colour
+        is the new theme's (the texts are not redrawn while held)."""
+        for tile in self._tiles.values():
+            tile.setValuePixelSize(self._value_px)
+        self._size_badge()
+        self._show_texts()
+
+    def _set_value_px(self, value_px: int) -> None:
+        if value_px == self._value_px:
+            return
+        self._value_px = value_px
+        if self._resizing_tiles:  # a resize while the fonts change: the loop below takes it
+            return
+        self._resizing_tiles = True
+        try:
+            applied = None
+            while applied != self._value_px:
+                applied = self._value_px
+                for tile in self._tiles.values():
+                    tile.setValuePixelSize(applied)
+                self._size_badge()
+        finally:
+            self._resizing_tiles = False
+
+    def sizeHint(self) -> QSize:
+        """Auto scale: the size at the smallest digits (the layout gives what it can)."""
+        return self.minimumSizeHint() if self._auto_scale else super().sizeHint()
+
+    def minimumSizeHint(self) -> QSize:
+        """Auto scale: room for the smallest digits allowed."""
+        if not self._auto_scale:
+            return super().minimumSizeHint()
+        columns = self._auto_columns[0] if self._auto_columns else self._columns
+        rows = math.ceil(len(QUANTITIES) / columns)
+        spacing = self._grid.spacing()
+        fixed_w, fixed_h = self._tile_overhead()
+        tile_w = fixed_w + self._per_px[0] * self._min_px
+        tile_h = fixed_h + self._per_px[1] * self._min_px
+        return QSize(
+            math.ceil(tile_w * columns + spacing * (columns - 1)),
+            math.ceil(tile_h * rows + spacing * (rows - 1)),
         )
 
     def _place_hold_badge(self) -> None:
@@ -308,6 +467,7 @@ class TiltReadouts(QWidget):
         self._hold_badge.move(self.width() - badge.width() - 10, 9)
 
     def resizeEvent(self, event: QResizeEvent) -> None:
-        """Keep the HOLD badge in the top-right corner."""
+        """Keep the HOLD badge in the top-right corner; auto scale: fit the digits."""
         super().resizeEvent(event)
+        self._fit_digits()
         self._place_hold_badge()

@@ -52,6 +52,17 @@ class ReplayOverview(pg.PlotWidget):
         self._alarm_marks: list[pg.InfiniteLine] = []
         self._duration_s = 0.0
         self.scene().sigMouseClicked.connect(self._on_click)
+        self._on_theme_changed()
+        theme.notifier().changed.connect(self._on_theme_changed)
+
+    def _on_theme_changed(self, _name: str = "") -> None:
+        """Background, bands and position line in the current theme's colours."""
+        self.setBackground(theme.BASE_BG)
+        for colour, (low, high), band in zip(theme.AXIS_COLORS, self._curves, self._bands):
+            low.setPen(pg.mkPen(colour))
+            high.setPen(pg.mkPen(colour))
+            band.setBrush(pg.mkBrush(pg.mkColor(colour).lighter(60)))
+        self.position.setPen(pg.mkPen(theme.TEXT, width=2))
 
     def show_overview(self, overview: Overview, duration_s: float,
                       gaps_s: tuple[float, ...] = ()) -> None:

@@ -1,0 +1,87 @@
+"""Display units: the conversions and texts of app.core.readout (1:n and in/ft included)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from app.core.readout import (
+    LEVEL_RATIO_TEXT,
+    SLOPE_UNITS,
+    format_slope,
+    reading_text,
+    slope_from_angle,
+)
+
+
+def test_inches_per_foot_is_twelve_times_the_rise():
+    # 1 in 12 (one inch per foot) is atan(1/12) = 4.7636°.
+    assert slope_from_angle(math.degrees(math.atan(1 / 12)), "in/ft") == pytest.approx(1.0)
+    assert slope_from_angle(-45.0, "in/ft") == pytest.approx(-12.0)
+
+
+def test_ratio_is_the_run_per_unit_rise_signed_like_the_angle():
+    assert slope_from_angle(45.0, "ratio") == pytest.approx(1.0)
+    assert slope_from_angle(math.degrees(math.atan(1 / 50)), "ratio") == pytest.approx(50.0)
+    assert slope_from_angle(-math.degrees(math.atan(1 / 200)), "ratio") == pytest.approx(-200.0)
+    assert slope_from_angle(0.0, "ratio") == math.inf
+    assert slope_from_angle(-0.0, "ratio") == math.inf  # level has no sign
+    both = slope_from_angle(np.array([0.0, 45.0]), "ratio")
+    np.testing.assert_allclose(both, [np.inf, 1.0])
+
+
+def test_ratio_text_near_level_and_steep():
+    assert format_slope(slope_from_angle(0.0, "ratio"), "ratio") == LEVEL_RATIO_TEXT == "1:∞"
+    assert format_slope(slope_from_angle(0.001, "ratio"), "ratio") == "1:∞"  # 1:57296
+    assert format_slope(slope_from_angle(0.01, "ratio"), "ratio") == "1:5730"
+    assert format_slope(slope_from_angle(1.0, "ratio"), "ratio") == "1:57.3"
+    assert format_slope(slope_from_angle(-10.0, "ratio"), "ratio", signed=True) == "-1:5.67"
+    assert format_slope(slope_from_angle(10.0, "ratio"), "ratio", signed=True) == "+1:5.67"
+    assert format_slope(slope_from_angle(60.0, "ratio"), "ratio") == "1:0.58"
+    assert format_slope(math.nan, "ratio") == ""
+
+
+def test_decimal_texts_have_two_decimals_and_no_negative_zero():
+    assert format_slope(1.234, "deg", signed=True) == "+1.23"
+    assert format_slope(-0.001, "mm/m", signed=True) == "+0.00"
+    assert format_slope(-0.001, "percent") == "0.00"
+    assert format_slope(-0.456, "in/ft") == "-0.46"
+    assert format_slope(math.nan, "deg") == ""
+
+
+def test_reading_text_for_the_clipboard():
+    assert reading_text(1.234, -0.454, 1.31, "deg") == "Roll 1.23° Pitch -0.45° Tilt 1.31°"
+    assert reading_text(2.0, 0.0, 2.0, "mm/m") == "Roll 2.00 mm/m Pitch 0.00 mm/m Tilt 2.00 mm/m"
+    roll, pitch, tilt = (slope_from_angle(a, "ratio") for a in (1.0, 0.0, 1.0))
+    assert reading_text(roll, pitch, tilt, "ratio") == "Roll 1:57.3 Pitch 1:∞ Tilt 1:57.3"
+
+
+def test_every_unit_converts_and_has_a_title():
+    for key, unit in SLOPE_UNITS.items():
+        assert unit.key == key and unit.title
+        assert math.isfinite(slope_from_angle(5.0, key))
+    with pytest.raises(ValueError, match="unknown slope unit"):
+        slope_from_angle(1.0, "furlongs")
+
+
+def test_readouts_show_ratios_and_copy_what_they_show(qtbot):
+    from app.gui.readouts import TiltReadouts
+
+    readouts = TiltReadouts()
+    qtbot.addWidget(readouts)
+    readouts.setValid(True)
+    roll, pitch, tilt = (slope_from_angle(a, "ratio") for a in (-1.0, 0.0, 1.0))
+    readouts.setValues(roll, pitch, tilt, 270.0, "ratio")
+    assert readouts.readoutText("roll") == "−1:57.3"
+    assert readouts.readoutText("pitch") == "1:∞"
+    assert readouts.readoutText("tilt") == "1:57.3"
+    assert readouts.reading() == "Roll -1:57.3 Pitch 1:∞ Tilt 1:57.3"
+    readouts.setValues(1.0, 12.0, 12.04, 85.0, "in/ft")
+    assert readouts.readoutText("pitch") == "+12.00 in/ft"
+    assert readouts.reading() == "Roll 1.00 in/ft Pitch 12.00 in/ft Tilt 12.04 in/ft"
+    readouts.setValues(math.nan, 0.0, 0.0, 0.0, "ratio")
+    assert readouts.reading() == ""
+    readouts.setValid(False)
+    assert readouts.reading() == ""
