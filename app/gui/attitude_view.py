@@ -27,7 +27,7 @@ from PySide6.QtGui import (
     QPolygonF,
     QWheelEvent,
 )
-from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
 from app.core.scene3d import (
     Camera,
@@ -249,15 +249,23 @@ class AttitudeView(QWidget):
         self.backend_reason = reason
         self.note = QLabel(
             "OpenGL · drag to turn, wheel to zoom" if self.canvas.backend == "opengl"
-            else f"Drawing without OpenGL ({reason}) · drag to turn, wheel to zoom, "
-                 "double-click to reset"
+            else "Drawn without OpenGL · drag to turn, wheel to zoom, double-click to reset"
         )
+        self.note.setToolTip(reason)
         self.note.setObjectName("dimLabel")
         self.note.setWordWrap(True)
+        self.arm_box = QCheckBox("Show arm")
+        self.arm_box.setToolTip("Draw the measuring arm (its layout is in the Arm dock)")
+        self.arm_box.setEnabled(False)
+        self.arm_box.toggled.connect(lambda _on: self._redraw())
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addWidget(self.canvas, 1)
-        layout.addWidget(self.note)
+        row = QHBoxLayout()
+        row.setContentsMargins(6, 0, 6, 2)
+        row.addWidget(self.note, 1)
+        row.addWidget(self.arm_box)
+        layout.addLayout(row)
         self._quaternions: list[np.ndarray] | None = None
         self._labels: tuple[str, ...] = ()
         self._arm: tuple[np.ndarray, np.ndarray, tuple[int, ...] | None] | None = None
@@ -286,13 +294,16 @@ class AttitudeView(QWidget):
             return
         self._quaternions = current
         self._labels = tuple(labels)
-        if self._arm is None:
+        if not self.showing_arm:
             self._redraw()
 
     def set_arm(
         self, points: np.ndarray, rotations: np.ndarray, sensor_links: Sequence[int] | None = None
     ) -> None:
-        """Show the arm: its joints (n + 1, 3) and link frames (n, 3, 3), boards on sensor links."""
+        """The arm: its joints (n + 1, 3) and link frames (n, 3, 3), boards on sensor links.
+
+        It is drawn (instead of the sensors alone) while the view's Arm box is ticked.
+        """
         points = np.asarray(points, dtype=np.float64)
         rotations = np.asarray(rotations, dtype=np.float64)
         if not np.all(np.isfinite(points)):
@@ -304,14 +315,22 @@ class AttitudeView(QWidget):
             if moved <= ARM_REDRAW_FRACTION * reach:
                 return
         self._arm = (points, rotations, links)
-        self._redraw()
+        first = not self.arm_box.isEnabled()
+        self.arm_box.setEnabled(True)
+        if self.showing_arm or first:
+            self._redraw()
 
     def clear_arm(self) -> None:
         self._arm = None
+        self.arm_box.setEnabled(False)
         self._redraw()
 
+    @property
+    def showing_arm(self) -> bool:
+        return self._arm is not None and self.arm_box.isChecked()
+
     def _redraw(self) -> None:
-        if self._arm is not None:
+        if self.showing_arm:
             scene = arm_scene(*self._arm)
         elif self._quaternions:
             scene = sensors_scene(self._quaternions, self._labels)
