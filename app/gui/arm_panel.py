@@ -51,7 +51,7 @@ from app.core.arm import (
 from app.core.arm.layout import ALONG_X, PITCH_UP, VERTICAL
 
 JOINT_KINDS = {
-    "column (about vertical)": (VERTICAL, VERTICAL),
+    "column (vertical)": (VERTICAL, VERTICAL),
     "hinge (raises link)": (PITCH_UP, ALONG_X),
 }
 """Joint kinds offered in the table: (hinge axis in the previous link, link direction)."""
@@ -80,6 +80,13 @@ def _tile(caption: str, size: int) -> tuple[QFrame, QLabel]:
     layout.addWidget(label)
     layout.addWidget(value)
     return tile, value
+
+
+def _fit_height(table: QTableWidget) -> None:
+    """Make a table exactly as tall as its rows (no scroll bar, no empty space)."""
+    table.resizeRowsToContents()
+    height = table.horizontalHeader().height() + table.verticalHeader().length()
+    table.setFixedHeight(height + 2 * table.frameWidth() + 2)
 
 
 class ArmPanel(QWidget):
@@ -190,7 +197,6 @@ class ArmPanel(QWidget):
         self.stats_table.horizontalHeader().setSectionResizeMode(
             QHeaderView.ResizeMode.Stretch
         )
-        self.stats_table.setMinimumHeight(170)
         stats.addWidget(self.stats_table)
         self.message = QLabel()
         self.message.setObjectName("dimLabel")
@@ -213,6 +219,7 @@ class ArmPanel(QWidget):
             self.unit_edit.setText(layout.unit)
         finally:
             self._filling = False
+        _fit_height(self.table)
         self._apply_layout(layout)
 
     def _append_row(self, link: Link, angle: float) -> None:
@@ -261,7 +268,11 @@ class ArmPanel(QWidget):
         return [self.table.cellWidget(r, COL_ANGLE).value() for r in range(self.table.rowCount())]
 
     def add_link(self) -> None:
-        self._append_row(Link(f"link {self.table.rowCount() + 1}", 100.0), 0.0)
+        self._filling = True  # the row is complete only at the end
+        try:
+            self._append_row(Link(f"link {self.table.rowCount() + 1}", 100.0), 0.0)
+        finally:
+            self._filling = False
         self._on_table_edited()
 
     def remove_link(self) -> None:
@@ -270,6 +281,7 @@ class ArmPanel(QWidget):
             self._on_table_edited()
 
     def _on_table_edited(self, *_args) -> None:
+        _fit_height(self.table)
         if self._filling:
             return
         try:
@@ -401,6 +413,7 @@ class ArmPanel(QWidget):
                 item = QTableWidgetItem(text)
                 item.setTextAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
                 self.stats_table.setItem(row, column, item)
+        _fit_height(self.stats_table)
         self.export_button.setEnabled(n > 0)
         self.undo_button.setEnabled(n > 0)
 
