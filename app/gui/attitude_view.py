@@ -30,6 +30,7 @@ from PySide6.QtGui import (
 from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
 from app.core.scene3d import (
+    FACE_NORMALS,
     Camera,
     Scene,
     arm_scene,
@@ -164,6 +165,17 @@ class PainterCanvas(QWidget):
         self.set_camera(self.camera.zoomed(1.15 ** (event.angleDelta().y() / 120.0)))
 
 
+def face_colors(body) -> np.ndarray:
+    """RGBA per triangle of :func:`box_triangles`, lit from above (a fixed light: the OpenGL
+    camera turns freely, and a board's top should stay the brightest when it faces up)."""
+    normals = np.vstack([FACE_NORMALS, FACE_NORMALS]) @ body.rotation.T
+    shade = 0.55 + 0.45 * np.clip(normals @ np.array([0.3, -0.2, 0.93]), 0.0, 1.0)
+    base = np.array([COLORS["body"].getRgbF()] * 12)
+    base[[5, 11]] = COLORS["body_top"].getRgbF()  # the +z face's two triangles
+    base[:, :3] *= shade[:, None]
+    return base
+
+
 def _gl_canvas_class():
     """The OpenGL canvas (defined on demand: pyqtgraph.opengl imports PyOpenGL)."""
     import pyqtgraph.opengl as gl
@@ -180,6 +192,8 @@ def _gl_canvas_class():
             self.scene = Scene()
             self.paints = 0
             self._items: list = []
+            self._shape: tuple | None = None
+            self._radius = 0.0
             self._grid = gl.GLGridItem()
             self._grid.setColor(QColor(theme.PLOT_GRID))
             self.addItem(self._grid)
@@ -190,41 +204,54 @@ def _gl_canvas_class():
             super().paintGL(*args, **kwargs)
 
         def set_scene(self, scene: Scene) -> None:
-            for item in self._items:
-                self.removeItem(item)
-            self._items = []
+            """Show a scene: items are updated in place while its make-up stays the same."""
+            shape = (len(scene.bodies), scene.arm is not None and len(scene.arm))
+            if shape != self._shape:
+                for item in self._items:
+                    self.removeItem(item)
+                self._items = self._make_items(scene)
+                for item in self._items:
+                    self.addItem(item)
+                self._shape = shape
             center, radius = scene.bounds()
+            items = iter(self._items)
             for body in scene.bodies:
                 vertices, faces = box_triangles(body)
-                colors = np.tile(COLORS["body"].getRgbF(), (len(faces), 1))
-                colors[[5, 11]] = COLORS["body_top"].getRgbF()  # the +z face's two triangles
-                mesh = gl.GLMeshItem(vertexes=vertices - center, faces=faces, faceColors=colors,
-                                     smooth=False, shader="shaded", drawEdges=False)
-                self._items.append(mesh)
-                tips = body.axis_tips()
-                for key, tip in zip(("axis_x", "axis_y", "axis_z"), tips):
-                    line = gl.GLLinePlotItem(pos=np.vstack([body.center, tip]) - center,
-                                             color=COLORS[key].getRgbF(), width=3.0,
-                                             antialias=True)
-                    self._items.append(line)
+                next(items).setMeshData(vertexes=vertices - center, faces=faces,
+                                        faceColors=face_colors(body))
+                for tip in body.axis_tips():
+                    next(items).setData(pos=np.vstack([body.center, tip]) - center)
             if scene.arm is not None:
-                self._items.append(gl.GLLinePlotItem(
-                    pos=scene.arm - center, color=COLORS["arm"].getRgbF(), width=6.0,
-                    antialias=True))
-                self._items.append(gl.GLScatterPlotItem(
-                    pos=scene.arm - center, color=COLORS["joint"].getRgbF(), size=10.0))
-            for item in self._items:
-                self.addItem(item)
-            spacing = radius / 4
-            self._grid.setSpacing(spacing, spacing, spacing)
-            self._grid.setSize(4 * radius, 4 * radius, 1)
-            floor = float(scene.points()[:, 2].min() - center[2]) if scene.bodies or (
-                scene.arm is not None) else 0.0
+                next(items).setData(pos=scene.arm - center)
+                next(items).setData(pos=scene.arm - center)
+            if radius != self._radius:  # a new size: frame it again
+                self._radius = radius
+                spacing = radius / 4
+                self._grid.setSpacing(spacing, spacing, spacing)
+                self._grid.setSize(4 * radius, 4 * radius, 1)
+                self.opts["distance"] = 3.5 * radius
+            floor = float(scene.points()[:, 2].min() - center[2])
             self._grid.resetTransform()
             self._grid.translate(0.0, 0.0, floor)
-            self.opts["distance"] = 3.5 * radius
             self.scene = scene
             self.update()
+
+        @staticmethod
+        def _make_items(scene: Scene) -> list:
+            items: list = []
+            for _body in scene.bodies:
+                items.append(gl.GLMeshItem(
+                    smooth=False, shader=None, drawEdges=True,
+                    edgeColor=QColor(theme.BASE_BG).getRgbF(), glOptions="opaque",
+                ))
+                for key in ("axis_x", "axis_y", "axis_z"):
+                    items.append(gl.GLLinePlotItem(color=COLORS[key].getRgbF(), width=3.0,
+                                                   antialias=True))
+            if scene.arm is not None:
+                items.append(gl.GLLinePlotItem(color=COLORS["arm"].getRgbF(), width=6.0,
+                                               antialias=True))
+                items.append(gl.GLScatterPlotItem(color=COLORS["joint"].getRgbF(), size=10.0))
+            return items
 
     return GLCanvas
 
