@@ -98,7 +98,10 @@ def pixels_of(image: QImage) -> np.ndarray:
     return data.reshape(image.height(), image.bytesPerLine())[:, : 4 * image.width()].copy()
 
 
-def test_view_falls_back_to_a_drawing_offscreen_and_follows_the_attitude(qtbot, artifacts_dir):
+def test_view_falls_back_to_a_drawing_offscreen_and_follows_the_attitude(
+    qtbot, qapp, artifacts_dir
+):
+    theme.apply_theme(qapp)
     view = AttitudeView()
     qtbot.addWidget(view)
     view.resize(480, 400)
@@ -144,7 +147,8 @@ def test_dragging_turns_the_drawn_view(qtbot):
     assert np.any(pixels_of(image_of(view)) != before)
 
 
-def test_view_draws_the_arm_when_asked(qtbot, artifacts_dir):
+def test_view_draws_the_arm_when_asked(qtbot, qapp, artifacts_dir):
+    theme.apply_theme(qapp)
     view = AttitudeView(backend="painter")
     qtbot.addWidget(view)
     view.resize(480, 400)

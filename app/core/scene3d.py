@@ -257,15 +257,15 @@ def _grid_items(
 ) -> list[DrawItem]:
     """A square grid on the floor under the scene (at its lowest point)."""
     floor = float(scene.points()[:, 2].min())
-    half = radius
-    step = _nice_step(2 * half / 8)
-    start = np.floor((center[:2] - half) / step) * step
+    half = 1.5 * radius
+    step = _nice_step(2 * half / 10)
+    low = np.floor((center[:2] - half) / step) * step
+    high = np.ceil((center[:2] + half) / step) * step
     lines = []
-    for i in range(int(np.ceil(2 * half / step)) + 1):
-        x = start[0] + i * step
-        y = start[1] + i * step
-        lines.append(([x, start[1], floor], [x, start[1] + 2 * half, floor]))
-        lines.append(([start[0], y, floor], [start[0] + 2 * half, y, floor]))
+    for x in np.arange(low[0], high[0] + 0.5 * step, step):
+        lines.append(([x, low[1], floor], [x, high[1], floor]))
+    for y in np.arange(low[1], high[1] + 0.5 * step, step):
+        lines.append(([low[0], y, floor], [high[0], y, floor]))
     items = []
     for a, b in lines:
         pixels, depth = projection.project(np.array([a, b]))
