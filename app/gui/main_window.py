@@ -48,6 +48,8 @@ from app.core.recording import sample_recordings
 from app.core.self_test import SelfTestReport
 from app.gui import theme
 from app.gui.alarm_panel import AlarmPanel
+from app.gui.arm_panel import ArmPanel
+from app.gui.attitude_view import AttitudeView
 from app.gui.bubble_level import BubbleLevel
 from app.gui.calibration_wizard import CalibrationWizard
 from app.gui.device_bar import DeviceBar
@@ -201,11 +203,19 @@ class MainWindow(QMainWindow):
         self.measure_panel.tareRequested.connect(session.requestTareReference)
         right = Qt.DockWidgetArea.RightDockWidgetArea
         self._add_dock("measure", "Measure", self.measure_panel, right)
+        self.attitude_view = AttitudeView()
+        self._add_dock("attitude3d", "3D view", self.attitude_view, right)
+        self.arm_panel = ArmPanel()
+        self._add_dock("arm", "Arm", self.arm_panel, right)
         bottom = Qt.DockWidgetArea.BottomDockWidgetArea
         self._add_dock("messages", "Messages", self.messages, bottom)
         self.tabifyDockWidget(self.docks["filter"], self.docks["simulator"])
         self.tabifyDockWidget(self.docks["simulator"], self.docks["device"])
         self.tabifyDockWidget(self.docks["device"], self.docks["measure"])
+        self.tabifyDockWidget(self.docks["measure"], self.docks["attitude3d"])
+        self.tabifyDockWidget(self.docks["attitude3d"], self.docks["arm"])
+        self.docks["attitude3d"].hide()  # opened from the View menu (then in this tab group)
+        self.docks["arm"].hide()
         self.tabifyDockWidget(self.docks["plots"], self.docks["messages"])
         self._build_alarms_and_log()
         self.docks["plots"].raise_()
@@ -241,6 +251,14 @@ class MainWindow(QMainWindow):
         )
         self.presenter.framesPerSecond.connect(
             lambda fps: self.status_fps.setText(f"{fps:.0f} fps")
+        )
+        # The 3D view and the arm follow the current device (live and replay).
+        self.presenter.attitudeChanged.connect(self.attitude_view.set_attitude)
+        self.presenter.attitudeChanged.connect(self.arm_panel.set_device_orientation)
+        self.arm_panel.poseChanged.connect(
+            lambda pose: self.attitude_view.set_arm(
+                pose.points, pose.rotations, self.arm_panel.sensor_links
+            )
         )
 
         # Wiring: GUI -> session (queued to the worker) and worker -> GUI.

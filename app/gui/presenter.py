@@ -48,6 +48,7 @@ class LivePresenter(QObject):
     """Refreshes the bubble level, the readouts and the plots at a fixed frame rate."""
 
     framesPerSecond = Signal(float)
+    attitudeChanged = Signal(object)  # the newest orientation quaternion, on new data (3D view)
 
     def __init__(
         self,
@@ -134,6 +135,7 @@ class LivePresenter(QObject):
         angles = averaged_angles(recent["quat"])
         if angles is None:
             return
+        self.attitudeChanged.emit(recent["quat"][-1])
         unit = self.settings.unit
         self.level.setValid(True)
         self.level.setTilt(angles.roll_deg, angles.pitch_deg, angles.tilt_deg)

@@ -1,0 +1,468 @@
+"""The Arm panel: the measuring arm's layout, its end point (R, Z and x, y, z), repeatability.
+
+The arm's maths lives in :mod:`app.core.arm`; this panel edits the layout (a table of links:
+name, length, joint kind and the angle used when no sensor measures the joint), shows the end
+point and keeps the captured placements. It is fed by :meth:`ArmPanel.set_joint_angles`
+(joint angles from any source) or :meth:`ArmPanel.set_link_orientations` (each link's sensor
+quaternion, or None); today the main window feeds the one connected device through
+:meth:`ArmPanel.set_device_orientation`, to the link chosen under the table.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtGui import QFont
+from PySide6.QtWidgets import (
+    QComboBox,
+    QDoubleSpinBox,
+    QFileDialog,
+    QFormLayout,
+    QFrame,
+    QGridLayout,
+    QGroupBox,
+    QHBoxLayout,
+    QHeaderView,
+    QLabel,
+    QLineEdit,
+    QPushButton,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
+)
+
+from app.core.arm import (
+    COORDINATES,
+    ArmLayout,
+    ArmLayoutError,
+    ArmPose,
+    Link,
+    Placements,
+    forward,
+    jamris_layout,
+    pose_from_link_quaternions,
+)
+from app.core.arm.layout import ALONG_X, PITCH_UP, VERTICAL
+
+JOINT_KINDS = {
+    "column (vertical)": (VERTICAL, VERTICAL),
+    "hinge (raises link)": (PITCH_UP, ALONG_X),
+}
+"""Joint kinds offered in the table: (hinge axis in the previous link, link direction)."""
+STAT_ROWS = ("mean", "sd", "min", "max", "range")
+SHOWN_COORDINATES = ("R", "Z", "x", "y", "z")
+HISTORY_S = 30.0
+COL_NAME, COL_LENGTH, COL_JOINT, COL_ANGLE = range(4)
+
+
+def _tile(caption: str, size: int) -> tuple[QFrame, QLabel]:
+    tile = QFrame()
+    tile.setObjectName("ReadoutTile")
+    layout = QVBoxLayout(tile)
+    layout.setContentsMargins(8, 4, 8, 4)
+    layout.setSpacing(0)
+    label = QLabel(caption)
+    label.setObjectName("ReadoutCaption")
+    value = QLabel("—")
+    value.setObjectName("ReadoutValue")
+    value.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
+    font = QFont()
+    font.setPointSize(size)
+    font.setBold(True)
+    font.setStyleHint(QFont.StyleHint.Monospace)
+    value.setFont(font)
+    layout.addWidget(label)
+    layout.addWidget(value)
+    return tile, value
+
+
+def _fit_height(table: QTableWidget) -> None:
+    """Make a table exactly as tall as its rows (no scroll bar, no empty space)."""
+    table.resizeRowsToContents()
+    height = table.horizontalHeader().height() + table.verticalHeader().length()
+    table.setFixedHeight(height + 2 * table.frameWidth() + 2)
+
+
+class ArmPanel(QWidget):
+    """Layout table, the end point's readouts, and repeatability over captured placements."""
+
+    poseChanged = Signal(object)  # ArmPose; sensor_links says which links carry a sensor
+    layoutChanged = Signal(object)  # ArmLayout
+
+    def __init__(
+        self,
+        parent: QWidget | None = None,
+        layout: ArmLayout | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        super().__init__(parent)
+        self._clock = clock
+        self.arm = layout or jamris_layout()
+        self.pose: ArmPose | None = None
+        self.sensor_links: tuple[int, ...] = ()
+        self.placements = Placements(self.arm.base_position, self.arm.unit)
+        self._history: deque[tuple[float, np.ndarray]] = deque()
+        self._filling = False
+        outer = QVBoxLayout(self)
+
+        layout_box = QGroupBox("Arm layout")
+        box = QVBoxLayout(layout_box)
+        self.table = QTableWidget(0, 4)
+        self.table.setHorizontalHeaderLabels(["Link", "Length", "Joint", "Angle °"])
+        self.table.verticalHeader().setVisible(False)
+        header = self.table.horizontalHeader()
+        header.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+        header.setSectionResizeMode(COL_JOINT, QHeaderView.ResizeMode.Stretch)
+        self.table.setToolTip(
+            "Links from the base. The angle is used when no sensor measures that joint "
+            "(a column's turn about the vertical cannot be seen by an accelerometer)."
+        )
+        self.table.itemChanged.connect(self._on_table_edited)
+        box.addWidget(self.table)
+        buttons = QHBoxLayout()
+        self.add_button = QPushButton("Add link")
+        self.add_button.clicked.connect(self.add_link)
+        self.remove_button = QPushButton("Remove last")
+        self.remove_button.clicked.connect(self.remove_link)
+        self.load_button = QPushButton("Load…")
+        self.load_button.clicked.connect(lambda: self.load_layout())
+        self.save_button = QPushButton("Save…")
+        self.save_button.clicked.connect(lambda: self.save_layout())
+        for button in (self.add_button, self.remove_button, self.load_button, self.save_button):
+            buttons.addWidget(button)
+        box.addLayout(buttons)
+        form = QFormLayout()
+        self.unit_edit = QLineEdit(self.arm.unit)
+        self.unit_edit.setMaximumWidth(80)
+        self.unit_edit.editingFinished.connect(self._on_table_edited)
+        form.addRow("Length unit", self.unit_edit)
+        self.device_link = QComboBox()
+        self.device_link.setToolTip("The link the connected device sits on (x along the link)")
+        self.device_link.currentIndexChanged.connect(self._on_device_link_changed)
+        form.addRow("Current device on", self.device_link)
+        box.addLayout(form)
+        outer.addWidget(layout_box)
+
+        end_box = QGroupBox("End point (base frame)")
+        grid = QGridLayout(end_box)
+        self.values: dict[str, QLabel] = {}
+        for column, name in enumerate(("R", "Z")):
+            tile, value = _tile(name, 22)
+            self.values[name] = value
+            grid.addWidget(tile, 0, column * 3, 1, 3)
+        for column, name in enumerate(("x", "y", "z")):
+            tile, value = _tile(name, 13)
+            self.values[name] = value
+            grid.addWidget(tile, 1, column * 2, 1, 2)
+        self.pose_note = QLabel()
+        self.pose_note.setObjectName("dimLabel")
+        self.pose_note.setWordWrap(True)
+        grid.addWidget(self.pose_note, 2, 0, 1, 6)
+        outer.addWidget(end_box)
+
+        stats_box = QGroupBox("Repeatability over placements")
+        stats = QVBoxLayout(stats_box)
+        row = QHBoxLayout()
+        self.window = QDoubleSpinBox()
+        self.window.setRange(0.1, HISTORY_S)
+        self.window.setValue(1.0)
+        self.window.setSuffix(" s")
+        self.window.setToolTip("A placement is the mean end point over this time")
+        self.capture_button = QPushButton("Capture")
+        self.capture_button.setToolTip("Capture the end point of this placement (averaged)")
+        self.capture_button.clicked.connect(self.capture)
+        self.undo_button = QPushButton("Undo")
+        self.undo_button.clicked.connect(self.undo_capture)
+        self.clear_button = QPushButton("Clear")
+        self.clear_button.clicked.connect(self.clear_captures)
+        self.export_button = QPushButton("Export CSV…")
+        self.export_button.clicked.connect(lambda: self.export_csv())
+        row.addWidget(QLabel("Average"))
+        row.addWidget(self.window)
+        for button in (self.capture_button, self.undo_button, self.clear_button,
+                       self.export_button):
+            row.addWidget(button)
+        stats.addLayout(row)
+        self.count_label = QLabel()
+        stats.addWidget(self.count_label)
+        self.stats_table = QTableWidget(len(STAT_ROWS), len(SHOWN_COORDINATES))
+        self.stats_table.setVerticalHeaderLabels(["Mean", "SD", "Min", "Max", "Range"])
+        self.stats_table.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
+        self.stats_table.horizontalHeader().setSectionResizeMode(
+            QHeaderView.ResizeMode.Stretch
+        )
+        stats.addWidget(self.stats_table)
+        self.message = QLabel()
+        self.message.setObjectName("dimLabel")
+        self.message.setWordWrap(True)
+        stats.addWidget(self.message)
+        outer.addWidget(stats_box)
+        outer.addStretch(1)
+
+        self.set_layout(self.arm)
+        self._show_statistics()
+
+    # -- the layout -----------------------------------------------------------------------
+    def set_layout(self, layout: ArmLayout) -> None:
+        """Show and use a layout (the table is rebuilt; placements of another arm are kept)."""
+        self._filling = True
+        try:
+            self.table.setRowCount(0)
+            for link in layout.links:
+                self._append_row(link, 0.0)
+            self.unit_edit.setText(layout.unit)
+        finally:
+            self._filling = False
+        _fit_height(self.table)
+        self._apply_layout(layout)
+
+    def _append_row(self, link: Link, angle: float) -> None:
+        row = self.table.rowCount()
+        self.table.insertRow(row)
+        self.table.setItem(row, COL_NAME, QTableWidgetItem(link.name))
+        length = QDoubleSpinBox()
+        length.setRange(0.0, 1e6)
+        length.setDecimals(1)
+        length.setValue(link.length)
+        length.valueChanged.connect(self._on_table_edited)
+        self.table.setCellWidget(row, COL_LENGTH, length)
+        joint = QComboBox()
+        joint.addItems(list(JOINT_KINDS))
+        kind = next((name for name, (axis, direction) in JOINT_KINDS.items()
+                     if np.allclose(axis, link.axis) and np.allclose(direction, link.direction)),
+                    None)
+        if kind is None:  # a layout from a file with another joint: keep it, say so
+            joint.addItem(f"custom axis {tuple(round(v, 3) for v in link.axis)}")
+            joint.setItemData(joint.count() - 1, (link.axis, link.direction))
+            kind = joint.itemText(joint.count() - 1)
+        joint.setCurrentText(kind)
+        joint.currentIndexChanged.connect(self._on_table_edited)
+        self.table.setCellWidget(row, COL_JOINT, joint)
+        angle_box = QDoubleSpinBox()
+        angle_box.setRange(-180.0, 180.0)
+        angle_box.setDecimals(2)
+        angle_box.setValue(angle)
+        angle_box.setWrapping(True)
+        angle_box.valueChanged.connect(self._on_angles_edited)
+        self.table.setCellWidget(row, COL_ANGLE, angle_box)
+
+    def layout_from_table(self) -> ArmLayout:
+        """The layout the table describes (raises ArmLayoutError with the reason)."""
+        links = []
+        for row in range(self.table.rowCount()):
+            item = self.table.item(row, COL_NAME)
+            name = item.text().strip() if item is not None else ""
+            joint: QComboBox = self.table.cellWidget(row, COL_JOINT)
+            axis, direction = JOINT_KINDS.get(joint.currentText()) or joint.currentData()
+            length = self.table.cellWidget(row, COL_LENGTH).value()
+            links.append(Link(name or f"link {row + 1}", length, axis, direction))
+        return ArmLayout(tuple(links), self.unit_edit.text().strip() or "mm", self.arm.name)
+
+    def entered_angles(self) -> list[float]:
+        return [self.table.cellWidget(r, COL_ANGLE).value() for r in range(self.table.rowCount())]
+
+    def add_link(self) -> None:
+        self._filling = True  # the row is complete only at the end
+        try:
+            self._append_row(Link(f"link {self.table.rowCount() + 1}", 100.0), 0.0)
+        finally:
+            self._filling = False
+        self._on_table_edited()
+
+    def remove_link(self) -> None:
+        if self.table.rowCount() > 1:
+            self.table.removeRow(self.table.rowCount() - 1)
+            self._on_table_edited()
+
+    def _on_table_edited(self, *_args) -> None:
+        _fit_height(self.table)
+        if self._filling:
+            return
+        try:
+            layout = self.layout_from_table()
+        except ArmLayoutError as exc:
+            self.message.setText(f"Layout not used: {exc}")
+            return
+        self._apply_layout(layout)
+
+    def _apply_layout(self, layout: ArmLayout) -> None:
+        changed_unit = layout.unit != self.arm.unit
+        self.arm = layout
+        self.placements.unit = layout.unit
+        if changed_unit:
+            self.clear_captures()
+        chosen = self.device_link.currentIndex()
+        self.device_link.blockSignals(True)
+        self.device_link.clear()
+        self.device_link.addItem("no link", -1)
+        for i, link in enumerate(layout.links):
+            self.device_link.addItem(link.name, i)
+        default = 2 if layout.n_joints > 1 else 1  # the first hinge after a column
+        self.device_link.setCurrentIndex(chosen if 0 <= chosen < self.device_link.count()
+                                         else min(default, self.device_link.count() - 1))
+        self.device_link.blockSignals(False)
+        self._history.clear()
+        self.layoutChanged.emit(layout)
+        self.set_joint_angles(self.entered_angles(), observed=())
+
+    def _on_angles_edited(self, *_args) -> None:
+        if not self._filling and not self.sensor_links:
+            self.set_joint_angles(self.entered_angles(), observed=())
+
+    def _on_device_link_changed(self, *_args) -> None:
+        self.sensor_links = ()
+        self.set_joint_angles(self.entered_angles(), observed=())
+
+    # -- feeding --------------------------------------------------------------------------
+    def set_joint_angles(self, angles_deg: Sequence[float], observed: Sequence[int] = ()) -> None:
+        """Show the end point for these joint angles (degrees, one per link).
+
+        ``observed`` lists the links whose angle a sensor measured (drawn with a board).
+        """
+        try:
+            pose = forward(self.arm, angles_deg)
+        except ArmLayoutError as exc:
+            self.message.setText(f"Joint angles not used: {exc}")
+            return
+        self.sensor_links = tuple(observed)
+        self._show_pose(pose)
+
+    def set_link_orientations(self, quaternions: Sequence[np.ndarray | None]) -> None:
+        """Each link's sensor orientation (sensor to earth; None: no sensor on that link).
+
+        Joints the sensors cannot see (a vertical axis, a link without a sensor) take the
+        angle entered in the table.
+        """
+        try:
+            pose, observed = pose_from_link_quaternions(
+                self.arm, quaternions, known_deg=self.entered_angles()
+            )
+        except ArmLayoutError as exc:
+            self.message.setText(f"Orientations not used: {exc}")
+            return
+        self.sensor_links = tuple(i for i, q in enumerate(quaternions) if q is not None)
+        self._show_pose(pose, observed)
+
+    def set_device_orientation(self, q: np.ndarray) -> None:
+        """The one connected device's orientation, on the link chosen under the table."""
+        link = self.device_link.currentData()
+        if link is None or link < 0 or link >= self.arm.n_joints:
+            return
+        quaternions: list[np.ndarray | None] = [None] * self.arm.n_joints
+        quaternions[link] = np.asarray(q, dtype=np.float64)
+        self.set_link_orientations(quaternions)
+
+    def _show_pose(self, pose: ArmPose, observed: np.ndarray | None = None) -> None:
+        self.pose = pose
+        now = self._clock()
+        self._history.append((now, pose.end.copy()))
+        while self._history and self._history[0][0] < now - HISTORY_S:
+            self._history.popleft()
+        coordinates = pose.coordinates()
+        unit = self.arm.unit
+        for name in SHOWN_COORDINATES:
+            self.values[name].setText(f"{coordinates[name]:.1f} {unit}")
+        angles = ", ".join(
+            f"{link.name} {angle:+.1f}°" + (" (sensor)" if observed is not None and seen else "")
+            for link, angle, seen in zip(
+                self.arm.links, pose.joint_angles_deg,
+                observed if observed is not None else [False] * self.arm.n_joints,
+            )
+        )
+        self.pose_note.setText(f"Joints: {angles}. Azimuth {coordinates['azimuth_deg']:.1f}°.")
+        self.poseChanged.emit(pose)
+
+    # -- placements -----------------------------------------------------------------------
+    def capture(self) -> bool:
+        """Capture a placement: the mean end point over the averaging window."""
+        now = self._clock()
+        recent = [point for t, point in self._history if t >= now - self.window.value()]
+        if not recent:
+            self.message.setText("Nothing to capture yet: no end point in the averaging window.")
+            return False
+        self.placements.base = np.asarray(self.arm.base_position)
+        self.placements.capture(np.array(recent))
+        self.message.setText(f"Captured placement {len(self.placements)} "
+                             f"(mean of {len(recent)} end points).")
+        self._show_statistics()
+        return True
+
+    def undo_capture(self) -> None:
+        self.placements.remove_last()
+        self._show_statistics()
+
+    def clear_captures(self) -> None:
+        self.placements.clear()
+        self._show_statistics()
+
+    def _show_statistics(self) -> None:
+        stats = self.placements.statistics()
+        n = len(self.placements)
+        self.count_label.setText(f"{n} placement{'s' if n != 1 else ''} · {self.arm.unit}")
+        self.stats_table.setHorizontalHeaderLabels(list(SHOWN_COORDINATES))
+        for column, name in enumerate(SHOWN_COORDINATES):
+            for row, what in enumerate(STAT_ROWS):
+                value = getattr(stats[name], what) if stats else float("nan")
+                text = "—" if not np.isfinite(value) else f"{value:.2f}"
+                item = QTableWidgetItem(text)
+                item.setTextAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
+                self.stats_table.setItem(row, column, item)
+        _fit_height(self.stats_table)
+        self.export_button.setEnabled(n > 0)
+        self.undo_button.setEnabled(n > 0)
+
+    def export_csv(self, path: str | None = None) -> bool:
+        if not len(self.placements):
+            return False
+        if path is None:
+            path, _ = QFileDialog.getSaveFileName(
+                self, "Export repeatability", str(Path.home() / "arm-repeatability.csv"),
+                "CSV (*.csv)",
+            )
+            if not path:
+                return False
+        try:
+            self.placements.export_csv(path)
+        except OSError as exc:
+            self.message.setText(f"Not exported: {exc}")
+            return False
+        self.message.setText(f"Exported {len(self.placements)} placements to {path}")
+        return True
+
+    def save_layout(self, path: str | None = None) -> bool:
+        if path is None:
+            path, _ = QFileDialog.getSaveFileName(
+                self, "Save arm layout", str(Path.home() / "arm-layout.json"), "JSON (*.json)"
+            )
+            if not path:
+                return False
+        try:
+            Path(path).write_text(self.arm.to_json(), encoding="utf-8")
+        except OSError as exc:
+            self.message.setText(f"Layout not saved: {exc}")
+            return False
+        self.message.setText(f"Saved the layout to {path}")
+        return True
+
+    def load_layout(self, path: str | None = None) -> bool:
+        if path is None:
+            path, _ = QFileDialog.getOpenFileName(self, "Load arm layout", "", "JSON (*.json)")
+            if not path:
+                return False
+        try:
+            layout = ArmLayout.from_json(Path(path).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ArmLayoutError) as exc:
+            self.message.setText(f"Layout not loaded: {exc}")
+            return False
+        self.set_layout(layout)
+        self.message.setText(f"Loaded the layout {layout.name!r} from {path}")
+        return True
+
+
+__all__ = ["COORDINATES", "JOINT_KINDS", "ArmPanel"]
