@@ -32,6 +32,10 @@ _BEZEL_FRACTION = 0.085
 # a ring step may have so that its label reads cleanly (0.1, 0.25, 0.5, 1, 2.5, 10, 30 ...).
 _RING_DIVISIONS = (4, 5, 3, 2)
 _NICE_MANTISSAS = (1.0, 2.0, 2.5, 3.0, 5.0)
+REPAINT_THRESHOLD_PX = 0.25
+"""New values repaint the vial only when the bubble or the reference marker would move at
+least this far from where they were last painted (or the vial's state changes): finer
+steps cannot be seen, even with antialiasing."""
 
 
 class LevelState(enum.Enum):
@@ -97,6 +101,7 @@ class BubbleLevel(QWidget):
         self._valid = False
         self._reference: tuple[float, float] | None = None
         self._static_layer: QPixmap | None = None
+        self._painted: _Marks | None = None
         policy = QSizePolicy(QSizePolicy.Policy.Preferred, QSizePolicy.Policy.Preferred)
         policy.setHeightForWidth(True)
         self.setSizePolicy(policy)
@@ -112,7 +117,7 @@ class BubbleLevel(QWidget):
         self._roll_deg = float(roll_deg)
         self._pitch_deg = float(pitch_deg)
         self._tilt_deg = None if tilt_deg is None else float(tilt_deg)
-        self.update()
+        self._update_if_moved()
 
     def setRange(self, full_scale_deg: float) -> None:
         """Set the tilt (degrees) at the outer graduation ring, e.g. 0.5, 1, 2, 5, 10, 30, 90."""
@@ -131,18 +136,20 @@ class BubbleLevel(QWidget):
 
     def setValid(self, valid: bool) -> None:
         """Show the bubble (True) or hide it and print "no data" (False, e.g. disconnected)."""
-        self._valid = bool(valid)
-        self.update()
+        if bool(valid) != self._valid:
+            self._valid = bool(valid)
+            self._update_if_moved()
 
     def setReference(self, roll_deg: float, pitch_deg: float) -> None:
         """Show a faint second marker at a reference orientation (e.g. a simulator's truth)."""
         self._reference = (float(roll_deg), float(pitch_deg))
-        self.update()
+        self._update_if_moved()
 
     def clearReference(self) -> None:
         """Remove the reference marker."""
-        self._reference = None
-        self.update()
+        if self._reference is not None:
+            self._reference = None
+            self._update_if_moved()
 
     def roll(self) -> float:
         """The roll shown, in degrees."""
@@ -191,6 +198,40 @@ class BubbleLevel(QWidget):
         """Where the bubble's centre is drawn, in widget pixels (pinned to the rim if over)."""
         pin = self.state() is LevelState.OVER_RANGE
         return self._position(self._roll_deg, self._pitch_deg, self._geometry(), pin)
+
+    def _marks(self) -> _Marks:
+        """What the current values would paint: state, bubble and reference centres."""
+        geo = self._geometry()
+        state = self.state()
+        if state is LevelState.NO_DATA:
+            return _Marks(state, None, None, geo.bubble_radius)
+        bubble = self._position(
+            self._roll_deg, self._pitch_deg, geo, state is LevelState.OVER_RANGE
+        )
+        reference = None if self._reference is None else self._position(*self._reference, geo)
+        return _Marks(state, bubble, reference, geo.bubble_radius)
+
+    def _update_if_moved(self) -> None:
+        """Schedule a repaint if the new values look different: of the whole vial when the
+        state changes, else of the spots the bubble and reference marker leave and enter."""
+        painted, now = self._painted, self._marks()
+        if painted is None or painted.state is not now.state or painted.radius != now.radius:
+            self.update()
+            return
+        dirty = QRectF()
+        for old, new in ((painted.bubble, now.bubble), (painted.reference, now.reference)):
+            if (old is None) != (new is None) or (
+                old is not None and new is not None
+                and math.hypot(new.x() - old.x(), new.y() - old.y()) >= REPAINT_THRESHOLD_PX
+            ):
+                for spot in (old, new):
+                    if spot is not None:
+                        dirty = dirty.united(_spot_rect(spot, now.radius))
+        if not dirty.isEmpty():
+            if now.state is LevelState.OVER_RANGE:  # the arrow on the bezel moves too
+                self.update()
+            else:
+                self.update(dirty.toAlignedRect())
 
     # ---- Qt size handling ----------------------------------------------------------------
 
@@ -273,6 +314,7 @@ class BubbleLevel(QWidget):
                 self._paint_over_range_arrow(painter, geo, center)
         self._paint_sheen(painter, geo)
         painter.end()
+        self._painted = self._marks()
 
     def _static_pixmap(self, geo: _VialGeometry) -> QPixmap:
         """Bezel, glass, graduations and crosshair, cached until size or range change."""
@@ -564,6 +606,27 @@ class BubbleLevel(QWidget):
         font = QFont(self.font())
         font.setPixelSize(max(9, round(geo.outer_radius * 0.058)))
         return font
+
+
+class _Marks:
+    """What a paint showed: the state and the bubble's and reference's centres (pixels)."""
+
+    __slots__ = ("bubble", "radius", "reference", "state")
+
+    def __init__(
+        self, state: LevelState, bubble: QPointF | None, reference: QPointF | None,
+        radius: float,
+    ) -> None:
+        self.state = state
+        self.bubble = bubble
+        self.reference = reference
+        self.radius = radius
+
+
+def _spot_rect(center: QPointF, bubble_radius: float) -> QRectF:
+    """The pixels a bubble (with its meniscus) or reference marker at ``center`` covers."""
+    reach = bubble_radius * 1.25 + 3.0
+    return QRectF(center.x() - reach, center.y() - reach, 2 * reach, 2 * reach)
 
 
 class _VialGeometry:

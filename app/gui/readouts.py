@@ -75,6 +75,12 @@ def raised_side_label(direction_deg: float) -> str:
     return _SIDES[sector]
 
 
+def _set_text(label: QLabel, text: str) -> None:
+    """``label.setText(text)`` unless it already shows ``text`` (no relayout, no repaint)."""
+    if label.text() != text:
+        label.setText(text)
+
+
 class _ReadoutTile(QFrame):
     """One readout: caption, big value with unit, and a small note line."""
 
@@ -205,6 +211,8 @@ class TiltReadouts(QWidget):
 
     def setValid(self, valid: bool) -> None:
         """Show the numbers (True) or dashes (False: no data)."""
+        if bool(valid) == self._valid:
+            return
         self._valid = bool(valid)
         self._show_texts()
 
@@ -253,6 +261,8 @@ class TiltReadouts(QWidget):
         return raised_side_label(direction)
 
     def _show_texts(self) -> None:
+        """Put the values into the labels; a label whose text stays the same is not touched,
+        so it does not repaint."""
         formatters = {
             "roll": _format_signed,
             "pitch": _format_signed,
@@ -261,15 +271,14 @@ class TiltReadouts(QWidget):
         }
         for name, tile in self._tiles.items():
             value = self._values[name]
-            if self._valid and math.isfinite(value):
-                tile.value.setText(formatters[name](value))
-            else:
-                tile.value.setText(NO_VALUE)
+            text = formatters[name](value) if self._valid and math.isfinite(value) else NO_VALUE
+            _set_text(tile.value, text)
             if name != "direction":
                 tile.setUnit(self._unit_label)
-        self._tiles["direction"].note.setText(
+        _set_text(
+            self._tiles["direction"].note,
             f'{_NOTES["direction"]}&nbsp;&nbsp;<span style="color:{theme.TEXT};">'
-            f"<b>{self._side_text()}</b></span>"
+            f"<b>{self._side_text()}</b></span>",
         )
 
     def _place_hold_badge(self) -> None:
