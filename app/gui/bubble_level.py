@@ -15,6 +15,7 @@ from PySide6.QtGui import (
     QLinearGradient,
     QPainter,
     QPainterPath,
+    QPainterPathStroker,
     QPaintEvent,
     QPen,
     QPixmap,
@@ -102,6 +103,8 @@ class BubbleLevel(QWidget):
         self._reference: tuple[float, float] | None = None
         self._static_layer: QPixmap | None = None
         self._painted: _Marks | None = None
+        self._layers: dict[object, tuple[int, QPixmap]] = {}
+        self._reference_outline: tuple[tuple[float, float], QPainterPath] | None = None
         policy = QSizePolicy(QSizePolicy.Policy.Preferred, QSizePolicy.Policy.Preferred)
         policy.setHeightForWidth(True)
         self.setSizePolicy(policy)
@@ -296,12 +299,9 @@ class BubbleLevel(QWidget):
             return
         painter = QPainter(self)
         painter.setRenderHint(QPainter.RenderHint.Antialiasing)
-        painter.drawPixmap(0, 0, self._static_pixmap(geo))
-
         state = self.state()
         state_color = _STATE_COLORS[state]
-        self._paint_level_ring(painter, geo, state, state_color)
-        self._paint_range_caption(painter, geo, state)
+        painter.drawPixmap(0, 0, self._state_pixmap(geo, state, state_color))
         if state is not LevelState.NO_DATA and self._reference is not None:
             self._paint_reference(painter, geo)
         if state is LevelState.NO_DATA:
@@ -312,9 +312,39 @@ class BubbleLevel(QWidget):
             self._paint_bubble(painter, geo, center, state_color)
             if state is LevelState.OVER_RANGE:
                 self._paint_over_range_arrow(painter, geo, center)
-        self._paint_sheen(painter, geo)
+        painter.drawPixmap(0, 0, self._layer(geo, "sheen", lambda p: self._paint_sheen(p, geo)))
         painter.end()
         self._painted = self._marks()
+
+    def _state_pixmap(self, geo: _VialGeometry, state: LevelState, color: QColor) -> QPixmap:
+        """The static vial with the level ring and range caption of ``state``, cached."""
+
+        def paint(painter: QPainter) -> None:
+            painter.drawPixmap(0, 0, self._static_pixmap(geo))
+            self._paint_level_ring(painter, geo, state, color)
+            self._paint_range_caption(painter, geo, state)
+
+        return self._layer(geo, state, paint)
+
+    def _layer(self, geo: _VialGeometry, key: object, paint) -> QPixmap:
+        """A transparent widget-sized pixmap ``paint`` draws on, cached under ``key`` until
+        the static drawing is redone (size, range, font): a moving bubble then costs a few
+        pixmap copies instead of repainting gradients across the whole vial."""
+        base = self._static_pixmap(geo).cacheKey()
+        cached = self._layers.get(key)
+        if cached is not None and cached[0] == base:
+            return cached[1]
+        ratio = self.devicePixelRatioF()
+        pixmap = QPixmap(round(self.width() * ratio), round(self.height() * ratio))
+        pixmap.setDevicePixelRatio(ratio)
+        pixmap.fill(Qt.GlobalColor.transparent)
+        painter = QPainter(pixmap)
+        painter.setRenderHint(QPainter.RenderHint.Antialiasing)
+        painter.setRenderHint(QPainter.RenderHint.TextAntialiasing)
+        paint(painter)
+        painter.end()
+        self._layers[key] = (base, pixmap)
+        return pixmap
 
     def _static_pixmap(self, geo: _VialGeometry) -> QPixmap:
         """Bezel, glass, graduations and crosshair, cached until size or range change."""
@@ -473,10 +503,16 @@ class BubbleLevel(QWidget):
         roll_deg, pitch_deg = self._reference or (0.0, 0.0)
         spot = self._position(roll_deg, pitch_deg, geo)
         color = _with_alpha(theme.TRACE_REFERENCE, 170)
-        pen = QPen(color, max(1.0, geo.outer_radius / 160), Qt.PenStyle.DashLine)
-        painter.setPen(pen)
-        painter.setBrush(Qt.BrushStyle.NoBrush)
-        painter.drawEllipse(spot, geo.bubble_radius, geo.bubble_radius)
+        # The dashed ring's outline is stroked once per size and then only filled where the
+        # marker is: dashing a curve anew each frame costs more than the rest of the vial.
+        width = max(1.0, geo.outer_radius / 160)
+        key = (geo.bubble_radius, width)
+        if self._reference_outline is None or self._reference_outline[0] != key:
+            ring = QPainterPath()
+            ring.addEllipse(QPointF(0.0, 0.0), geo.bubble_radius, geo.bubble_radius)
+            stroker = QPainterPathStroker(QPen(color, width, Qt.PenStyle.DashLine))
+            self._reference_outline = (key, stroker.createStroke(ring))
+        painter.fillPath(self._reference_outline[1].translated(spot), color)
         arm = geo.bubble_radius * 0.35
         painter.setPen(QPen(color, max(1.0, geo.outer_radius / 160)))
         painter.drawLine(spot - QPointF(arm, 0), spot + QPointF(arm, 0))

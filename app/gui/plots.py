@@ -2,6 +2,12 @@
 
 The widget only draws arrays it is handed (:meth:`LivePlots.set_data`); the presenter pulls
 them from the ring buffers and decimates them to the pixel width first.
+
+Redrawing is kept cheap: the time axis is fixed (times are relative to the newest sample),
+the value axes follow the data with hysteresis (:class:`StickyRange`: a range changes only
+when the data leave it or shrink well inside it, so the axes are not re-laid out every
+frame), and between two blocks of data the traces are only moved sideways
+(:meth:`LivePlots.scroll_to`) instead of being rebuilt.
 """
 
 from __future__ import annotations
@@ -9,9 +15,16 @@ from __future__ import annotations
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, Signal
-from PySide6.QtWidgets import QVBoxLayout, QWidget
+from PySide6.QtWidgets import QGraphicsItem, QVBoxLayout, QWidget
 
 from app.gui import theme
+
+SCROLL_THRESHOLD_PX = 0.5
+"""The traces are moved sideways only once they would move at least this far on screen."""
+RANGE_MARGIN = 0.1
+"""Space above and below the data when a value range is set, as a fraction of its span."""
+RANGE_SHRINK = 0.4
+"""A value range shrinks once the data span less than this fraction of it."""
 
 pg.setConfigOptions(antialias=False, background=theme.BASE_BG, foreground=theme.TEXT_DIM)
 
@@ -21,14 +34,76 @@ def _make_plot(title: str, unit: str) -> pg.PlotItem:
     plot.setLabel("left", title, units=unit)
     plot.getAxis("left").setWidth(62)
     plot.showGrid(x=False, y=False)
-    # Traces arrive already min/max-decimated to the pixel width (app.core.decimation), so
-    # pyqtgraph's own per-frame downsampling would only repeat the work.
-    plot.setClipToView(True)
+    # Traces arrive already cut to the window and min/max-decimated to the pixel width
+    # (app.core.decimation), so pyqtgraph's own downsampling and clipping would only repeat
+    # the work; clipping would also rebuild every trace each time it scrolls (the view box
+    # clips what lies outside it anyway).
+    plot.setClipToView(False)
     plot.setMouseEnabled(x=False, y=True)
     plot.hideButtons()
+    for name in ("left", "bottom"):  # redrawn only when their range or size changes
+        plot.getAxis(name).setCacheMode(QGraphicsItem.CacheMode.DeviceCoordinateCache)
     legend = plot.addLegend(offset=(-8, 4), labelTextSize="8pt", colCount=4)
     legend.setBrush(pg.mkBrush(theme.PANEL_BG + "c0"))
     return plot
+
+
+class StickyRange:
+    """The value range of one plot, following the data with hysteresis.
+
+    It grows as soon as the data leave it and shrinks only when they use less than
+    ``RANGE_SHRINK`` of it, so noise does not change the axis (and re-lay it out) every
+    frame. A user who zooms or pans the plot takes the range over; choosing *Auto* in the
+    plot's menu hands it back.
+    """
+
+    def __init__(self, plot: pg.PlotItem) -> None:
+        self.plot = plot
+        self.following = True
+        self.range: tuple[float, float] | None = None
+        view = plot.getViewBox()
+        view.disableAutoRange(axis=pg.ViewBox.YAxis)
+        view.sigRangeChangedManually.connect(self._taken_over)
+        view.sigStateChanged.connect(self._state_changed)
+
+    def _taken_over(self, *_args: object) -> None:
+        self.following = False
+
+    def _state_changed(self, *_args: object) -> None:
+        view = self.plot.getViewBox()
+        if view.autoRangeEnabled()[1]:  # the menu's "Auto": follow the data again
+            view.disableAutoRange(axis=pg.ViewBox.YAxis)
+            self.following = True
+            self.range = None
+
+    def follow(self, low: float, high: float) -> bool:
+        """Fit ``low``..``high`` (finite) if needed; True when the range changed."""
+        if not self.following or not (np.isfinite(low) and np.isfinite(high)):
+            return False
+        if self.range is not None:
+            r0, r1 = self.range
+            inside = r0 <= low and high <= r1
+            if inside and (high - low) >= RANGE_SHRINK * (r1 - r0):
+                return False
+        span = max(high - low, 1e-9 + 1e-6 * max(abs(low), abs(high)))
+        margin = RANGE_MARGIN * span
+        self.range = (low - margin, high + margin)
+        self.plot.setYRange(*self.range, padding=0.0)
+        return True
+
+
+def _finite_bounds(arrays: list[np.ndarray]) -> tuple[float, float]:
+    """Smallest and largest finite value over ``arrays`` (NaN, NaN when there is none)."""
+    lows, highs = [], []
+    for values in arrays:
+        if len(values):
+            with np.errstate(all="ignore"):
+                lows.append(np.nanmin(values))
+                highs.append(np.nanmax(values))
+    if not lows:
+        return float("nan"), float("nan")
+    with np.errstate(all="ignore"):
+        return float(np.nanmin(lows)), float(np.nanmax(highs))
 
 
 class LivePlots(QWidget):
@@ -91,6 +166,11 @@ class LivePlots(QWidget):
         self.region.setZValue(-10)
         self.region.sigRegionChangeFinished.connect(self._emit_range)
         self._region_shown = False
+        self.ranges = {
+            plot: StickyRange(plot)
+            for plot in (self.accel_plot, self.gyro_plot, self.angle_plot, self.error_plot)
+        }
+        self._scroll_s = 0.0
         self.set_window(self._window_s)
 
     def set_error_visible(self, visible: bool) -> None:
@@ -170,9 +250,15 @@ class LivePlots(QWidget):
             self.comparison_error_curves[name].setData(t_rel, error, skipFiniteCheck=True)
 
     def set_error_data(self, t_rel: np.ndarray, error: np.ndarray) -> None:
-        """The main filter's inclination error (degrees) over time."""
+        """The main filter's inclination error (degrees) over time (call it after the
+        compared filters' data: the plot's range covers them all)."""
         if self._error_shown:
             self.error_curve.setData(t_rel, error, skipFiniteCheck=True)
+            errors = [error] + [
+                curve.yData for curve in self.comparison_error_curves.values()
+                if curve.yData is not None
+            ]
+            self.ranges[self.error_plot].follow(*_finite_bounds(errors))
 
     def export(self, path: str) -> None:
         """Write all plots to ``path``: ``.png`` (pyqtgraph's exporter) or ``.svg``.
@@ -239,6 +325,7 @@ class LivePlots(QWidget):
             curve.setData(t_rel, accel_g[:, axis], connect=sensor_connect, skipFiniteCheck=True)
         for axis, curve in enumerate(self.gyro_curves):
             curve.setData(t_rel, gyro_dps[:, axis], connect=sensor_connect, skipFiniteCheck=True)
+        shown_angles = []
         for name, curve in self.angle_curves.items():
             values = angles.get(name)
             visible = values is not None and len(values) > 0 and bool(np.isfinite(values[-1]))
@@ -247,5 +334,45 @@ class LivePlots(QWidget):
                 curve.setData(
                     angles_t_rel, values, connect=angle_connect, skipFiniteCheck=True
                 )
+                shown_angles.append(values)
             elif curve.xData is not None and len(curve.xData):
                 curve.setData([], [])
+        self._scroll_s = 0.0
+        self._place_curves()
+        self.ranges[self.accel_plot].follow(*_finite_bounds([accel_g]))
+        self.ranges[self.gyro_plot].follow(*_finite_bounds([gyro_dps]))
+        compared = [
+            curve.yData for pair in self.comparison_curves.values() for curve in pair
+            if curve.yData is not None
+        ]
+        self.ranges[self.angle_plot].follow(*_finite_bounds(shown_angles + compared))
+
+    def scroll_to(self, seconds: float) -> bool:
+        """Move every trace ``seconds`` to the left (the time since the newest sample arrived)
+        without rebuilding it; only when that moves it a visible amount. True if it moved."""
+        pixels_per_s = self.accel_plot.getViewBox().width() / max(self._window_s, 1e-9)
+        if abs(seconds - self._scroll_s) * pixels_per_s < SCROLL_THRESHOLD_PX:
+            return False
+        self._scroll_s = float(seconds)
+        self._place_curves()
+        return True
+
+    @property
+    def scroll_s(self) -> float:
+        """How far (seconds) the traces are moved left of where their data put them."""
+        return self._scroll_s
+
+    def _place_curves(self) -> None:
+        # The drawn line (the item's PlotCurveItem) moves, keeping its path: moving the
+        # PlotDataItem itself would have it rebuild its display data.
+        for item in self._all_curves():
+            line = item.curve
+            if line.pos().x() != -self._scroll_s:
+                line.setPos(-self._scroll_s, 0.0)
+
+    def _all_curves(self) -> list[pg.PlotDataItem]:
+        return [
+            *self.accel_curves, *self.gyro_curves, *self.angle_curves.values(),
+            *(curve for pair in self.comparison_curves.values() for curve in pair),
+            self.error_curve, *self.comparison_error_curves.values(),
+        ]

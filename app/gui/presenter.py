@@ -34,6 +34,9 @@ from app.services.session import DeviceSession
 
 ANGLE_TRACES = ["roll", "pitch", "ref_roll", "ref_pitch"]
 ERROR_TABLE_INTERVAL_S = 0.5
+MAX_SCROLL_LEAD_S = 0.25
+"""Between blocks the plots scroll on with the clock, at most this long (and at most 1.5
+block intervals) past the newest sample: a stream that stopped leaves them still."""
 UNIT_LABELS = {"deg": "°", "percent": "%", "mm/m": "mm/m"}
 
 
@@ -102,6 +105,10 @@ class LivePresenter(QObject):
         """Frames that drew something (ticks without changes are not counted)."""
         self.plot_updates = 0
         """How often the plots were handed new data."""
+        self.plot_scrolls = 0
+        """How often the plots were only moved on between two blocks of data."""
+        self._plot_wall = 0.0
+        self._block_interval_s = MAX_SCROLL_LEAD_S
         self._fps_window = (time.monotonic(), 0)
         self._fps_shown = -1
         self._no_data_shown = False
@@ -160,11 +167,20 @@ class LivePresenter(QObject):
         plot_key = (
             total, self.plots.window_s, self.plots.width(), tuple(pipeline.comparison_buffers)
         )
-        if self.plots_enabled and plot_key != self._plot_key and on_screen(self.plots):
-            self._update_plots(pipeline.samples, orientation)
-            self._plot_key = plot_key
-            self.plot_updates += 1
-            busy = True
+        if self.plots_enabled and on_screen(self.plots):
+            if plot_key != self._plot_key:
+                self._update_plots(pipeline.samples, orientation)
+                self._plot_key = plot_key
+                self.plot_updates += 1
+                interval = min(now - self._plot_wall, MAX_SCROLL_LEAD_S)
+                self._block_interval_s += 0.2 * (interval - self._block_interval_s)
+                self._plot_wall = now
+                busy = True
+            else:
+                lead = min(now - self._plot_wall, MAX_SCROLL_LEAD_S, 1.5 * self._block_interval_s)
+                if self.plots.scroll_to(lead):
+                    self.plot_scrolls += 1
+                    busy = True
         error_key = (total, self.plots.window_s, tuple(pipeline.comparison_buffers))
         if (
             error_key != self._error_key
