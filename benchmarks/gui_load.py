@@ -23,6 +23,7 @@ that drew something. The window is 1280 x 860 with all plots on a 10 s window un
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import resource
 import statistics
@@ -127,7 +128,8 @@ def main() -> int:
     def mark() -> None:
         marks.append({
             "wall": time.monotonic(), "cpu": time.process_time(), "threads": thread_cpu_s(),
-            "frames": window.presenter.frames, "updates": getattr(window.presenter, "plot_updates", 0),
+            "frames": window.presenter.frames,
+            "updates": getattr(window.presenter, "plot_updates", 0),
             "plot": plot_paints.paints, "bubble": bubble_paints.paints,
             "samples": session.pipeline.counters.samples, "load": load_average(),
         })
@@ -154,7 +156,7 @@ def main() -> int:
           + (", plots dock closed" if args.hide_plots else ", all plots shown"))
     print(f"{args.repeat} x {args.seconds:g} s after {warm_up:g} s warm-up")
     rows = []
-    for before, after in zip(marks, marks[1:]):
+    for before, after in itertools.pairwise(marks):
         wall = after["wall"] - before["wall"]
 
         def rate(key: str, a: dict = after, b: dict = before, w: float = wall) -> float:
