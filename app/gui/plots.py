@@ -45,6 +45,7 @@ def _make_plot(title: str, unit: str) -> pg.PlotItem:
         plot.getAxis(name).setCacheMode(QGraphicsItem.CacheMode.DeviceCoordinateCache)
     legend = plot.addLegend(offset=(-8, 4), labelTextSize="8pt", colCount=4)
     legend.setBrush(pg.mkBrush(theme.PANEL_BG + "c0"))
+    legend.setCacheMode(QGraphicsItem.CacheMode.DeviceCoordinateCache)  # drawn once, then copied
     return plot
 
 

@@ -148,7 +148,7 @@ class LivePresenter(QObject):
             self._count_frame(busy)
             return busy
         self._no_data_shown = False
-        busy = False
+        drew = pending = False
         now = time.monotonic()
         level_key = (total, self.settings.unit, self.settings.averaging_s)
         if not self.settings.hold:
@@ -157,13 +157,15 @@ class LivePresenter(QObject):
                 averaged = self._averaged(orientation)
                 self._show_level(averaged)
                 self._level_key = level_key
-                busy = True
+                drew = True
             if level_key != self._text_key and on_screen(self.readouts):
                 if now - self._last_text_update >= 1.0 / self.settings.readout_rate_hz:
                     self._show_texts(averaged or self._averaged(orientation))
                     self._text_key = level_key
                     self._last_text_update = now
-                busy = True  # a readout update is due: keep ticking until it is shown
+                    drew = True
+                else:
+                    pending = True  # due shortly: the clock keeps its pace until then
         plot_key = (
             total, self.plots.window_s, self.plots.width(), tuple(pipeline.comparison_buffers)
         )
@@ -175,12 +177,12 @@ class LivePresenter(QObject):
                 interval = min(now - self._plot_wall, MAX_SCROLL_LEAD_S)
                 self._block_interval_s += 0.2 * (interval - self._block_interval_s)
                 self._plot_wall = now
-                busy = True
+                drew = True
             else:
                 lead = min(now - self._plot_wall, MAX_SCROLL_LEAD_S, 1.5 * self._block_interval_s)
                 if self.plots.scroll_to(lead):
                     self.plot_scrolls += 1
-                    busy = True
+                    drew = True
         error_key = (total, self.plots.window_s, tuple(pipeline.comparison_buffers))
         if (
             error_key != self._error_key
@@ -190,8 +192,8 @@ class LivePresenter(QObject):
             self._last_error_update = now
             self._error_key = error_key
             self.update_error_table()
-        self._count_frame(busy)
-        return busy
+        self._count_frame(drew)
+        return drew or pending
 
     def _show_no_data(self) -> bool:
         """Dashes and an empty vial, once per stretch without data; True when it drew."""
