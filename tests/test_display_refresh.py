@@ -249,9 +249,9 @@ def test_plots_scroll_between_blocks_without_rebuilding(live):
     view_width_px = live.plots.accel_plot.getViewBox().width()
     step = 2.0 * live.plots.window_s / view_width_px  # two pixels
     assert live.plots.scroll_to(step)
-    assert curve.curve.pos().x() == pytest.approx(-step)
+    assert curve.pos().x() == pytest.approx(-step)
     np.testing.assert_array_equal(curve.xData, x_before)
     assert not live.plots.scroll_to(step + 0.1 * live.plots.window_s / view_width_px)
     live.pipeline.process(raw_block(208, 3))
     live.presenter.refresh()
-    assert curve.curve.pos().x() == 0.0  # new data: drawn where they belong
+    assert curve.pos().x() == 0.0  # new data: drawn where they belong

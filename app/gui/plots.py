@@ -35,10 +35,9 @@ def _make_plot(title: str, unit: str) -> pg.PlotItem:
     plot.getAxis("left").setWidth(62)
     plot.showGrid(x=False, y=False)
     # Traces arrive already cut to the window and min/max-decimated to the pixel width
-    # (app.core.decimation), so pyqtgraph's own downsampling and clipping would only repeat
-    # the work; clipping would also rebuild every trace each time it scrolls (the view box
-    # clips what lies outside it anyway).
-    plot.setClipToView(False)
+    # (app.core.decimation), so they are bare PlotCurveItems (_line): pyqtgraph's own
+    # downsampling and clipping would only repeat the work and rebuild every trace each time
+    # it scrolls (the view box clips what lies outside it anyway).
     plot.setMouseEnabled(x=False, y=True)
     plot.hideButtons()
     for name in ("left", "bottom"):  # redrawn only when their range or size changes
@@ -47,6 +46,15 @@ def _make_plot(title: str, unit: str) -> pg.PlotItem:
     legend.setBrush(pg.mkBrush(theme.PANEL_BG + "c0"))
     legend.setCacheMode(QGraphicsItem.CacheMode.DeviceCoordinateCache)  # drawn once, then copied
     return plot
+
+
+def _line(plot: pg.PlotItem, pen: pg.QtGui.QPen, name: str) -> pg.PlotCurveItem:
+    """A named trace in ``plot`` (and its legend): a bare PlotCurveItem, whose ``setData``
+    only stores the arrays and drops the cached path, without PlotDataItem's per-call
+    dataset bookkeeping (it would only redo what the presenter already did)."""
+    curve = pg.PlotCurveItem(pen=pen, name=name, skipFiniteCheck=True)
+    plot.addItem(curve)
+    return curve
 
 
 class StickyRange:
@@ -138,28 +146,28 @@ class LivePlots(QWidget):
 
         axes = ("x", "y", "z")
         self.accel_curves = [
-            self.accel_plot.plot(pen=pen(c), name=a) for c, a in zip(theme.AXIS_COLORS, axes)
+            _line(self.accel_plot, pen(c), a) for c, a in zip(theme.AXIS_COLORS, axes)
         ]
         self.gyro_curves = [
-            self.gyro_plot.plot(pen=pen(c), name=a) for c, a in zip(theme.AXIS_COLORS, axes)
+            _line(self.gyro_plot, pen(c), a) for c, a in zip(theme.AXIS_COLORS, axes)
         ]
         self.angle_curves = {
-            "roll": self.angle_plot.plot(pen=pen(theme.TRACE_ROLL), name="roll"),
-            "pitch": self.angle_plot.plot(pen=pen(theme.TRACE_PITCH), name="pitch"),
-            "ref_roll": self.angle_plot.plot(
-                pen=pen(theme.TRACE_ROLL, Qt.PenStyle.DashLine), name="true roll"
+            "roll": _line(self.angle_plot, pen(theme.TRACE_ROLL), "roll"),
+            "pitch": _line(self.angle_plot, pen(theme.TRACE_PITCH), "pitch"),
+            "ref_roll": _line(
+                self.angle_plot, pen(theme.TRACE_ROLL, Qt.PenStyle.DashLine), "true roll"
             ),
-            "ref_pitch": self.angle_plot.plot(
-                pen=pen(theme.TRACE_PITCH, Qt.PenStyle.DashLine), name="true pitch"
+            "ref_pitch": _line(
+                self.angle_plot, pen(theme.TRACE_PITCH, Qt.PenStyle.DashLine), "true pitch"
             ),
         }
-        self.comparison_curves: dict[str, tuple[pg.PlotDataItem, pg.PlotDataItem]] = {}
+        self.comparison_curves: dict[str, tuple[pg.PlotCurveItem, pg.PlotCurveItem]] = {}
 
         # Inclination error against the reference, shown only when the source has one.
         self.error_plot = _make_plot("error", "°")
         self.error_plot.setXLink(self.accel_plot)
-        self.error_curve = self.error_plot.plot(pen=pen(theme.TRACE_TILT), name="main filter")
-        self.comparison_error_curves: dict[str, pg.PlotDataItem] = {}
+        self.error_curve = _line(self.error_plot, pen(theme.TRACE_TILT), "main filter")
+        self.comparison_error_curves: dict[str, pg.PlotCurveItem] = {}
         self._error_shown = False
 
         # A time range the user selects on the angle plot (statistics per angle).
@@ -223,15 +231,14 @@ class LivePlots(QWidget):
             if name in self.comparison_curves:
                 continue
             colour = theme.COMPARISON_COLORS[index % len(theme.COMPARISON_COLORS)]
-            roll = self.angle_plot.plot(
-                pen=pg.mkPen(colour, width=1), name=f"{title} roll"
-            )
-            pitch = self.angle_plot.plot(
-                pen=pg.mkPen(colour, width=1, style=Qt.PenStyle.DotLine), name=f"{title} pitch"
+            roll = _line(self.angle_plot, pg.mkPen(colour, width=1), f"{title} roll")
+            pitch = _line(
+                self.angle_plot, pg.mkPen(colour, width=1, style=Qt.PenStyle.DotLine),
+                f"{title} pitch",
             )
             self.comparison_curves[name] = (roll, pitch)
-            self.comparison_error_curves[name] = self.error_plot.plot(
-                pen=pg.mkPen(colour, width=1), name=title
+            self.comparison_error_curves[name] = _line(
+                self.error_plot, pg.mkPen(colour, width=1), title
             )
         for name in list(self.comparison_error_curves):
             if name not in wanted:
@@ -364,14 +371,12 @@ class LivePlots(QWidget):
         return self._scroll_s
 
     def _place_curves(self) -> None:
-        # The drawn line (the item's PlotCurveItem) moves, keeping its path: moving the
-        # PlotDataItem itself would have it rebuild its display data.
-        for item in self._all_curves():
-            line = item.curve
+        # A moved line keeps its path: nothing is rebuilt, the view only repaints.
+        for line in self._all_curves():
             if line.pos().x() != -self._scroll_s:
                 line.setPos(-self._scroll_s, 0.0)
 
-    def _all_curves(self) -> list[pg.PlotDataItem]:
+    def _all_curves(self) -> list[pg.PlotCurveItem]:
         return [
             *self.accel_curves, *self.gyro_curves, *self.angle_curves.values(),
             *(curve for pair in self.comparison_curves.values() for curve in pair),
