@@ -15,6 +15,7 @@ from PySide6.QtGui import (
     QLinearGradient,
     QPainter,
     QPainterPath,
+    QPainterPathStroker,
     QPaintEvent,
     QPen,
     QPixmap,
@@ -32,6 +33,10 @@ _BEZEL_FRACTION = 0.085
 # a ring step may have so that its label reads cleanly (0.1, 0.25, 0.5, 1, 2.5, 10, 30 ...).
 _RING_DIVISIONS = (4, 5, 3, 2)
 _NICE_MANTISSAS = (1.0, 2.0, 2.5, 3.0, 5.0)
+REPAINT_THRESHOLD_PX = 0.25
+"""New values repaint the vial only when the bubble or the reference marker would move at
+least this far from where they were last painted (or the vial's state changes): finer
+steps cannot be seen, even with antialiasing."""
 
 
 class LevelState(enum.Enum):
@@ -98,6 +103,9 @@ class BubbleLevel(QWidget):
         self._reference: tuple[float, float] | None = None
         self._alarm = False
         self._static_layer: QPixmap | None = None
+        self._painted: _Marks | None = None
+        self._layers: dict[object, tuple[int, QPixmap]] = {}
+        self._reference_outline: tuple[tuple[float, float], QPainterPath] | None = None
         policy = QSizePolicy(QSizePolicy.Policy.Preferred, QSizePolicy.Policy.Preferred)
         policy.setHeightForWidth(True)
         self.setSizePolicy(policy)
@@ -115,8 +123,12 @@ class BubbleLevel(QWidget):
         self._roll_deg = float(roll_deg)
         self._pitch_deg = float(pitch_deg)
         self._tilt_deg = None if tilt_deg is None else float(tilt_deg)
+        caption_below = self._caption_below
         self._place_caption()
-        self.update()
+        if self._caption_below != caption_below:
+            self.update()  # the caption moved to the other side
+        else:
+            self._update_if_moved()
 
     def setRange(self, full_scale_deg: float) -> None:
         """Set the tilt (degrees) at the outer graduation ring, e.g. 0.5, 1, 2, 5, 10, 30, 90."""
@@ -150,19 +162,21 @@ class BubbleLevel(QWidget):
 
     def setValid(self, valid: bool) -> None:
         """Show the bubble (True) or hide it and print "no data" (False, e.g. disconnected)."""
-        self._valid = bool(valid)
-        self._place_caption()
-        self.update()
+        if bool(valid) != self._valid:
+            self._valid = bool(valid)
+            self._place_caption()
+            self._update_if_moved()
 
     def setReference(self, roll_deg: float, pitch_deg: float) -> None:
         """Show a faint second marker at a reference orientation (e.g. a simulator's truth)."""
         self._reference = (float(roll_deg), float(pitch_deg))
-        self.update()
+        self._update_if_moved()
 
     def clearReference(self) -> None:
         """Remove the reference marker."""
-        self._reference = None
-        self.update()
+        if self._reference is not None:
+            self._reference = None
+            self._update_if_moved()
 
     def roll(self) -> float:
         """The roll shown, in degrees."""
@@ -240,6 +254,39 @@ class BubbleLevel(QWidget):
     def _on_theme_changed(self, _name: str) -> None:
         self._static_layer = None
         self.update()
+    def _marks(self) -> _Marks:
+        """What the current values would paint: state, bubble and reference centres."""
+        geo = self._geometry()
+        state = self.state()
+        if state is LevelState.NO_DATA:
+            return _Marks(state, None, None, geo.bubble_radius)
+        bubble = self._position(
+            self._roll_deg, self._pitch_deg, geo, state is LevelState.OVER_RANGE
+        )
+        reference = None if self._reference is None else self._position(*self._reference, geo)
+        return _Marks(state, bubble, reference, geo.bubble_radius)
+
+    def _update_if_moved(self) -> None:
+        """Schedule a repaint if the new values look different: of the whole vial when the
+        state changes, else of the spots the bubble and reference marker leave and enter."""
+        painted, now = self._painted, self._marks()
+        if painted is None or painted.state is not now.state or painted.radius != now.radius:
+            self.update()
+            return
+        dirty = QRectF()
+        for old, new in ((painted.bubble, now.bubble), (painted.reference, now.reference)):
+            if (old is None) != (new is None) or (
+                old is not None and new is not None
+                and math.hypot(new.x() - old.x(), new.y() - old.y()) >= REPAINT_THRESHOLD_PX
+            ):
+                for spot in (old, new):
+                    if spot is not None:
+                        dirty = dirty.united(_spot_rect(spot, now.radius))
+        if not dirty.isEmpty():
+            if now.state is LevelState.OVER_RANGE:  # the arrow on the bezel moves too
+                self.update()
+            else:
+                self.update(dirty.toAlignedRect())
 
     # ---- Qt size handling ----------------------------------------------------------------
 
@@ -305,15 +352,13 @@ class BubbleLevel(QWidget):
             return
         painter = QPainter(self)
         painter.setRenderHint(QPainter.RenderHint.Antialiasing)
-        painter.drawPixmap(0, 0, self._static_pixmap(geo))
-
         state = self.state()
         state_color = _state_color(state)
         if self._alarm and state is not LevelState.NO_DATA:
             state_color = QColor(theme.ALARM_STATE)
+        painter.drawPixmap(0, 0, self._state_pixmap(geo, state, state_color))
+        if self._alarm and state is not LevelState.NO_DATA:
             self._paint_alarm_ring(painter, geo, state_color)
-        self._paint_level_ring(painter, geo, state, state_color)
-        self._paint_range_caption(painter, geo, state)
         if state is not LevelState.NO_DATA and self._reference is not None:
             self._paint_reference(painter, geo)
         if state is LevelState.NO_DATA:
@@ -324,8 +369,41 @@ class BubbleLevel(QWidget):
             self._paint_bubble(painter, geo, center, state_color)
             if state is LevelState.OVER_RANGE:
                 self._paint_over_range_arrow(painter, geo, center)
-        self._paint_sheen(painter, geo)
+        painter.drawPixmap(0, 0, self._layer(geo, "sheen", lambda p: self._paint_sheen(p, geo)))
         painter.end()
+        self._painted = self._marks()
+
+    def _state_pixmap(self, geo: _VialGeometry, state: LevelState, color: QColor) -> QPixmap:
+        """The static vial with the level ring and range caption of ``state``, cached."""
+
+        def paint(painter: QPainter) -> None:
+            painter.drawPixmap(0, 0, self._static_pixmap(geo))
+            self._paint_level_ring(painter, geo, state, color)
+            self._paint_range_caption(painter, geo, state)
+
+        # Keyed by what the layer shows: the state, its colour (theme, alarm) and the side the
+        # caption is on.
+        return self._layer(geo, (state, color.rgba(), self._caption_below), paint)
+
+    def _layer(self, geo: _VialGeometry, key: object, paint) -> QPixmap:
+        """A transparent widget-sized pixmap ``paint`` draws on, cached under ``key`` until
+        the static drawing is redone (size, range, font): a moving bubble then costs a few
+        pixmap copies instead of repainting gradients across the whole vial."""
+        base = self._static_pixmap(geo).cacheKey()
+        cached = self._layers.get(key)
+        if cached is not None and cached[0] == base:
+            return cached[1]
+        ratio = self.devicePixelRatioF()
+        pixmap = QPixmap(round(self.width() * ratio), round(self.height() * ratio))
+        pixmap.setDevicePixelRatio(ratio)
+        pixmap.fill(Qt.GlobalColor.transparent)
+        painter = QPainter(pixmap)
+        painter.setRenderHint(QPainter.RenderHint.Antialiasing)
+        painter.setRenderHint(QPainter.RenderHint.TextAntialiasing)
+        paint(painter)
+        painter.end()
+        self._layers[key] = (base, pixmap)
+        return pixmap
 
     def _static_pixmap(self, geo: _VialGeometry) -> QPixmap:
         """Bezel, glass, graduations and crosshair, cached until size or range change."""
@@ -495,10 +573,16 @@ class BubbleLevel(QWidget):
         roll_deg, pitch_deg = self._reference or (0.0, 0.0)
         spot = self._position(roll_deg, pitch_deg, geo)
         color = _with_alpha(theme.TRACE_REFERENCE, 170)
-        pen = QPen(color, max(1.0, geo.outer_radius / 160), Qt.PenStyle.DashLine)
-        painter.setPen(pen)
-        painter.setBrush(Qt.BrushStyle.NoBrush)
-        painter.drawEllipse(spot, geo.bubble_radius, geo.bubble_radius)
+        # The dashed ring's outline is stroked once per size and then only filled where the
+        # marker is: dashing a curve anew each frame costs more than the rest of the vial.
+        width = max(1.0, geo.outer_radius / 160)
+        key = (geo.bubble_radius, width)
+        if self._reference_outline is None or self._reference_outline[0] != key:
+            ring = QPainterPath()
+            ring.addEllipse(QPointF(0.0, 0.0), geo.bubble_radius, geo.bubble_radius)
+            stroker = QPainterPathStroker(QPen(color, width, Qt.PenStyle.DashLine))
+            self._reference_outline = (key, stroker.createStroke(ring))
+        painter.fillPath(self._reference_outline[1].translated(spot), color)
         arm = geo.bubble_radius * 0.35
         painter.setPen(QPen(color, max(1.0, geo.outer_radius / 160)))
         painter.drawLine(spot - QPointF(arm, 0), spot + QPointF(arm, 0))
@@ -650,6 +734,27 @@ class BubbleLevel(QWidget):
         font = QFont(self.font())
         font.setPixelSize(max(9, round(geo.outer_radius * 0.058)))
         return font
+
+
+class _Marks:
+    """What a paint showed: the state and the bubble's and reference's centres (pixels)."""
+
+    __slots__ = ("bubble", "radius", "reference", "state")
+
+    def __init__(
+        self, state: LevelState, bubble: QPointF | None, reference: QPointF | None,
+        radius: float,
+    ) -> None:
+        self.state = state
+        self.bubble = bubble
+        self.reference = reference
+        self.radius = radius
+
+
+def _spot_rect(center: QPointF, bubble_radius: float) -> QRectF:
+    """The pixels a bubble (with its meniscus) or reference marker at ``center`` covers."""
+    reach = bubble_radius * 1.25 + 3.0
+    return QRectF(center.x() - reach, center.y() - reach, 2 * reach, 2 * reach)
 
 
 class _VialGeometry:

@@ -39,7 +39,10 @@ class HealthLights(QWidget):
         theme.notifier().changed.connect(self._on_theme_changed)
 
     def show_health(self, health: dict[str, str] | None) -> None:
-        """Colour each light (None: no device, all dim)."""
+        """Colour each light (None: no device, all dim). Unchanged health restyles nothing
+        (a style sheet change re-polishes and repaints the labels)."""
+        if self.lights and hasattr(self, "state") and dict(health or {}) == self.state:
+            return
         self.state = dict(health or {})
         for channel, label in self.lights.items():
             state = self.state.get(channel)

@@ -3,6 +3,12 @@
 The widget only draws arrays it is handed (:meth:`LivePlots.set_data`); the presenter pulls
 them from the ring buffers and decimates them to the pixel width first. Each plot's legend is
 a one-line header above its data (never on the traces); colours follow the theme.
+
+Redrawing is kept cheap: the time axis is fixed (times are relative to the newest sample),
+the value axes follow the data with hysteresis (:class:`StickyRange`: a range changes only
+when the data leave it or shrink well inside it, so the axes are not re-laid out every
+frame), and between two blocks of data the traces are only moved sideways
+(:meth:`LivePlots.scroll_to`) instead of being rebuilt.
 """
 
 from __future__ import annotations
@@ -13,9 +19,16 @@ from html import escape
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, Signal
-from PySide6.QtWidgets import QVBoxLayout, QWidget
+from PySide6.QtWidgets import QGraphicsItem, QVBoxLayout, QWidget
 
 from app.gui import theme
+
+SCROLL_THRESHOLD_PX = 0.5
+"""The traces are moved sideways only once they would move at least this far on screen."""
+RANGE_MARGIN = 0.1
+"""Space above and below the data when a value range is set, as a fraction of its span."""
+RANGE_SHRINK = 0.4
+"""A value range shrinks once the data span less than this fraction of it."""
 
 pg.setConfigOptions(antialias=False, background=theme.BASE_BG, foreground=theme.TEXT_DIM)
 
@@ -36,11 +49,14 @@ def _make_plot() -> pg.PlotItem:
     plot.getAxis("left").setWidth(48)
     plot.getAxis("left").enableAutoSIPrefix(False)
     plot.showGrid(x=False, y=False)
-    # Traces arrive already min/max-decimated to the pixel width (app.core.decimation), so
-    # pyqtgraph's own per-frame downsampling would only repeat the work.
-    plot.setClipToView(True)
+    # Traces arrive already cut to the window and min/max-decimated to the pixel width
+    # (app.core.decimation), so they are bare PlotCurveItems (_line): pyqtgraph's own
+    # downsampling and clipping would only repeat the work and rebuild every trace each time
+    # it scrolls (the view box clips what lies outside it anyway).
     plot.setMouseEnabled(x=False, y=True)
     plot.hideButtons()
+    for name in ("left", "bottom"):  # redrawn only when their range or size changes
+        plot.getAxis(name).setCacheMode(QGraphicsItem.CacheMode.DeviceCoordinateCache)
     return plot
 
 
@@ -54,6 +70,64 @@ def legend_html(title: str, entries: list[tuple[str, str, Qt.PenStyle]]) -> str:
         for label, colour, style in entries
     ]
     return "&nbsp;&nbsp;&nbsp;&nbsp;".join(items)
+
+
+class StickyRange:
+    """The value range of one plot, following the data with hysteresis.
+
+    It grows as soon as the data leave it and shrinks only when they use less than
+    ``RANGE_SHRINK`` of it, so noise does not change the axis (and re-lay it out) every
+    frame. A user who zooms or pans the plot takes the range over; choosing *Auto* in the
+    plot's menu hands it back.
+    """
+
+    def __init__(self, plot: pg.PlotItem) -> None:
+        self.plot = plot
+        self.following = True
+        self.range: tuple[float, float] | None = None
+        view = plot.getViewBox()
+        view.disableAutoRange(axis=pg.ViewBox.YAxis)
+        view.sigRangeChangedManually.connect(self._taken_over)
+        view.sigStateChanged.connect(self._state_changed)
+
+    def _taken_over(self, *_args: object) -> None:
+        self.following = False
+
+    def _state_changed(self, *_args: object) -> None:
+        view = self.plot.getViewBox()
+        if view.autoRangeEnabled()[1]:  # the menu's "Auto": follow the data again
+            view.disableAutoRange(axis=pg.ViewBox.YAxis)
+            self.following = True
+            self.range = None
+
+    def follow(self, low: float, high: float) -> bool:
+        """Fit ``low``..``high`` (finite) if needed; True when the range changed."""
+        if not self.following or not (np.isfinite(low) and np.isfinite(high)):
+            return False
+        if self.range is not None:
+            r0, r1 = self.range
+            inside = r0 <= low and high <= r1
+            if inside and (high - low) >= RANGE_SHRINK * (r1 - r0):
+                return False
+        span = max(high - low, 1e-9 + 1e-6 * max(abs(low), abs(high)))
+        margin = RANGE_MARGIN * span
+        self.range = (low - margin, high + margin)
+        self.plot.setYRange(*self.range, padding=0.0)
+        return True
+
+
+def _finite_bounds(arrays: list[np.ndarray]) -> tuple[float, float]:
+    """Smallest and largest finite value over ``arrays`` (NaN, NaN when there is none)."""
+    lows, highs = [], []
+    for values in arrays:
+        if len(values):
+            with np.errstate(all="ignore"):
+                lows.append(np.nanmin(values))
+                highs.append(np.nanmax(values))
+    if not lows:
+        return float("nan"), float("nan")
+    with np.errstate(all="ignore"):
+        return float(np.nanmin(lows)), float(np.nanmax(highs))
 
 
 class LivePlots(QWidget):
@@ -84,8 +158,8 @@ class LivePlots(QWidget):
 
         # Each curve's colour (read from the current theme) and pen style, and the legend
         # entries of each plot, so that a theme switch can redraw them.
-        self._pens: dict[pg.PlotDataItem, tuple[Callable[[], str], Qt.PenStyle]] = {}
-        self._legends: dict[pg.PlotItem, list[tuple[str, pg.PlotDataItem]]] = {}
+        self._pens: dict[pg.PlotCurveItem, tuple[Callable[[], str], Qt.PenStyle]] = {}
+        self._legends: dict[pg.PlotItem, list[tuple[str, pg.PlotCurveItem]]] = {}
         self._titles: dict[pg.PlotItem, str] = {
             self.accel_plot: "acceleration (g)", self.gyro_plot: "angular rate (°/s)",
             self.angle_plot: "roll, pitch (°)",
@@ -112,7 +186,7 @@ class LivePlots(QWidget):
                 self.angle_plot, "true pitch", lambda: theme.TRACE_PITCH, dash
             ),
         }
-        self.comparison_curves: dict[str, tuple[pg.PlotDataItem, pg.PlotDataItem]] = {}
+        self.comparison_curves: dict[str, tuple[pg.PlotCurveItem, pg.PlotCurveItem]] = {}
 
         # Inclination error against the reference, shown only when the source has one.
         self.error_plot = _make_plot()
@@ -121,7 +195,7 @@ class LivePlots(QWidget):
         self.error_curve = self._curve(
             self.error_plot, "main filter", lambda: theme.TRACE_TILT, solid
         )
-        self.comparison_error_curves: dict[str, pg.PlotDataItem] = {}
+        self.comparison_error_curves: dict[str, pg.PlotCurveItem] = {}
         self._error_shown = False
 
         # A time range the user selects on the angle plot (statistics per angle).
@@ -129,6 +203,11 @@ class LivePlots(QWidget):
         self.region.setZValue(-10)
         self.region.sigRegionChangeFinished.connect(self._emit_range)
         self._region_shown = False
+        self.ranges = {
+            plot: StickyRange(plot)
+            for plot in (self.accel_plot, self.gyro_plot, self.angle_plot, self.error_plot)
+        }
+        self._scroll_s = 0.0
         self.set_window(self._window_s)
         self.apply_theme()
         theme.notifier().changed.connect(self.apply_theme)
@@ -137,14 +216,19 @@ class LivePlots(QWidget):
     def _curve(
         self, plot: pg.PlotItem, label: str, colour: Callable[[], str],
         style: Qt.PenStyle = Qt.PenStyle.SolidLine,
-    ) -> pg.PlotDataItem:
+    ) -> pg.PlotCurveItem:
         """A new curve on ``plot`` with a legend entry."""
-        curve = plot.plot(pen=pg.mkPen(colour(), width=1, style=style))
+        # A bare PlotCurveItem: its setData only stores the arrays and drops the cached path,
+        # without PlotDataItem's per-call dataset work (the presenter already cut and
+        # decimated the data).
+        curve = pg.PlotCurveItem(pen=pg.mkPen(colour(), width=1, style=style),
+                                 skipFiniteCheck=True)
+        plot.addItem(curve)
         self._pens[curve] = (colour, style)
         self._legends.setdefault(plot, []).append((label, curve))
         return curve
 
-    def _drop_curve(self, plot: pg.PlotItem, curve: pg.PlotDataItem) -> None:
+    def _drop_curve(self, plot: pg.PlotItem, curve: pg.PlotCurveItem) -> None:
         plot.removeItem(curve)
         self._pens.pop(curve, None)
         self._legends[plot] = [entry for entry in self._legends[plot] if entry[1] is not curve]
@@ -264,9 +348,15 @@ class LivePlots(QWidget):
             self.comparison_error_curves[name].setData(t_rel, error, skipFiniteCheck=True)
 
     def set_error_data(self, t_rel: np.ndarray, error: np.ndarray) -> None:
-        """The main filter's inclination error (degrees) over time."""
+        """The main filter's inclination error (degrees) over time (call it after the
+        compared filters' data: the plot's range covers them all)."""
         if self._error_shown:
             self.error_curve.setData(t_rel, error, skipFiniteCheck=True)
+            errors = [error] + [
+                curve.yData for curve in self.comparison_error_curves.values()
+                if curve.yData is not None
+            ]
+            self.ranges[self.error_plot].follow(*_finite_bounds(errors))
 
     def export(self, path: str) -> None:
         """Write all plots to ``path``: ``.png`` (pyqtgraph's exporter) or ``.svg``.
@@ -333,6 +423,7 @@ class LivePlots(QWidget):
             curve.setData(t_rel, accel_g[:, axis], connect=sensor_connect, skipFiniteCheck=True)
         for axis, curve in enumerate(self.gyro_curves):
             curve.setData(t_rel, gyro_dps[:, axis], connect=sensor_connect, skipFiniteCheck=True)
+        shown_angles = []
         for name, curve in self.angle_curves.items():
             values = angles.get(name)
             visible = values is not None and len(values) > 0 and bool(np.isfinite(values[-1]))
@@ -341,5 +432,43 @@ class LivePlots(QWidget):
                 curve.setData(
                     angles_t_rel, values, connect=angle_connect, skipFiniteCheck=True
                 )
+                shown_angles.append(values)
             elif curve.xData is not None and len(curve.xData):
                 curve.setData([], [])
+        self._scroll_s = 0.0
+        self._place_curves()
+        self.ranges[self.accel_plot].follow(*_finite_bounds([accel_g]))
+        self.ranges[self.gyro_plot].follow(*_finite_bounds([gyro_dps]))
+        compared = [
+            curve.yData for pair in self.comparison_curves.values() for curve in pair
+            if curve.yData is not None
+        ]
+        self.ranges[self.angle_plot].follow(*_finite_bounds(shown_angles + compared))
+
+    def scroll_to(self, seconds: float) -> bool:
+        """Move every trace ``seconds`` to the left (the time since the newest sample arrived)
+        without rebuilding it; only when that moves it a visible amount. True if it moved."""
+        pixels_per_s = self.accel_plot.getViewBox().width() / max(self._window_s, 1e-9)
+        if abs(seconds - self._scroll_s) * pixels_per_s < SCROLL_THRESHOLD_PX:
+            return False
+        self._scroll_s = float(seconds)
+        self._place_curves()
+        return True
+
+    @property
+    def scroll_s(self) -> float:
+        """How far (seconds) the traces are moved left of where their data put them."""
+        return self._scroll_s
+
+    def _place_curves(self) -> None:
+        # A moved line keeps its path: nothing is rebuilt, the view only repaints.
+        for line in self._all_curves():
+            if line.pos().x() != -self._scroll_s:
+                line.setPos(-self._scroll_s, 0.0)
+
+    def _all_curves(self) -> list[pg.PlotCurveItem]:
+        return [
+            *self.accel_curves, *self.gyro_curves, *self.angle_curves.values(),
+            *(curve for pair in self.comparison_curves.values() for curve in pair),
+            self.error_curve, *self.comparison_error_curves.values(),
+        ]

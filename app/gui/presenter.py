@@ -1,7 +1,12 @@
-"""The live presenter: on a fixed-rate timer, pull from the ring buffers and feed the views.
+"""The live presenter: once per screen refresh, pull from the ring buffers and feed the views
+that are on screen, and only those whose input changed.
 
 This is the one place where buffered data meets widgets. The maths it needs (averaging,
 unit conversion) comes from :mod:`app.core`; the widgets only receive finished numbers.
+Frames are paced by :class:`~app.gui.frame_clock.FrameClock` (the screen's refresh rate,
+resting while nothing changes); each view keeps the key of what it last showed (newest row,
+settings, size), so a frame without new data draws nothing and a hidden view does no work
+until it is shown again.
 """
 
 from __future__ import annotations
@@ -10,8 +15,8 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from PySide6.QtCore import QObject, QTimer, Signal
-from PySide6.QtWidgets import QLabel
+from PySide6.QtCore import QObject, Qt, Signal
+from PySide6.QtWidgets import QLabel, QWidget
 
 from app.core.calibration_procedures import StaticStatistics
 from app.core.comparison import summarize_errors
@@ -22,12 +27,16 @@ from app.core.readout import SLOPE_UNITS, averaged_angles, slope_from_angle
 from app.core.samples import STANDARD_GRAVITY_M_S2
 from app.gui.bubble_level import BubbleLevel
 from app.gui.filter_panel import FilterPanel
+from app.gui.frame_clock import FrameClock
 from app.gui.plots import LivePlots
 from app.gui.readouts import TiltReadouts
 from app.services.session import DeviceSession
 
 ANGLE_TRACES = ["roll", "pitch", "ref_roll", "ref_pitch"]
 ERROR_TABLE_INTERVAL_S = 0.5
+MAX_SCROLL_LEAD_S = 0.25
+"""Between blocks the plots scroll on with the clock, at most this long (and at most 1.5
+block intervals) past the newest sample: a stream that stopped leaves them still."""
 UNIT_LABELS = {key: unit.suffix or "1:n" for key, unit in SLOPE_UNITS.items()}
 
 
@@ -38,14 +47,36 @@ class DisplaySettings:
     unit: str = "deg"
     averaging_s: float = 0.5
     hold: bool = False
-    frame_rate_hz: float = 30.0
     readout_rate_hz: float = 10.0
     """Numeric readouts change at most this often, like a digital level's display: faster
     figures cannot be read, and every text change repaints the tiles."""
 
 
+def on_screen(widget: QWidget) -> bool:
+    """Whether any of ``widget`` can be seen: shown, not in a hidden dock or tab, not covered
+    entirely, its window not minimised."""
+    return widget.isVisible() and not widget.window().isMinimized() and _exposed(widget)
+
+
+def _exposed(widget: QWidget) -> bool:
+    """Some of ``widget`` or of a child is uncovered (children that fill their parent leave
+    the parent's own visible region empty)."""
+    if not widget.visibleRegion().isEmpty():
+        return True
+    children = widget.findChildren(QWidget, options=Qt.FindChildOption.FindDirectChildrenOnly)
+    return any(child.isVisible() and _exposed(child) for child in children)
+
+
+def gap_connect(gap: np.ndarray) -> np.ndarray | str:
+    """pyqtgraph ``connect`` for a (decimated) gap column: ``"all"`` when nothing was lost,
+    which lets pyqtgraph build the line in one pass."""
+    if len(gap) < 2 or not np.any(gap[1:] > 0.5):
+        return "all"
+    return connect_mask(gap)
+
+
 class LivePresenter(QObject):
-    """Refreshes the bubble level, the readouts and the plots at a fixed frame rate."""
+    """Refreshes the bubble level, the readouts and the plots when their data change."""
 
     framesPerSecond = Signal(float)
     attitudeChanged = Signal(object)  # the newest orientation quaternion, on new data (3D view)
@@ -69,85 +100,147 @@ class LivePresenter(QObject):
         self.truth_label = truth_label
         self.settings = DisplaySettings()
         self.plots_enabled = True
-        self.timer = QTimer(self)
-        self.timer.timeout.connect(self.refresh)
+        self.clock = FrameClock(level, parent=self)
+        self.clock.tick.connect(self._on_tick)
         self.frames = 0
+        """Frames that drew something (ticks without changes are not counted)."""
+        self.plot_updates = 0
+        """How often the plots were handed new data."""
+        self.plot_scrolls = 0
+        """How often the plots were only moved on between two blocks of data."""
+        self._plot_wall = 0.0
+        self._block_interval_s = MAX_SCROLL_LEAD_S
         self._fps_window = (time.monotonic(), 0)
-        self._shown_total = -1
-        self._last_text_update = 0.0
+        self._fps_shown = -1
+        self._no_data_shown = False
+        self._level_key: tuple | None = None
+        self._text_key: tuple | None = None
+        self._plot_key: tuple | None = None
+        self._error_key: tuple | None = None
+        self._last_text_update = -np.inf
         self._sensor_trace: IncrementalMinMax | None = None
         self._angle_trace: IncrementalMinMax | None = None
         self._comparison_traces: dict[str, IncrementalMinMax] = {}
-        self._last_error_update = 0.0
+        self._last_error_update = -np.inf
         self._shown_quat: np.ndarray | None = None
         """The quaternions behind the readouts' figures (what Hold keeps showing)."""
 
     def start(self) -> None:
-        self.timer.start(round(1000.0 / self.settings.frame_rate_hz))
+        self.clock.start()
 
     def stop(self) -> None:
-        self.timer.stop()
+        self.clock.stop()
 
     def set_hold(self, hold: bool) -> None:
         self.settings.hold = hold
         self.readouts.setHold(hold)
+        self.clock.wake()
 
     # -- the frame --------------------------------------------------------------------------
-    def refresh(self) -> None:
-        """Draw one frame from the newest buffered data."""
-        pipeline = self.session.pipeline
-        samples, orientation = pipeline.samples, pipeline.orientation
-        connected = self.session.device_info is not None
-        total = orientation.total_written
-        if total != self._shown_total:
-            self._shown_total = total
-            if total == 0:
-                self._show_no_data()
-            else:
-                self._update_level(orientation)
-                if self.plots_enabled and self.plots.isVisible():
-                    self._update_plots(samples, orientation)
-        if not connected and total == 0:
-            self._show_no_data()
-        now = time.monotonic()
-        if now - self._last_error_update >= ERROR_TABLE_INTERVAL_S:
-            self._last_error_update = now
-            self.update_error_table()
-        self._count_frame()
+    def _on_tick(self) -> None:
+        self.clock.report(self.refresh())
 
-    def _show_no_data(self) -> None:
+    def refresh(self) -> bool:
+        """Draw what changed since the last frame; True if something was drawn (or a readout
+        update is due shortly), i.e. the clock should keep the screen rate."""
+        pipeline = self.session.pipeline
+        orientation = pipeline.orientation
+        total = orientation.total_written
+        if total == 0:
+            busy = self._show_no_data()
+            self._count_frame(busy)
+            return busy
+        self._no_data_shown = False
+        drew = pending = False
+        now = time.monotonic()
+        level_key = (total, self.settings.unit, self.settings.averaging_s)
+        if not self.settings.hold:
+            averaged = None
+            if level_key != self._level_key and on_screen(self.level):
+                averaged = self._averaged(orientation)
+                self._show_level(averaged)
+                self._level_key = level_key
+                drew = True
+            if level_key != self._text_key and on_screen(self.readouts):
+                if now - self._last_text_update >= 1.0 / self.settings.readout_rate_hz:
+                    self._show_texts(averaged or self._averaged(orientation))
+                    self._text_key = level_key
+                    self._last_text_update = now
+                    drew = True
+                else:
+                    pending = True  # due shortly: the clock keeps its pace until then
+        plot_key = (
+            total, self.plots.window_s, self.plots.width(), tuple(pipeline.comparison_buffers)
+        )
+        if self.plots_enabled and on_screen(self.plots):
+            if plot_key != self._plot_key:
+                self._update_plots(pipeline.samples, orientation)
+                self._plot_key = plot_key
+                self.plot_updates += 1
+                interval = min(now - self._plot_wall, MAX_SCROLL_LEAD_S)
+                self._block_interval_s += 0.2 * (interval - self._block_interval_s)
+                self._plot_wall = now
+                drew = True
+            else:
+                lead = min(now - self._plot_wall, MAX_SCROLL_LEAD_S, 1.5 * self._block_interval_s)
+                if self.plots.scroll_to(lead):
+                    self.plot_scrolls += 1
+                    drew = True
+        error_key = (total, self.plots.window_s, tuple(pipeline.comparison_buffers))
+        if (
+            error_key != self._error_key
+            and now - self._last_error_update >= ERROR_TABLE_INTERVAL_S
+            and on_screen(self.filter_panel)
+        ):
+            self._last_error_update = now
+            self._error_key = error_key
+            self.update_error_table()
+        self._count_frame(drew)
+        return drew or pending
+
+    def _show_no_data(self) -> bool:
+        """Dashes and an empty vial, once per stretch without data; True when it drew."""
+        if self._no_data_shown:
+            return False
+        self._no_data_shown = True
+        self._level_key = self._text_key = self._plot_key = self._error_key = None
         self.level.setValid(False)
         self.readouts.setValid(False)
         self.truth_label.setText("")
         self.plots.clear()
+        return True
 
-    def _update_level(self, orientation) -> None:
-        if self.settings.hold:
-            return
-        now = time.monotonic()
-        update_text = now - self._last_text_update >= 1.0 / self.settings.readout_rate_hz
-        if update_text:
-            self._last_text_update = now
+    def _averaged(self, orientation) -> tuple[dict, object] | None:
+        """The newest averaging window's rows and their mean angles (None: no attitude)."""
         recent = orientation.window(
             self.settings.averaging_s,
             names=["quat", "ref_roll", "ref_pitch", "incl_error"],
         )
         angles = averaged_angles(recent["quat"])
-        if angles is None:
+        return None if angles is None else (recent, angles)
+
+    def _show_level(self, averaged: tuple[dict, object] | None) -> None:
+        """The bubble (it repaints itself only when it moves by a visible amount)."""
+        if averaged is None:
             return
+        recent, angles = averaged
         self.attitudeChanged.emit(recent["quat"][-1])
-        unit = self.settings.unit
         self.level.setValid(True)
         self.level.setTilt(angles.roll_deg, angles.pitch_deg, angles.tilt_deg)
         ref_roll, ref_pitch = recent["ref_roll"][-1], recent["ref_pitch"][-1]
-        has_reference = bool(np.isfinite(ref_roll))
-        if has_reference:
+        if np.isfinite(ref_roll):
             self.level.setReference(float(ref_roll), float(ref_pitch))
         else:
             self.level.clearReference()
-        if not update_text:
+
+    def _show_texts(self, averaged: tuple[dict, object] | None) -> None:
+        """The numeric readouts and the simulator-truth line (labels repaint only when their
+        text changes)."""
+        if averaged is None:
             return
+        recent, angles = averaged
         self._shown_quat = recent["quat"]
+        unit = self.settings.unit
         self.readouts.setValid(True)
         self.readouts.setValues(
             float(slope_from_angle(angles.roll_deg, unit)),
@@ -156,14 +249,17 @@ class LivePresenter(QObject):
             angles.direction_deg,
             unit,
         )
-        if has_reference:
+        ref_roll, ref_pitch = recent["ref_roll"][-1], recent["ref_pitch"][-1]
+        if np.isfinite(ref_roll):
             rms = float(np.sqrt(np.nanmean(recent["incl_error"] ** 2)))
-            self.truth_label.setText(
+            text = (
                 f"Simulator truth  roll {ref_roll:+.2f}°  pitch {ref_pitch:+.2f}°  ·  "
                 f"inclination error {rms:.3f}° RMS"
             )
         else:
-            self.truth_label.setText("")
+            text = ""
+        if self.truth_label.text() != text:
+            self.truth_label.setText(text)
 
     def current_reading(self, label: str = "") -> Measurement | None:
         """The reading the readouts show (held, or over the averaging time up to now) with its
@@ -209,8 +305,8 @@ class LivePresenter(QObject):
             np.degrees(sensor[:, 3:6]),
             angle_t - newest,
             {key: angle_values[:, i] for i, key in enumerate(ANGLE_TRACES)},
-            sensor_connect=connect_mask(sensor[:, 6]),
-            angle_connect=connect_mask(angle_values[:, len(ANGLE_TRACES)]),
+            sensor_connect=gap_connect(sensor[:, 6]),
+            angle_connect=gap_connect(angle_values[:, len(ANGLE_TRACES)]),
         )
         error = angle_values[:, len(ANGLE_TRACES) + 1]
         self.plots.set_error_visible(len(error) > 0 and bool(np.isfinite(error[-1])))
@@ -262,10 +358,14 @@ class LivePresenter(QObject):
         span = recent[-1] - recent[0] if len(recent) > 1 else 0.0
         return (len(recent) - 1) / span if span > 0 else 1.0
 
-    def _count_frame(self) -> None:
-        self.frames += 1
+    def _count_frame(self, drew: bool) -> None:
+        if drew:
+            self.frames += 1
         start, frames_then = self._fps_window
         now = time.monotonic()
         if now - start >= 1.0:
-            self.framesPerSecond.emit((self.frames - frames_then) / (now - start))
+            fps = (self.frames - frames_then) / (now - start)
             self._fps_window = (now, self.frames)
+            if round(fps) != self._fps_shown:  # the status bar repaints only on a change
+                self._fps_shown = round(fps)
+                self.framesPerSecond.emit(fps)

@@ -83,6 +83,12 @@ def raised_side_label(direction_deg: float) -> str:
     return _SIDES[sector]
 
 
+def _set_text(label: QLabel, text: str) -> None:
+    """``label.setText(text)`` unless it already shows ``text`` (no relayout, no repaint)."""
+    if label.text() != text:
+        label.setText(text)
+
+
 class _ReadoutTile(QFrame):
     """One readout: caption, big value with unit, and a small note line."""
 
@@ -285,6 +291,8 @@ class TiltReadouts(QWidget):
 
     def setValid(self, valid: bool) -> None:
         """Show the numbers (True) or dashes (False: no data)."""
+        if bool(valid) == self._valid:
+            return
         self._valid = bool(valid)
         self._show_texts()
 
@@ -361,6 +369,8 @@ class TiltReadouts(QWidget):
         return raised_side_label(direction)
 
     def _show_texts(self) -> None:
+        """Put the values into the labels; a label whose text stays the same is not touched,
+        so it does not repaint."""
         suffix = SLOPE_UNITS[self._unit].suffix
         for name, tile in self._tiles.items():
             value = self._values[name]
@@ -369,10 +379,11 @@ class TiltReadouts(QWidget):
             else:
                 text = format_slope(value, self._unit, signed=name != "tilt")
                 tile.setUnit(suffix)
-            tile.value.setText(text.replace("-", MINUS) if self._valid and text else NO_VALUE)
-        self._tiles["direction"].note.setText(
+            _set_text(tile.value, text.replace("-", MINUS) if self._valid and text else NO_VALUE)
+        _set_text(
+            self._tiles["direction"].note,
             f'{_NOTES["direction"]}&nbsp;&nbsp;<span style="color:{theme.TEXT};">'
-            f"<b>{self._side_text()}</b></span>"
+            f"<b>{self._side_text()}</b></span>",
         )
 
     def _place_tiles(self) -> None:

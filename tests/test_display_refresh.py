@@ -1,0 +1,257 @@
+"""The display redraws what changed, when it changed, at the pace of the screen.
+
+Behaviour, not speed: frames follow the screen's refresh rate, a frame without new data hands
+the plots nothing, hidden views do no work, labels whose text stays the same and a bubble
+that moves less than a visible amount do not repaint. Repaints are counted from paint events;
+"no repaint" is checked after a sentinel widget in the same window has been painted, i.e.
+after the window's pending paints went out.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from PySide6.QtCore import QEvent, QObject
+from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+
+from app.core.orientation import quaternion_from_roll_pitch, up_in_sensor_frame
+from app.core.pipeline import Pipeline
+from app.core.samples import RawBlock, ScaleFactors
+from app.gui.bubble_level import REPAINT_THRESHOLD_PX, BubbleLevel
+from app.gui.filter_panel import FilterPanel
+from app.gui.frame_clock import FALLBACK_REFRESH_HZ, FrameClock, frame_interval_ms
+from app.gui.plots import LivePlots
+from app.gui.presenter import LivePresenter
+from app.gui.readouts import TiltReadouts
+
+G = 9.80665
+ODR = 104.0
+SCALE = ScaleFactors(0.122e-3 * G, np.radians(8.75e-3), 1 / 256, 25.0)
+
+
+class Paints(QObject):
+    """Counts paint events of the widgets it is installed on."""
+
+    def __init__(self, *widgets: QWidget) -> None:
+        super().__init__()
+        self.count = 0
+        for widget in widgets:
+            widget.installEventFilter(self)
+
+    def eventFilter(self, watched, event) -> bool:
+        if event.type() == QEvent.Type.Paint:
+            self.count += 1
+        return False
+
+
+def flush_paints(qtbot, sentinel: QLabel) -> None:
+    """Return once a repaint asked for now has happened: pending paints are done too."""
+    painted = Paints(sentinel)
+    sentinel.setText(sentinel.text() + ".")
+    qtbot.waitUntil(lambda: painted.count > 0, timeout=5000)
+
+
+def raw_block(start: int, count: int, roll: float = 2.0, pitch: float = -1.0) -> RawBlock:
+    q = quaternion_from_roll_pitch(roll, pitch)
+    accel = np.round(up_in_sensor_frame(q) * G / SCALE.accel_m_s2_per_lsb).astype(np.int16)
+    return RawBlock(
+        t_s=(start + np.arange(count)) / ODR,
+        accel_raw=np.tile(accel, (count, 1)),
+        gyro_raw=np.zeros((count, 3), np.int16),
+        temp_raw=np.full(count, 256, np.int16),
+        scale=SCALE,
+        reference_quat=np.tile(q, (count, 1)),
+    )
+
+
+# -- frame pacing ------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("refresh_hz", "interval_ms"),
+    [(60.0, 16), (59.94, 16), (75.0, 13), (120.0, 8), (144.0, 6), (240.0, 4),
+     (0.0, 16), (float("nan"), 16), (-1.0, 16)],
+)
+def test_frame_interval_is_never_slower_than_the_screen(refresh_hz, interval_ms):
+    assert frame_interval_ms(refresh_hz) == interval_ms
+    if refresh_hz >= 1.0:
+        assert 1000.0 / frame_interval_ms(refresh_hz) >= refresh_hz
+
+
+def test_frame_clock_follows_the_screen_refresh_rate(qtbot):
+    widget = QWidget()
+    qtbot.addWidget(widget)
+    clock = FrameClock(widget, parent=widget)
+    widget.show()
+    qtbot.waitExposed(widget)
+    screen = widget.window().windowHandle().screen()
+    rate = screen.refreshRate()
+    expected = rate if 1.0 <= rate <= 1000.0 else FALLBACK_REFRESH_HZ
+    assert clock.refresh_hz == pytest.approx(expected)
+    clock.start()
+    assert clock.timer.interval() == frame_interval_ms(expected)
+    # The screen's rate changing (a new mode, another screen) changes the pace.
+    with qtbot.waitSignal(clock.rateChanged):
+        screen.refreshRateChanged.emit(144.0)
+    assert clock.timer.interval() == frame_interval_ms(144.0)
+    clock.stop()
+
+
+def test_frame_clock_rests_when_idle_and_wakes_on_work(qtbot):
+    widget = QWidget()
+    qtbot.addWidget(widget)
+    clock = FrameClock(widget, idle_ticks=5, rest_interval_ms=100, parent=widget)
+    clock.start()
+    for _ in range(4):
+        clock.report(False)
+    assert not clock.resting and clock.timer.interval() == clock.interval_ms
+    clock.report(False)
+    assert clock.resting and clock.timer.interval() == 100
+    clock.report(True)
+    assert not clock.resting and clock.timer.interval() == clock.interval_ms
+    ticks = []
+    clock.tick.connect(lambda: ticks.append(1))
+    qtbot.waitUntil(lambda: len(ticks) >= 3, timeout=2000)
+    clock.stop()
+
+
+# -- widgets repaint only on a visible change -------------------------------------------------
+@pytest.fixture
+def host(qtbot):
+    """A shown window holding the views, and a sentinel label to flush paints with."""
+    window = QWidget()
+    layout = QVBoxLayout(window)
+    window.sentinel = QLabel("sentinel")
+    layout.addWidget(window.sentinel)
+    qtbot.addWidget(window)
+    window.resize(900, 900)
+    return window
+
+
+def test_readout_repaints_only_when_its_text_changes(qtbot, host):
+    readouts = TiltReadouts()
+    host.layout().addWidget(readouts)
+    host.show()
+    qtbot.waitExposed(host)
+    readouts.setValid(True)
+    readouts.setValues(1.234, -0.5, 1.3, 45.0, "°")
+    flush_paints(qtbot, host.sentinel)
+    roll = Paints(readouts.valueLabel("roll"))
+    readouts.setValues(1.2349, -0.5, 1.3, 45.0, "°")  # still "+1.23"
+    flush_paints(qtbot, host.sentinel)
+    assert roll.count == 0
+    assert readouts.readoutText("roll") == "+1.23°"
+    readouts.setValues(1.24, -0.5, 1.3, 45.0, "°")
+    qtbot.waitUntil(lambda: roll.count > 0, timeout=5000)
+    assert readouts.readoutText("roll") == "+1.24°"
+
+
+def test_bubble_repaints_only_when_it_moves_a_visible_amount(qtbot, host):
+    level = BubbleLevel()
+    level.setMinimumSize(400, 400)
+    host.layout().addWidget(level)
+    host.show()
+    qtbot.waitExposed(host)
+    level.setRange(5.0)
+    level.setValid(True)
+    level.setTilt(2.0, 1.0)
+    px_per_degree = level.bubbleCenter().y()
+    level.setTilt(1.0, 1.0)
+    px_per_degree -= level.bubbleCenter().y()
+    assert px_per_degree < 0  # roll raises the bubble: y decreases
+    flush_paints(qtbot, host.sentinel)
+    paints = Paints(level)
+    start = level.bubbleCenter()
+    level.setTilt(1.0 + 0.3 * REPAINT_THRESHOLD_PX / abs(px_per_degree), 1.0)
+    flush_paints(qtbot, host.sentinel)
+    assert level.bubbleCenter() != start  # the value is taken ...
+    assert paints.count == 0  # ... but a fraction of the threshold is not drawn
+    level.setTilt(1.0 + 3.0 * REPAINT_THRESHOLD_PX / abs(px_per_degree), 1.0)
+    qtbot.waitUntil(lambda: paints.count > 0, timeout=5000)
+    # A change of state (here: into over range) repaints however small the move.
+    level.setTilt(4.999, 0.0)
+    flush_paints(qtbot, host.sentinel)
+    paints.count = 0
+    level.setTilt(4.999, 0.0, 5.01)
+    qtbot.waitUntil(lambda: paints.count > 0, timeout=5000)
+
+
+# -- the presenter: new data only, views on screen only -----------------------------------------
+@pytest.fixture
+def live(qtbot, host):
+    """A presenter over a real pipeline (fed by hand) and real views in a shown window."""
+    pipeline = Pipeline(odr_hz=ODR)
+    session = SimpleNamespace(pipeline=pipeline, device_info=None)
+    level, readouts, plots = BubbleLevel(), TiltReadouts(), LivePlots()
+    truth, panel = QLabel(), FilterPanel()
+    for widget in (level, readouts, plots, truth, panel):
+        host.layout().addWidget(widget)
+    plots.setMinimumHeight(300)
+    presenter = LivePresenter(session, level, readouts, plots, truth, panel, parent=host)
+    host.show()
+    qtbot.waitExposed(host)
+    handed = []
+    original = plots.set_data
+
+    def spy(*args, **kwargs):
+        handed.append(len(args[0]))
+        return original(*args, **kwargs)
+
+    plots.set_data = spy
+    return SimpleNamespace(
+        pipeline=pipeline, presenter=presenter, plots=plots, level=level, handed=handed
+    )
+
+
+def test_plots_get_no_data_when_no_new_samples_arrived(live):
+    live.pipeline.process(raw_block(0, 208))
+    assert live.presenter.refresh()
+    assert len(live.handed) == 1 and live.handed[0] > 100
+    for _ in range(5):
+        live.presenter.refresh()
+    assert len(live.handed) == 1
+    live.pipeline.process(raw_block(208, 3))
+    live.presenter.refresh()
+    assert len(live.handed) == 2
+
+
+def test_hidden_plots_do_no_work_and_catch_up_when_shown(qtbot, live):
+    live.pipeline.process(raw_block(0, 208))
+    live.presenter.refresh()
+    live.plots.hide()
+    live.pipeline.process(raw_block(208, 104, roll=5.0))
+    live.presenter.refresh()
+    assert len(live.handed) == 1  # hidden: nothing handed over ...
+    assert live.level.roll() > 2.0  # ... while the visible bubble followed the data
+    live.plots.show()
+    qtbot.waitExposed(live.plots)
+    live.presenter.refresh()
+    assert len(live.handed) == 2  # shown again: the newest data at once
+
+
+def test_a_stream_that_stopped_lets_the_display_rest(live):
+    live.pipeline.process(raw_block(0, 208))
+    assert live.presenter.refresh()
+    frames = live.presenter.frames
+    live.presenter.settings.readout_rate_hz = 1e9  # no readout update pending
+    busy = [live.presenter.refresh() for _ in range(3)]
+    # Nothing new: at most the plots' scroll to where the lead limit stops it, then nothing.
+    assert busy[-1] is False
+    assert live.presenter.frames - frames <= 1
+    assert len(live.handed) == 1
+
+
+def test_plots_scroll_between_blocks_without_rebuilding(live):
+    live.pipeline.process(raw_block(0, 208))
+    live.presenter.refresh()
+    curve = live.plots.accel_curves[2]
+    x_before = curve.xData.copy()
+    view_width_px = live.plots.accel_plot.getViewBox().width()
+    step = 2.0 * live.plots.window_s / view_width_px  # two pixels
+    assert live.plots.scroll_to(step)
+    assert curve.pos().x() == pytest.approx(-step)
+    np.testing.assert_array_equal(curve.xData, x_before)
+    assert not live.plots.scroll_to(step + 0.1 * live.plots.window_s / view_width_px)
+    live.pipeline.process(raw_block(208, 3))
+    live.presenter.refresh()
+    assert curve.pos().x() == 0.0  # new data: drawn where they belong
