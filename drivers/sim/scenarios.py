@@ -798,7 +798,10 @@ class Arm(Scenario):
     mountings) depends on the seed only, so streams of one seed with different ``sensor`` are
     one consistent arm. Each sensor is its own simulated unit (:meth:`unit_errors`: its own
     biases, noise and id), but all share the arm's sample clock, as one board reading every
-    chip on one trigger would. Gyroscope turn-on biases are drawn within +-``bias`` dps.
+    chip on one trigger would. Gyroscope turn-on biases are drawn within +-``bias`` dps; with
+    ``calibrated`` (the default) the units have no scale or cross-axis errors and a residual
+    accelerometer bias of at most 2 mg, as after the app's six-face calibration (the
+    bias, its drift and temperature dependence, noise and quantisation stay).
     """
 
     name = "arm"
@@ -812,12 +815,17 @@ class Arm(Scenario):
         "joint_max": Param(130.0, 0.0, 180.0, "largest joint angle, degrees"),
         "joint_band": Param(0.5, 0.02, 3.0, "highest frequency of the joint motion, Hz"),
         "bias": Param(0.5, 0.0, 5.0, "largest gyroscope turn-on bias per axis, dps"),
+        "calibrated": Param(True, doc="1: units as after a six-face calibration (no scale or "
+                            "cross-axis errors, accelerometer bias within +-2 mg); 0: raw units "
+                            "(1 % scale and cross-axis errors, +-20 mg)"),
         "move": Param(30.0, 3.0, 3600.0, "seconds of base motion between rest breaks"),
         "rest": Param(10.0, 0.0, 3600.0, "seconds of each rest break of the base"),
     }
     accel_fs_g = 8
     gyro_fs_dps = 2000
     LINK_LENGTH_M: ClassVar[tuple[float, float]] = (0.2, 0.35)
+    CALIBRATED_ACCEL_BIAS: ClassVar[float] = 0.1
+    """Accelerometer bias left by a calibration, as a fraction of the raw unit's (2 of 20 mg)."""
     LEVER_STEP_S: ClassVar[float] = 5e-4
     """Step of the central difference that gives the lever arms' acceleration."""
 
@@ -883,7 +891,7 @@ class Arm(Scenario):
         return np.degrees(self.joint_angles(t)[0])
 
     def axis_in_sensor(self, joint: int, sensor: int) -> np.ndarray:
-        """Hinge ``joint`` (1 ... links-1)'s axis in sensor ``sensor``'s frame (joint-1 or joint)."""
+        """Hinge ``joint``'s axis (1 ... links-1) in sensor ``sensor``'s frame."""
         if sensor not in (joint - 1, joint):
             raise ValueError(f"hinge {joint} joins sensors {joint - 1} and {joint}, not {sensor}")
         return quat.rotate_inverse(self.mountings[sensor], self.axes[joint - 1])
@@ -894,9 +902,17 @@ class Arm(Scenario):
         unit = UnitErrors.draw(int.from_bytes(digest, "big"))
         clock = UnitErrors.draw(seed)
         scale = math.radians(float(self.params["bias"])) / GYRO_BIAS_LIMIT_RAD_S
-        return replace(
+        unit = replace(
             unit, gyro_bias_rad_s=unit.gyro_bias_rad_s * scale,
             freq_fine=clock.freq_fine, clock_residual=clock.clock_residual,
+        )
+        if not self.params["calibrated"]:
+            return unit
+        zero, none = np.zeros(3), np.zeros((3, 3))
+        return replace(
+            unit, accel_scale_error=zero, accel_cross_axis=none, gyro_scale_error=zero,
+            gyro_cross_axis=none, accel_scale_tc_per_degc=zero, gyro_scale_tc_per_degc=zero,
+            accel_bias_m_s2=unit.accel_bias_m_s2 * self.CALIBRATED_ACCEL_BIAS,
         )
 
     # -- motion ---------------------------------------------------------------------------------

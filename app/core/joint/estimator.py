@@ -45,7 +45,7 @@ AXIS_FIRST_S = 5.0
 """Seconds of motion before an estimated axis is first used (the angle is NaN until then)."""
 AXIS_REFIT_S = 10.0
 AXIS_WINDOW_S = 120.0
-DEFAULT_FUSION_TAU_S = 4.0
+DEFAULT_FUSION_TAU_S = 3.0
 
 
 @dataclass
