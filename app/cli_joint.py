@@ -147,12 +147,12 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
           f"   ({info['axis_source']})", file=out)
     if estimate is not None:
         spread = result.axis_spread_deg
-        good = estimate.well_determined and spread < AXIS_SPREAD_LIMIT_DEG
+        good = estimate.well_determined and spread < AXIS_SPREAD_LIMIT_DEG  # NaN: not good
         verdict = "well determined" if good else "POORLY determined"
         residual = info["axis_quality"]["residual_rms_dps"]
         print(f"axis fit: {estimate.samples} samples, residual {residual:.3f} dps, smallest "
               f"singular value {estimate.smallest_singular:.3f} rad/s (0: motion that cannot "
-              f"show the axis), spread over the four quarters {spread:.3f} deg, 1-sigma from "
+              f"show the axis), spread over the quarters {spread:.3f} deg, 1-sigma from "
               f"the residuals {max(estimate.uncertainty_deg):.3f} deg: {verdict}", file=out)
     known = np.isfinite(angle)
     print(f"{target}: {len(angle)} rows ({int(known.sum())} with an angle), alignment: {how}",

@@ -50,7 +50,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from app.core import quaternion as quat
 from app.core.joint.axis import consistent_sign
 from app.core.joint.estimator import JointEstimator, hinge_angle
 from app.core.joint.offline import joint_angle_offline

@@ -19,6 +19,10 @@ from app.core.joint.axis import AxisEstimate, consistent_sign, estimate_hinge_ax
 from app.core.joint.estimator import JointBlock, JointEstimator
 from app.core.samples import SampleBlock
 
+RICH_QUARTER = 0.25
+"""A quarter of the recording counts towards the axis spread when its smallest singular value
+is at least this fraction of the whole recording's."""
+
 
 @dataclass
 class JointResult:
@@ -30,8 +34,9 @@ class JointResult:
     axis_estimate: AxisEstimate | None
     """None when the axes were given."""
     axis_spread_deg: float = math.nan
-    """Largest angle between the axes fitted on each quarter of the recording and on the whole
-    (NaN when given, or when a quarter moved too little): how repeatable the estimate is."""
+    """Largest angle between the axes fitted on each quarter of the recording and on the whole,
+    over the quarters whose motion shows the axis (:data:`RICH_QUARTER`); NaN when the axes
+    were given or fewer than two quarters qualify: how repeatable the estimate is."""
 
 
 def estimate_axes_offline(block1: SampleBlock, block2: SampleBlock
@@ -44,15 +49,19 @@ def estimate_axes_offline(block1: SampleBlock, block2: SampleBlock
     w2 = block2.gyro_rad_s - filters[1].bias_estimate_rad_s
     found = estimate_hinge_axes(w1, w2)
     j2 = consistent_sign(found.j1, found.j2, quats[0], quats[1])
-    spread = 0.0
+    spread, counted = 0.0, 0
     for rows in np.array_split(np.arange(len(w1)), 4):
         try:
             part = estimate_hinge_axes(w1[rows], w2[rows], start=(found.j1, j2))
         except ValueError:
-            spread = math.nan
-            break
+            continue
+        if part.smallest_singular < RICH_QUARTER * found.smallest_singular:
+            continue  # e.g. a rest of the base: this quarter cannot show the axis
+        counted += 1
         for a, b in ((part.j1, found.j1), (part.j2, j2)):
             spread = max(spread, math.degrees(math.acos(min(1.0, abs(float(a @ b))))))
+    if counted < 2:
+        spread = math.nan
     estimate = AxisEstimate(found.j1, j2, found.residual_rms_rad_s, found.smallest_singular,
                             found.uncertainty_deg, found.samples)
     return estimate, spread
