@@ -1,4 +1,5 @@
-"""``inclinometer joint A.csv B.csv --out J.csv [--axis auto|AX,AY,AZ:BX,BY,BZ]``.
+"""``inclinometer joint A.csv B.csv --out J.csv [--axis auto|AX,AY,AZ:BX,BY,BZ]`` and
+``inclinometer record-arm "sim://arm?..." --duration S DIR``.
 
 The angle of the hinge between the sensor of recording A and that of recording B
 (:mod:`app.core.joint`), one row per row of A. Output: ``# inclinometer-joint 1``, ``# key:
@@ -45,6 +46,42 @@ def add_joint_parser(commands: argparse._SubParsersAction) -> None:
         "space); 'auto' (default): estimated from the motion",
     )
     joint.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    arm = commands.add_parser(
+        "record-arm",
+        help="record a simulated measuring arm: one v1 file per sensor, with the truth",
+        description=(
+            "Run every sensor of one sim://arm (same seed: one arm) as fast as possible and "
+            "write DIR/sensor0.csv, sensor1.csv, ...: raw samples, the true orientation and, "
+            "from sensor 1 on, joint_ref_deg, the true angle of the hinge between sensor K-1 "
+            "and K; the true axes are in the 'arm' metadata key."
+        ),
+    )
+    arm.add_argument("url", metavar="URL", help="a sim://arm URL, e.g. "
+                     "'sim://arm?links=3&seed=4&odr=208' (sensor= is set for each file)")
+    arm.add_argument("directory", metavar="DIR", help="where to write the files")
+    arm.add_argument("--duration", type=float, default=180.0, metavar="S",
+                     help="seconds of device time (default %(default)g)")
+    arm.add_argument("--force", action="store_true", help="overwrite existing files")
+
+
+def record_arm_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """The ``record-arm`` sub-command."""
+    from app.services.arm_recordings import record_arm
+    from drivers.errors import DeviceError
+
+    out = sys.stdout if out is None else out
+    try:
+        written = record_arm(args.url, args.duration, Path(args.directory),
+                             overwrite=args.force)
+    except (ValueError, DeviceError) as exc:
+        print(f"inclinometer record-arm: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as exc:
+        print(f"inclinometer record-arm: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    for item in written:
+        print(f"{item.path}: sensor {item.sensor}, {item.samples} samples", file=out)
+    return 0
 
 
 def parse_axes(text: str) -> tuple[np.ndarray, np.ndarray] | None:

@@ -302,3 +302,15 @@ def test_cli_joint_reports_a_missing_file_and_keeps_an_existing_output(arm_files
     existing.write_text("mine", encoding="utf-8")
     assert cli.main(["joint", str(a), str(a), "--out", str(existing)]) == 2
     assert existing.read_text(encoding="utf-8") == "mine"
+
+
+def test_cli_record_arm_writes_every_sensor_and_refuses_other_scenarios(tmp_path, capsys):
+    target = tmp_path / "arm"
+    assert cli.main(["record-arm", "sim://arm?links=3&odr=26&seed=9", str(target),
+                     "--duration", "2"]) == 0
+    assert sorted(p.name for p in target.iterdir()) == [
+        "sensor0.csv", "sensor1.csv", "sensor2.csv"]
+    assert "sensor 2" in capsys.readouterr().out
+    assert cli.main(["record-arm", "sim://wobble", str(tmp_path / "other")]) == 2
+    assert "not a measuring arm" in capsys.readouterr().err
+    assert not (tmp_path / "other").exists()

@@ -24,6 +24,7 @@ from app.core.recording.format import (
 from app.core.recording.writer import BASE_COLUMNS, format_table
 from app.core.samples import convert_raw_block
 from drivers.sim.device import SimulatedDevice
+from drivers.sim.options import parse_sim_url
 from drivers.sim.scenarios import Arm
 
 JOINT_REFERENCE_COLUMN = "joint_ref_deg"
@@ -56,9 +57,10 @@ def record_arm(
     """
     if seconds <= 0.0 or not math.isfinite(seconds):
         raise ValueError(f"the duration must be a positive number of seconds, not {seconds!r}")
-    first = _arm_url(url, 0)
-    if not isinstance(first.scenario, Arm):
+    if parse_sim_url(url).scenario != Arm.name:
         raise ValueError(f"{url}: not a measuring arm; use sim://arm?links=N&...")
+    first = _arm_url(url, 0)
+    assert isinstance(first.scenario, Arm)
     links = first.scenario.links
     paths = [out_dir / f"{stem}{k}.csv" for k in range(links)]
     existing = [p for p in paths if p.exists()]

@@ -2,7 +2,8 @@
 
 URL: ``sim://SCENARIO?key=value&...``, for example ``sim://wobble?odr=416&seed=7``.
 
-Scenarios (:data:`SCENARIOS`): static, slow-tilt, wobble, vibration, translation, tour,
+Scenarios (:data:`SCENARIOS`): static, slow-tilt, wobble, vibration, translation, handheld,
+strokes, arm (a measuring arm: one stream per ``sensor=K``), tour,
 interactive. Options every scenario accepts:
 
 - ``odr`` Hz, snapped to the nearest LSM6DSOX rate 12.5 ... 6667 (default 104)
