@@ -121,16 +121,17 @@ def select_samples(w1: np.ndarray, w2: np.ndarray, limit: int = MAX_SAMPLES) -> 
 
 def estimate_hinge_axes(
     gyro1: np.ndarray, gyro2: np.ndarray, *, start: tuple[np.ndarray, np.ndarray] | None = None,
-    seed: int = 0,
+    seed: int = 0, limit: int = MAX_SAMPLES,
 ) -> AxisEstimate:
     """The hinge axis in both sensors' frames from simultaneous gyroscope samples (N, 3), rad/s.
 
     ``start``: an earlier estimate to refine (then a single start); otherwise the best of
-    :data:`STARTS` random starting points. Raises ValueError when fewer than 20 samples move.
+    :data:`STARTS` random starting points. ``limit``: at most this many samples, evenly spread
+    over the moving ones. Raises ValueError when fewer than 20 samples move.
     """
     w1 = np.asarray(gyro1, dtype=np.float64)
     w2 = np.asarray(gyro2, dtype=np.float64)
-    rows = select_samples(w1, w2)
+    rows = select_samples(w1, w2, limit)
     if len(rows) < 20:
         raise ValueError("too little motion to estimate the hinge axis (fewer than 20 samples "
                          "turning faster than 5 deg/s)")

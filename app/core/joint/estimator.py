@@ -45,6 +45,10 @@ AXIS_FIRST_S = 5.0
 """Seconds of motion before an estimated axis is first used (the angle is NaN until then)."""
 AXIS_REFIT_S = 10.0
 AXIS_WINDOW_S = 120.0
+AXIS_LIVE_SAMPLES = 6000
+"""Samples a live refit uses (spread over the window): keeps a refit near 0.1 s."""
+AXIS_SEARCHES = 3
+"""Refits that also search afresh from random starts (later ones refine the axis in use)."""
 DEFAULT_FUSION_TAU_S = 3.0
 
 
@@ -91,10 +95,9 @@ class JointEstimator:
         self.heading = heading if heading is not None else HeadingTracker()
         self.vqf1 = VQFFilter()
         self.vqf2 = VQFFilter()
-        self._sign_checked = self.fixed_axes
-        self._history: list[np.ndarray] = []  # (n, 11): t, w1, w2 (bias-corrected), q1z.., q2z
-        self._history_t0: float | None = None
+        self._history: list[np.ndarray] = []  # (n, 15): t, w1, w2 (bias-corrected), q1, q2
         self._next_fit_t = -math.inf
+        self._fits = 0
         self._theta = math.nan
         self._rate_bias = 0.0
         self._last_t: float | None = None
@@ -108,22 +111,28 @@ class JointEstimator:
         data = data[keep]
         self._history = [data]
         if data[-1, 0] - data[0, 0] < AXIS_FIRST_S:
+            self._next_fit_t = data[0, 0] + AXIS_FIRST_S
             return
+        w1, w2 = data[:, 1:4], data[:, 4:7]
         try:
-            start = self.axes if self.axes is not None else None
-            found = estimate_hinge_axes(data[:, 1:4], data[:, 4:7], start=start)
-            if start is not None:  # a fresh multi-start search guards against a local minimum
-                fresh = estimate_hinge_axes(data[:, 1:4], data[:, 4:7])
-                if fresh.residual_rms_rad_s < found.residual_rms_rad_s - 1e-9:
+            if self.axes is not None:
+                found = estimate_hinge_axes(w1, w2, start=self.axes, limit=AXIS_LIVE_SAMPLES)
+            if self.axes is None or self._fits < AXIS_SEARCHES:
+                # A search from random starts, against a local minimum of early, poor motion.
+                fresh = estimate_hinge_axes(w1, w2, limit=AXIS_LIVE_SAMPLES)
+                if self.axes is None or fresh.residual_rms_rad_s < found.residual_rms_rad_s:
                     found = fresh
-        except ValueError:
+        except ValueError:  # too little motion so far
+            self._next_fit_t = t + 1.0
             return
-        j1, j2 = found.j1, found.j2
-        if self.axes is not None:  # keep the sign of the axes in use
-            j1 = j1 if j1 @ self.axes[0] >= 0 else -j1
-            j2 = j2 if j2 @ self.axes[1] >= 0 else -j2
-        else:
-            j2 = consistent_sign(j1, j2, data[:, 7:11], data[:, 11:15])
+        self._fits += 1
+        j1 = found.j1 if self.axes is None or found.j1 @ self.axes[0] >= 0 else -found.j1
+        # The relative sign from the whole window's orientations, each time: the first few
+        # seconds may show too little of the axis' inclination to be sure of it.
+        j2 = consistent_sign(j1, found.j2, data[:, 7:11], data[:, 11:15])
+        if self.axes is not None and j2 @ self.axes[1] < 0:
+            self.heading.reset()  # it was mirrored: heading and angle start afresh
+            self._theta = math.nan
         self.axes = (j1, j2)
         self.axis_estimate = found
         self._next_fit_t = t + AXIS_REFIT_S
