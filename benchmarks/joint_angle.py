@@ -186,6 +186,7 @@ def main_trials(count: int) -> list[Trial]:
 
 
 SENSITIVITY = (
+    ("as the main set (bias 0.5 dps, level 0.5)", "bias=0.5"),
     ("gyro bias within +-0 dps", "bias=0"),
     ("gyro bias within +-1 dps", "bias=1"),
     ("gyro bias within +-2 dps", "bias=2"),

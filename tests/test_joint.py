@@ -314,3 +314,11 @@ def test_cli_record_arm_writes_every_sensor_and_refuses_other_scenarios(tmp_path
     assert cli.main(["record-arm", "sim://wobble", str(tmp_path / "other")]) == 2
     assert "not a measuring arm" in capsys.readouterr().err
     assert not (tmp_path / "other").exists()
+
+
+def test_vqf_parameters_reach_both_links_filters():
+    estimator = JointEstimator(vqf_parameters={"bias_sigma_init_dps": 1.0})
+    assert estimator.vqf1.get_parameter("bias_sigma_init_dps") == 1.0
+    assert estimator.vqf2.get_parameter("bias_sigma_init_dps") == 1.0
+    with pytest.raises(ValueError, match="outside"):
+        JointEstimator(vqf_parameters={"tau_acc_s": -1.0})

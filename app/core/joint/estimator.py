@@ -80,11 +80,14 @@ class JointEstimator:
     ----------
     axes : ``(j1, j2)`` known axes in the sensors' frames, or None to estimate them.
     fusion_tau_s : time constant of the gyroscope / orientation fusion (0: orientation only).
+    heading : the heading tracker (default: :class:`HeadingTracker` with its defaults).
+    vqf_parameters : parameters of both links' VQF (:class:`VQFFilter`'s names).
     """
 
     def __init__(self, axes: tuple[np.ndarray, np.ndarray] | None = None,
                  fusion_tau_s: float = DEFAULT_FUSION_TAU_S,
-                 heading: HeadingTracker | None = None) -> None:
+                 heading: HeadingTracker | None = None,
+                 vqf_parameters: dict[str, float] | None = None) -> None:
         self.fixed_axes = axes is not None
         self.axes: tuple[np.ndarray, np.ndarray] | None = None
         if axes is not None:
@@ -93,8 +96,8 @@ class JointEstimator:
         self.axis_estimate: AxisEstimate | None = None
         self.fusion_tau_s = fusion_tau_s
         self.heading = heading if heading is not None else HeadingTracker()
-        self.vqf1 = VQFFilter()
-        self.vqf2 = VQFFilter()
+        self.vqf1 = VQFFilter(**(vqf_parameters or {}))
+        self.vqf2 = VQFFilter(**(vqf_parameters or {}))
         self._history: list[np.ndarray] = []  # (n, 15): t, w1, w2 (bias-corrected), q1, q2
         self._next_fit_t = -math.inf
         self._fits = 0
