@@ -322,3 +322,16 @@ def test_vqf_parameters_reach_both_links_filters():
     assert estimator.vqf2.get_parameter("bias_sigma_init_dps") == 1.0
     with pytest.raises(ValueError, match="outside"):
         JointEstimator(vqf_parameters={"tau_acc_s": -1.0})
+
+
+def test_a_refitted_axis_moves_the_angle_zero_only_as_much_as_the_axis():
+    from app.core.joint.axis import tangent_basis
+    from app.core.joint.estimator import angle_zero
+
+    before = np.array([1.0, 0.5, 0.501]) / np.linalg.norm([1.0, 0.5, 0.501])
+    after = np.array([1.0, 0.501, 0.5]) / np.linalg.norm([1.0, 0.501, 0.5])
+    zero = angle_zero(before, before)
+    moved = angle_zero(after, after, zero)
+    # A fresh perpendicular jumps (the smallest component changed), the carried one does not.
+    assert angle_deg(tangent_basis(after)[:, 0], zero[0]) > 30.0
+    assert angle_deg(moved[0], zero[0]) < 0.2 and abs(float(moved[0] @ after)) < 1e-12

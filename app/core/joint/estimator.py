@@ -63,14 +63,30 @@ class JointBlock:
     heading_offset_deg: np.ndarray
 
 
-def hinge_angle(quat1: np.ndarray, quat2: np.ndarray, j1: np.ndarray,
-                j2: np.ndarray) -> np.ndarray:
+def hinge_angle(quat1: np.ndarray, quat2: np.ndarray, j1: np.ndarray, j2: np.ndarray,
+                zero: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(N,) angle (rad) of sensor 2 relative to sensor 1 about the hinge, both quaternions in one
-    earth frame: a fixed perpendicular of ``j2`` against one of ``j1``, about ``j1``."""
-    u1 = tangent_basis(j1)[:, 0]
-    u2 = tangent_basis(j2)[:, 0]
+    earth frame: a fixed perpendicular ``u2`` of ``j2`` against one, ``u1``, of ``j1``, about
+    ``j1``. ``zero``: ``(u1, u2)`` (default: :func:`angle_zero`)."""
+    u1, u2 = angle_zero(j1, j2) if zero is None else zero
     v = quat.rotate_inverse(quat1, quat.rotate(quat2, u2))
     return np.arctan2(np.cross(u1, v) @ j1, v @ u1)
+
+
+def angle_zero(j1: np.ndarray, j2: np.ndarray,
+               previous: tuple[np.ndarray, np.ndarray] | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Perpendiculars ``(u1, u2)`` of the axes that define the angle's zero: ``previous`` ones
+    projected onto the new axes' planes (so a refitted axis moves the zero only as much as the
+    axis moved), else fixed ones."""
+    if previous is None:
+        return tangent_basis(j1)[:, 0], tangent_basis(j2)[:, 0]
+    out = []
+    for u, j in zip(previous, (j1, j2), strict=True):
+        v = u - (u @ j) * j
+        norm = float(np.linalg.norm(v))
+        out.append(v / norm if norm > 1e-6 else tangent_basis(j)[:, 0])
+    return out[0], out[1]
 
 
 class JointEstimator:
@@ -93,6 +109,7 @@ class JointEstimator:
         if axes is not None:
             j1, j2 = (np.asarray(a, dtype=np.float64) for a in axes)
             self.axes = (j1 / np.linalg.norm(j1), j2 / np.linalg.norm(j2))
+        self._zero = None if self.axes is None else angle_zero(*self.axes)
         self.axis_estimate: AxisEstimate | None = None
         self.fusion_tau_s = fusion_tau_s
         self.heading = heading if heading is not None else HeadingTracker()
@@ -133,10 +150,13 @@ class JointEstimator:
         # The relative sign from the whole window's orientations, each time: the first few
         # seconds may show too little of the axis' inclination to be sure of it.
         j2 = consistent_sign(j1, found.j2, data[:, 7:11], data[:, 11:15])
+        previous = self._zero
         if self.axes is not None and j2 @ self.axes[1] < 0:
             self.heading.reset()  # it was mirrored: heading and angle start afresh
             self._theta = math.nan
+            previous = None
         self.axes = (j1, j2)
+        self._zero = angle_zero(j1, j2, previous)
         self.axis_estimate = found
         self._next_fit_t = t + AXIS_REFIT_S
 
@@ -176,7 +196,7 @@ class JointEstimator:
         self._last_t = float(t[-1])
         delta = self.heading.update(heading_measurements(q1, j1, q2, j2), dt)
         q1c = quat.multiply(heading_quaternion(delta), q1)
-        theta_ori = hinge_angle(q1c, q2, j1, j2)
+        theta_ori = hinge_angle(q1c, q2, j1, j2, self._zero)
         rate = w2 @ j2 - w1 @ j1
         fused = self._fuse(theta_ori, rate, dt)
         sl = slice(offset, offset + n)
