@@ -70,9 +70,12 @@ static void send_info(fw_state *fw)
     send_reply(fw, link_encode_info(&info, fw->wire));
 }
 
-/* SENSOR, one per sensor (docs/protocol.md, 0x0A), after CONFIG. */
+/* SENSOR, one per sensor (docs/protocol.md, 0x0A), after CONFIG; a one-sensor board sends
+ * none, so its bytes stay exactly those of plain v1. */
 static void send_sensors(fw_state *fw)
 {
+    if (fw->sensor_count < 2)
+        return;
     for (uint8_t i = 0; i < fw->sensor_count; i++) {
         const lsm6dsox *chip = i ? &fw->chip1 : &fw->chip;
         bool ok = i ? fw->sensor1_ok : fw->sensor_ok;
