@@ -77,7 +77,7 @@ def test_decoder_follows_its_sensor_with_its_own_sequence_and_clock() -> None:
     assert np.concatenate([b.gap for b in blocks1]).tolist() == [False] * 4 + [True] + [False] * 3
 
 
-# -- the firmware core with two chips ---------------------------------------------------------------
+# -- the firmware core with two chips ----------------------------------------------------------
 def two_chip_core(firmware_lib):
     clock = VirtualClock(50.0)
     chips = [EmulatedLsm6dsox(SimOptions("wobble", seed=seed), address=address, clock=clock,
