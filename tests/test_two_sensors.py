@@ -10,6 +10,8 @@ from __future__ import annotations
 import importlib
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -17,16 +19,40 @@ import pytest
 from fwcore import FirmwareCore, SharedBus
 
 from drivers import lsm6dsox
+from drivers.errors import DeviceError, DeviceOpenError, SettingRefusedError
 from drivers.link import protocol as p
 from drivers.link.decoder import LinkDecoder
 from drivers.link.framing import FrameSplitter, encode_packet, unframe
 from drivers.lsm6dsox_direct.emulated_chip import EmulatedLsm6dsox, VirtualClock
+from drivers.registry import create_device
 from drivers.sim.options import SimOptions
 
 ROOT = Path(__file__).resolve().parent.parent
 V1_READER_COMMIT = "af5deac"
 """The last commit before the multi-sensor extension: its decoder knows SAMPLES and STATUS
 only, as every host in the field does."""
+
+
+def read_samples(device, count: int, deadline_s: float = 5.0) -> list:
+    """Blocks of ``device`` until at least ``count`` samples arrived (fails at the deadline)."""
+    blocks: list = []
+    end = time.monotonic() + deadline_s
+    while sum(len(b) for b in blocks) < count:
+        assert time.monotonic() < end, "samples did not arrive"
+        block = device.read(0.2)
+        if block is not None:
+            blocks.append(block)
+    return blocks
+
+
+def wait_until(condition, deadline_s: float = 3.0) -> bool:
+    """Poll ``condition`` (the emulated board's thread acts on its own) until true or late."""
+    end = time.monotonic() + deadline_s
+    while not condition():
+        if time.monotonic() > end:
+            return False
+        threading.Event().wait(0.01)
+    return True
 
 
 # -- the packets ----------------------------------------------------------------------------------
@@ -192,3 +218,147 @@ def test_one_chip_board_sends_plain_v1(firmware_lib) -> None:
     assert [type(pk) for pk in packets] == [p.Info, p.Config, p.Ack, p.Config, p.Pong]
     assert packets[2] == p.Ack(p.CONFIGURE, p.ACK_OK)
     core.close()
+
+
+# -- two device objects on one pseudo-terminal --------------------------------------------------
+@pytest.fixture
+def two_sensor_board():
+    from drivers.emulated_nucleo import EmulatedNucleo
+
+    board = EmulatedNucleo("wobble", odr_hz=833, seed=4, sensors=2, sensor_bus_hz=400_000)
+    yield board
+    board.close()
+
+
+def sensor1_rows(board, count: int) -> np.ndarray:
+    """What sensor 1 of ``board`` produces, in order, after its turn-on transient: the same
+    simulated unit, run again (the simulator is deterministic per seed)."""
+    sim = board._new_sim(*board._settings, seed=board.seed + 1000)
+    rows = []
+    while sum(len(r) for r in rows) < count + 200:
+        raw = sim.read(1.0)
+        rows.append(np.hstack([raw.gyro_raw, raw.accel_raw]))
+    sim.close()
+    return np.concatenate(rows)[lsm6dsox.turn_on_discard(833):]
+
+
+def read_in_thread(device, count: int, out: dict, key: str) -> threading.Thread:
+    def run() -> None:
+        try:
+            out[key] = read_samples(device, count)
+        except BaseException as exc:  # reported by the test
+            out[key] = exc
+
+    thread = threading.Thread(target=run, name=f"reader {key}")
+    thread.start()
+    return thread
+
+
+def test_two_devices_on_one_pty_get_their_own_sensor(two_sensor_board) -> None:
+    board = two_sensor_board
+    zero = create_device(board.port)  # a bare port: protocol v1 detected, sensor 0
+    one = create_device(f"serial://{board.port}?sensor=1")
+    try:
+        info0 = zero.open()
+        info1 = one.open()  # joins the open port and the running stream
+        assert info0.unique_id == board.unique_id.hex().upper()
+        assert info1.unique_id == info0.unique_id + "-S1"  # its own calibration profile
+        assert info1.extra["i2c_address"] == 0x6B and info1.extra["sensor_count"] == 2
+        # Each reports its own chip's trimmed rate.
+        assert info0.odr_hz == pytest.approx(board.config.odr_hz)
+        assert info1.odr_hz == pytest.approx(board._second.config.odr_hz)
+        assert info0.odr_hz != info1.odr_hz
+        got: dict = {}
+        threads = [read_in_thread(zero, 300, got, "zero"), read_in_thread(one, 300, got, "one")]
+        for thread in threads:
+            thread.join(10.0)
+        for key in ("zero", "one"):
+            assert not isinstance(got[key], BaseException), got[key]
+        data0 = np.hstack([np.concatenate([b.gyro_raw for b in got["zero"]]),
+                           np.concatenate([b.accel_raw for b in got["zero"]])])
+        data1 = np.hstack([np.concatenate([b.gyro_raw for b in got["one"]]),
+                           np.concatenate([b.accel_raw for b in got["one"]])])
+        # Sensor 1's device gets exactly sensor 1's samples, in order, from where it joined.
+        expected = sensor1_rows(board, len(data1) + 2000)
+        first = np.flatnonzero((expected[:, :6] == data1[0]).all(axis=1))
+        assert len(first) and any(
+            np.array_equal(expected[k:k + len(data1)], data1) for k in first)
+        # Sensor 0's samples are another unit's: none of them is in sensor 1's stream.
+        assert not any(np.array_equal(expected[k:k + 20], data0[:20])
+                       for k in np.flatnonzero((expected == data0[0]).all(axis=1)))
+        for device in (zero, one):
+            counters = device.counters
+            assert counters.seq_gaps == counters.crc_errors == counters.undecodable == 0
+        assert zero.counters.other_sensor_packets > 0 and one.counters.other_sensor_packets > 0
+        # Closing sensor 1 leaves sensor 0 streaming; the last close stops the board.
+        one.close()
+        assert board.streaming
+        assert read_samples(zero, 50)
+        zero.close()
+        assert wait_until(lambda: not board.streaming)
+    finally:
+        one.close()
+        zero.close()
+
+
+def test_sharing_rules_say_what_is_wrong(two_sensor_board) -> None:
+    from drivers.emulated_nucleo import EmulatedNucleo
+
+    board = two_sensor_board
+    single = EmulatedNucleo("static", seed=5)
+    urls = {
+        "zero": f"serial://{board.port}", "again": f"serial://{board.port}",
+        "other": f"serial://{board.port}?sensor=1&odr=52",
+        "one": f"serial://{board.port}?sensor=1", "lonely": f"serial://{single.port}?sensor=1",
+        "fast": f"serial://{board.port}?odr=1667",
+    }
+    devices = {name: create_device(url) for name, url in urls.items()}
+    try:
+        devices["zero"].open()
+        with pytest.raises(DeviceOpenError, match="is busy: this program has sensor 0"):
+            devices["again"].open()
+        with pytest.raises(DeviceOpenError, match="share their settings"):
+            devices["other"].open()
+        devices["one"].open()
+        with pytest.raises(DeviceError, match="another sensor of this board is open"):
+            devices["zero"].self_test()
+        devices["one"].close()
+        with pytest.raises(DeviceOpenError, match="no sensor 1 on this board: it has one sensor"):
+            devices["lonely"].open()
+        devices["zero"].close()
+        # Two sensors at 1667 Hz do not fit I2C at 400 kHz: the board refuses and says why.
+        with pytest.raises(SettingRefusedError, match="for 2 sensors"):
+            devices["fast"].open()
+    finally:
+        for device in devices.values():
+            device.close()
+        single.close()
+
+
+def test_simulate_pty_serves_two_sensors() -> None:
+    import io
+
+    from app.cli import build_parser
+    from app.cli_simulate import simulate_command
+
+    args = build_parser().parse_args(["simulate", "--pty", "--sensors", "2", "--odr", "208"])
+    out, stop = io.StringIO(), threading.Event()
+    server = threading.Thread(target=simulate_command, args=(args, out, stop), daemon=True)
+    server.start()
+    try:
+        assert wait_until(lambda: "Sensor 1" in out.getvalue(), 10.0)
+        port = out.getvalue().splitlines()[0]
+        assert f"serial://{port}?sensor=1" in out.getvalue()
+        one = create_device(f"serial://{port}?sensor=1")
+        info = one.open()
+        try:
+            assert info.extra["sensor_index"] == 1 and info.extra["i2c_address"] == 0x6B
+            assert sum(len(b) for b in read_samples(one, 100)) >= 100
+            assert one.counters.other_sensor_packets > 0  # sensor 0 streams beside it
+        finally:
+            one.close()
+    finally:
+        stop.set()
+        server.join(timeout=10)
+    refused = build_parser().parse_args(["simulate", "--pty", "--sensors", "2", "--odr", "1667"])
+    assert simulate_command(refused, io.StringIO()) == 2  # two sensors: up to 833 Hz on I2C

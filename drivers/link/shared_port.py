@@ -75,7 +75,7 @@ class SharedPort:
         with _REGISTRY_LOCK:
             with contextlib.suppress(ValueError):
                 self._listeners.remove(listener)
-            self._sensors = {k: v for k, v in self._sensors.items() if v is not listener}
+            self._sensors = {k: v for k, v in self._sensors.items() if v != listener}
             if self._listeners:
                 return False
             if _REGISTRY.get(self.name) is self:
