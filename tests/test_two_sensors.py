@@ -362,3 +362,26 @@ def test_simulate_pty_serves_two_sensors() -> None:
         server.join(timeout=10)
     refused = build_parser().parse_args(["simulate", "--pty", "--sensors", "2", "--odr", "1667"])
     assert simulate_command(refused, io.StringIO()) == 2  # two sensors: up to 833 Hz on I2C
+
+
+@pytest.mark.parametrize(("baud", "i2c_hz", "highest_hz"), [
+    (115_200, 0, 417), (230_400, 0, 833), (460_800, 0, 1667), (921_600, 0, 3333),
+    (921_600, 400_000, 833)])
+def test_two_sensor_limits_match_the_protocol_tables(firmware_lib, baud, i2c_hz,
+                                                     highest_hz) -> None:
+    """docs/protocol.md section 6 (two sensors): the firmware's rule and the emulated board's."""
+    import ctypes
+
+    from drivers.emulated_nucleo import odr_fits_link, odr_fits_sensor_bus
+
+    why = ctypes.create_string_buffer(160)
+    for code, label in lsm6dsox.ODR_LABELS_HZ.items():
+        fits = bool(firmware_lib.fw_rate_fits_sensors(code, baud, i2c_hz, 2, why, len(why)))
+        rate = lsm6dsox.ODR_RATES_HZ[code]
+        python = odr_fits_link(rate, baud, 2) and odr_fits_sensor_bus(rate, i2c_hz or None, 2)
+        assert fits == (label <= highest_hz) == python, label
+    page = " ".join((ROOT / "docs" / "protocol.md").read_text().split())
+    if not i2c_hz:
+        assert f"| {baud} | {baud // 10} |" in page and f"| {highest_hz} Hz |" in page
+    else:
+        assert "| 2 | 833 Hz | 3333 Hz | 833 Hz |" in page
