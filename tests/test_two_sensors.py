@@ -242,6 +242,12 @@ def sensor1_rows(board, count: int) -> np.ndarray:
     return np.concatenate(rows)[lsm6dsox.turn_on_discard(833):]
 
 
+def contains_run(rows: np.ndarray, run: np.ndarray) -> bool:
+    """Whether ``run`` appears in ``rows`` as consecutive rows."""
+    starts = np.flatnonzero((rows == run[0]).all(axis=1))
+    return any(np.array_equal(rows[k:k + len(run)], run) for k in starts)
+
+
 def read_in_thread(device, count: int, out: dict, key: str) -> threading.Thread:
     def run() -> None:
         try:
@@ -385,3 +391,42 @@ def test_two_sensor_limits_match_the_protocol_tables(firmware_lib, baud, i2c_hz,
         assert f"| {baud} | {baud // 10} |" in page and f"| {highest_hz} Hz |" in page
     else:
         assert "| 2 | 833 Hz | 3333 Hz | 833 Hz |" in page
+
+
+def test_the_app_opens_both_sensors_of_the_firmware_core_on_a_pty(firmware_lib) -> None:
+    """The firmware's own core, two emulated chips behind it, served in real time on a pty
+    (``serve.py --sensors 2``): two device objects, one per sensor, share the port."""
+    from fwcore import PtyBoard
+
+    def core() -> FirmwareCore:
+        chips = [EmulatedLsm6dsox(SimOptions("wobble", seed=seed), address=address,
+                                  record_truth=True)
+                 for seed, address in ((6, 0x6A), (1006, 0x6B))]
+        return FirmwareCore(firmware_lib, SharedBus(*chips))
+
+    board = PtyBoard(core)
+    zero = create_device(f"serial://{board.port}?odr=833")
+    one = create_device(f"serial://{board.port}?sensor=1&odr=833")
+    try:
+        info0, info1 = zero.open(), one.open()
+        assert info0.firmware == "1.1.0" and info1.extra["i2c_address"] == 0x6B
+        assert info1.unique_id == info0.unique_id + "-S1"
+        got: dict = {}
+        threads = [read_in_thread(zero, 200, got, "zero"), read_in_thread(one, 200, got, "one")]
+        for thread in threads:
+            thread.join(10.0)
+        for key, device in (("zero", zero), ("one", one)):
+            assert not isinstance(got[key], BaseException), got[key]
+            counters = device.counters
+            assert counters.seq_gaps == counters.crc_errors == counters.undecodable == 0
+        # Each device's samples are a run of its own chip's, in order, none from the other.
+        chips = board.core.bus.chips
+        for key, address in (("zero", 0x6A), ("one", 0x6B)):
+            data = np.concatenate([b.accel_raw for b in got[key]])
+            assert contains_run(chips[address].truth()["accel_raw"], data), key
+            other = 0x6B if address == 0x6A else 0x6A
+            assert not contains_run(chips[other].truth()["accel_raw"], data[:20]), key
+    finally:
+        one.close()
+        zero.close()
+        board.close()
