@@ -414,6 +414,8 @@ class EmulatedNucleo:
         self._pending: list[np.ndarray] = []  # generated, not yet sent: (n, 7) gx..az, temp
         self._run_sent = 0
         if self.sensors > 1:
+            if getattr(self, "_second", None) is not None:
+                self._second.sim.close()
             self._second = _SecondSensor(self)
 
     def _new_sim(self, odr_code: int, accel_fs_g: int, gyro_fs_dps: int,
