@@ -43,6 +43,10 @@ def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
                           help="the I2C clock the firmware reads the sensor at: faster ODRs "
                                "than it drains are refused, as by the real firmware (above "
                                "1667 Hz at 400 kHz); 0 for no limit (default %(default)s)")
+    simulate.add_argument("--sensors", type=int, choices=(1, 2), default=1,
+                          help="LSM6DSOX on the board: 2 adds a second one (its own unit, "
+                               "seed + 1000) streamed as sensor 1, open it as "
+                               "serial://PORT?sensor=1 (default %(default)s)")
     simulate.add_argument("--fifo-overrun", metavar="SEQ,...", default="",
                           help="lose the samples of these SAMPLES packets (sequence numbers) "
                                "to a sensor FIFO overrun, as the firmware reports one: a gap, "
@@ -71,7 +75,7 @@ def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
             args.scenario, odr_hz=args.odr, accel_fs_g=args.accel_fs, gyro_fs_dps=args.gyro_fs,
             seed=args.seed, baud=args.baud or None,
             sensor_bus_hz=args.i2c_khz * 1000 or None, share_port=True,
-            faults=NucleoFaults(overrun_seqs=overruns),
+            faults=NucleoFaults(overrun_seqs=overruns), sensors=args.sensors,
         )
     except ImportError as exc:
         print(f"inclinometer: pseudo-terminals need Linux or macOS ({exc})", file=sys.stderr)
@@ -87,6 +91,9 @@ def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
           f"+-{config.accel_fs_g} g, +-{config.gyro_fs_dps} dps.",
           file=out)
     print(f"Connect with: inclinometer --device {board.port}    (Ctrl-C stops)", file=out)
+    if args.sensors > 1:
+        print(f"Sensor 1 (0x6B, seed {args.seed + 1000}): inclinometer --device "
+              f"'serial://{board.port}?sensor=1'", file=out)
     out.flush()
     stop = stop or threading.Event()
     if threading.current_thread() is threading.main_thread():

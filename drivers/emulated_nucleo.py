@@ -20,6 +20,13 @@ Turn-on transient: the simulated chip is opened with ``settling=1`` (its first s
 power-on or CONFIGURE are wrong, :mod:`drivers.sim.transient`), and the board drops
 :func:`drivers.lsm6dsox.turn_on_discard` samples before any packet, as the firmware does.
 
+Two sensors (``sensors=2``, firmware 1.1.0): a second simulated LSM6DSOX "at 0x6B" with its
+own unit (seed + 1000: its own errors, trim and noise) and the same scenario, streamed as
+SAMPLES_INDEXED (sensor 1) with its own sequence numbers and clock, and described by SENSOR
+packets after CONFIG (docs/protocol.md, "Several sensors on one board"). The two simulators
+are independent: the motion is the same scenario, drawn per unit, not one rigid body. Rates
+two sensors cannot carry are refused. Faults (drops, overruns, cuts) touch sensor 0 only.
+
 Timing model: the board's clock runs with the wall clock from power-on (``initial_ticks`` at
 power-on; it keeps running across an unplug unless :meth:`replug` is told ``power_cycle``).
 Samples are produced at the simulated chip's true rate and sent every ``packet_interval_s``
@@ -58,7 +65,7 @@ from drivers.sim.error_model import unique_id_for_seed
 
 log = logging.getLogger(__name__)
 
-FIRMWARE_VERSION = (1, 0, 0)
+FIRMWARE_VERSION = (1, 1, 0)
 USB_VID = 0x0483
 USB_PID = 0x374B
 TX_BUFFER_BYTES = 16 * 1024
@@ -72,13 +79,16 @@ SELF_TEST_GYRO_WINDOW_DPS = (20, 80)
 """Self-test output change windows at +-250 dps (LSM6DSO datasheet, same family)."""
 
 
-def link_bytes_per_sample(samples_per_packet: int = p.MAX_SAMPLES_PER_PACKET) -> float:
+def link_bytes_per_sample(samples_per_packet: int = p.MAX_SAMPLES_PER_PACKET,
+                          *, indexed: bool = False) -> float:
     """Bytes on the wire per sample when packets carry ``samples_per_packet`` samples.
 
-    Type byte, SAMPLES header, 12 bytes per sample and the CRC, plus the COBS overhead
-    (one byte, and one more per 254) and the 0x00 delimiter.
+    Type byte, SAMPLES header (plus the sensor index in SAMPLES_INDEXED), 12 bytes per
+    sample and the CRC, plus the COBS overhead (one byte, and one more per 254) and the 0x00
+    delimiter.
     """
-    packet = 1 + p.SAMPLES_HEADER_BYTES + p.SAMPLE_BYTES * samples_per_packet + 2
+    packet = (1 + int(indexed) + p.SAMPLES_HEADER_BYTES + p.SAMPLE_BYTES * samples_per_packet
+              + 2)
     encoded = cobs.max_encoded_length(packet) + 1
     return encoded / samples_per_packet
 
@@ -88,9 +98,15 @@ def link_capacity_bytes_s(baud: int) -> float:
     return baud / 10.0
 
 
-def odr_fits_link(odr_hz: float, baud: int | None) -> bool:
+def link_bytes_per_odr_sample(sensors: int = 1) -> float:
+    """Wire bytes per sample period with ``sensors`` sensors (sensor 1.. in SAMPLES_INDEXED)."""
+    return link_bytes_per_sample() + (sensors - 1) * link_bytes_per_sample(indexed=True)
+
+
+def odr_fits_link(odr_hz: float, baud: int | None, sensors: int = 1) -> bool:
     """True when full SAMPLES packets at ``odr_hz`` fit the link (always on native USB)."""
-    return baud is None or odr_hz * link_bytes_per_sample() <= link_capacity_bytes_s(baud)
+    return baud is None or (odr_hz * link_bytes_per_odr_sample(sensors)
+                            <= link_capacity_bytes_s(baud))
 
 
 # The firmware's rule for the sensor bus (firmware/core/firmware.c, fw_rate_fits): per sample a
@@ -104,15 +120,15 @@ _POLL_BITS_S = 80 * 500
 _BUS_USABLE = 0.8
 
 
-def sensor_bus_bits_s(odr_hz: float) -> float:
-    """Bits per second the firmware moves over I2C to drain the FIFO at ``odr_hz``."""
+def sensor_bus_bits_s(odr_hz: float, sensors: int = 1) -> float:
+    """Bits per second the firmware moves over I2C to drain ``sensors`` FIFOs at ``odr_hz``."""
     words_s = odr_hz * _FIFO_WORDS_PER_SAMPLE + _TEMPERATURE_WORDS_S
-    return words_s * _BITS_PER_FIFO_WORD + _POLL_BITS_S
+    return sensors * (words_s * _BITS_PER_FIFO_WORD + _POLL_BITS_S)
 
 
-def odr_fits_sensor_bus(odr_hz: float, bus_hz: int | None) -> bool:
-    """True when the firmware can drain the FIFO at ``odr_hz`` over I2C at ``bus_hz``."""
-    return bus_hz is None or sensor_bus_bits_s(odr_hz) <= _BUS_USABLE * bus_hz
+def odr_fits_sensor_bus(odr_hz: float, bus_hz: int | None, sensors: int = 1) -> bool:
+    """True when the firmware can drain the FIFOs at ``odr_hz`` over I2C at ``bus_hz``."""
+    return bus_hz is None or sensor_bus_bits_s(odr_hz, sensors) <= _BUS_USABLE * bus_hz
 
 
 def usb_serial_for_seed(seed: int) -> str:
@@ -192,6 +208,7 @@ class EmulatedNucleo:
         ``inclinometer simulate``), not only to this one.
     sends_status : False acts as firmware before the STATUS extension: no STATUS, and
         GET_STATUS is an unknown command.
+    sensors : 1, or 2 for a second LSM6DSOX (see the module docstring).
     """
 
     def __init__(
@@ -214,12 +231,17 @@ class EmulatedNucleo:
         scenario_params: dict[str, object] | None = None,
         share_port: bool = False,
         sends_status: bool = True,
+        sensors: int = 1,
     ) -> None:
+        if sensors not in (1, 2):
+            raise ValueError(f"sensors={sensors}: the NUCLEO board carries 1 or 2 LSM6DSOX")
+        self.sensors = sensors
         odr_code = lsm6dsox.odr_code_for(odr_hz)
-        if not odr_fits_link(lsm6dsox.ODR_RATES_HZ[odr_code], baud):
-            raise ValueError(f"{odr_hz:g} Hz does not fit a {baud} baud link")
-        if not odr_fits_sensor_bus(lsm6dsox.ODR_RATES_HZ[odr_code], sensor_bus_hz):
-            raise ValueError(f"{odr_hz:g} Hz does not fit I2C at {sensor_bus_hz} Hz")
+        of = f" for {sensors} sensors" if sensors > 1 else ""
+        if not odr_fits_link(lsm6dsox.ODR_RATES_HZ[odr_code], baud, sensors):
+            raise ValueError(f"{odr_hz:g} Hz does not fit a {baud} baud link{of}")
+        if not odr_fits_sensor_bus(lsm6dsox.ODR_RATES_HZ[odr_code], sensor_bus_hz, sensors):
+            raise ValueError(f"{odr_hz:g} Hz does not fit I2C at {sensor_bus_hz} Hz{of}")
         self.scenario = scenario
         self.seed = seed
         self.baud = baud
@@ -335,6 +357,16 @@ class EmulatedNucleo:
         return p.Config(odr_mhz, sim.options.accel_fs_g, sim.options.gyro_fs_dps,
                         lsm6dsox.tick_ns(freq_fine))
 
+    def sensor_packets(self) -> list[p.Sensor]:
+        """The SENSOR packets the board sends after CONFIG (none with one sensor)."""
+        if self.sensors < 2:
+            return []
+        configs = [self.config, self._second.config]
+        return [p.Sensor(index, self.sensors, address, self.who_am_i, config.odr_mhz,
+                         config.accel_fs_g, config.gyro_fs_dps, config.tick_ns)
+                for index, (address, config) in enumerate(zip((0x6A, 0x6B), configs,
+                                                               strict=True))]
+
     def status(self) -> p.Status:
         """The STATUS the board would send now (its counters since power-on)."""
         now, base = self.stats, self._status_base
@@ -381,17 +413,24 @@ class EmulatedNucleo:
         self._sim = self._new_sim(*self._settings)
         self._pending: list[np.ndarray] = []  # generated, not yet sent: (n, 7) gx..az, temp
         self._run_sent = 0
+        if self.sensors > 1:
+            if getattr(self, "_second", None) is not None:
+                self._second.sim.close()
+            self._second = _SecondSensor(self)
 
-    def _new_sim(self, odr_code: int, accel_fs_g: int, gyro_fs_dps: int) -> SimulatedDevice:
+    def _new_sim(self, odr_code: int, accel_fs_g: int, gyro_fs_dps: int,
+                 seed: int | None = None) -> SimulatedDevice:
+        seed = self.seed if seed is None else seed
         url = (f"sim://{self.scenario}?odr={lsm6dsox.ODR_LABELS_HZ[odr_code]:g}"
-               f"&accel_fs={accel_fs_g}&gyro_fs={gyro_fs_dps}&seed={self.seed}&realtime=0"
+               f"&accel_fs={accel_fs_g}&gyro_fs={gyro_fs_dps}&seed={seed}&realtime=0"
                f"&block={SIM_BLOCK}&errors={int(self.errors)}&noise={int(self.noise)}"
                "&settling=1")
         sim = SimulatedDevice(url, **self.scenario_params)
         sim.open()
         # The simulated chip starts with its turn-on transient; the firmware drops it, as
         # firmware/core does (fifo_stream_discard), before any packet.
-        self._settling_left = lsm6dsox.turn_on_discard(lsm6dsox.ODR_LABELS_HZ[odr_code])
+        if seed == self.seed:
+            self._settling_left = lsm6dsox.turn_on_discard(lsm6dsox.ODR_LABELS_HZ[odr_code])
         return sim
 
     def _board_ticks(self, now: float) -> int:
@@ -499,6 +538,8 @@ class EmulatedNucleo:
         if isinstance(packet, p.Hello):
             self._queue(self.info)
             self._queue(self.config)
+            for sensor in self.sensor_packets():
+                self._queue(sensor)
         elif isinstance(packet, p.Configure):
             self._configure(packet)
         elif isinstance(packet, p.Start):
@@ -536,18 +577,22 @@ class EmulatedNucleo:
             problem = f"accel_fs_g {command.accel_fs_g} is not 2, 4, 8 or 16"
         elif command.gyro_fs_dps not in lsm6dsox.GYRO_MDPS_PER_LSB:
             problem = f"gyro_fs_dps {command.gyro_fs_dps} is not 125, 250, 500, 1000 or 2000"
-        elif not odr_fits_link(lsm6dsox.ODR_RATES_HZ[command.odr_code], self.baud):
+        elif not odr_fits_link(lsm6dsox.ODR_RATES_HZ[command.odr_code], self.baud,
+                               self.sensors):
             odr = lsm6dsox.ODR_RATES_HZ[command.odr_code]
-            needed = odr * link_bytes_per_sample()
+            needed = odr * link_bytes_per_odr_sample(self.sensors)
             problem = (f"{lsm6dsox.odr_label_hz(odr):g} Hz needs {needed:,.0f} bytes/s; "
-                       f"{self.baud} baud carries {link_capacity_bytes_s(self.baud or 0):,.0f}")
+                       f"{self.baud} baud carries {link_capacity_bytes_s(self.baud or 0):,.0f}"
+                       + (f" for {self.sensors} sensors" if self.sensors > 1 else ""))
         elif not odr_fits_sensor_bus(lsm6dsox.ODR_RATES_HZ[command.odr_code],
-                                     self.sensor_bus_hz):
+                                     self.sensor_bus_hz, self.sensors):
             odr = lsm6dsox.ODR_RATES_HZ[command.odr_code]
             bus_hz = self.sensor_bus_hz or 0
             problem = (f"ODR {lsm6dsox.odr_label_hz(odr):g} Hz needs about "
-                       f"{sensor_bus_bits_s(odr) / 1e3:.0f} kbit/s on I2C1; the bus at "
-                       f"{bus_hz / 1e3:g} kHz carries about {_BUS_USABLE * bus_hz / 1e3:.0f}")
+                       f"{sensor_bus_bits_s(odr, self.sensors) / 1e3:.0f} kbit/s on I2C1"
+                       + (f" for {self.sensors} sensors" if self.sensors > 1 else "")
+                       + f"; the bus at {bus_hz / 1e3:g} kHz carries about "
+                       f"{_BUS_USABLE * bus_hz / 1e3:.0f}")
         if problem:
             self._queue(p.Ack(p.CONFIGURE, p.ACK_BAD_ARGUMENT, problem))
         elif self._streaming:
@@ -557,8 +602,12 @@ class EmulatedNucleo:
             self._sim.close()
             self._sim = self._new_sim(*self._settings)
             self._pending = []
+            if self.sensors > 1:
+                self._second.configure(self._settings)
             self._queue(p.Ack(p.CONFIGURE, p.ACK_OK))
         self._queue(self.config)
+        for sensor in self.sensor_packets():
+            self._queue(sensor)
 
     def _start(self) -> None:
         now = time.monotonic()
@@ -568,6 +617,8 @@ class EmulatedNucleo:
         self._last_send = now
         self._run_origin_ticks = max(self._board_ticks(now), math.ceil(self._last_end_ticks))
         self._last_status = now
+        if self.sensors > 1:
+            self._second.start(now)
 
     # -- samples --------------------------------------------------------------------------------
     def _take_samples(self, count: int) -> np.ndarray:
@@ -616,6 +667,8 @@ class EmulatedNucleo:
             self._seq += 1
         self._run_sent += due
         self._last_send = now
+        if self.sensors > 1:
+            self._second.send_due(now)
 
     def _send_packet(self, packet: p.Samples, first_sample: int) -> None:
         stats, faults = self.stats, self.faults
@@ -664,3 +717,97 @@ class EmulatedNucleo:
         stats.samples_sent += count
         if self.on_packet_sent is not None:
             self.on_packet_sent(packet.seq, first_sample, count, time.perf_counter())
+
+
+class _SecondSensor:
+    """Sensor 1 of a two-sensor board: its own simulated unit, sequence numbers and clock.
+
+    Streamed as SAMPLES_INDEXED with index 1 at the moments the board sends sensor 0's
+    packets; its samples share the board's transmit buffer (dropped whole when it is full).
+    """
+
+    SEED_OFFSET = 1000
+
+    def __init__(self, board: EmulatedNucleo) -> None:
+        self.board = board
+        self.seed = board.seed + self.SEED_OFFSET
+        self.seq = 0
+        self.last_end_ticks = float(board.initial_ticks)
+        self.run_start = self.run_sent = 0
+        self.run_origin_ticks = 0
+        self.configure(board._settings)
+
+    def configure(self, settings: tuple[int, int, int]) -> None:
+        if getattr(self, "sim", None) is not None:
+            self.sim.close()
+        self.odr_code = settings[0]
+        self.sim = self.board._new_sim(*settings, seed=self.seed)
+        self.pending: list[np.ndarray] = []
+        self.settling_left = lsm6dsox.turn_on_discard(lsm6dsox.ODR_LABELS_HZ[self.odr_code])
+
+    @property
+    def config(self) -> p.Config:
+        freq_fine = self.sim.unit_errors.freq_fine
+        return p.Config(lsm6dsox.odr_mhz(self.odr_code, freq_fine), self.sim.options.accel_fs_g,
+                        self.sim.options.gyro_fs_dps, lsm6dsox.tick_ns(freq_fine))
+
+    def start(self, now: float) -> None:
+        board = self.board
+        self.run_start = now
+        self.run_sent = 0
+        ticks = board.initial_ticks + round((now - board._power_on_wall) / self.config.tick_s)
+        self.run_origin_ticks = max(ticks, math.ceil(self.last_end_ticks))
+
+    def _take(self, count: int) -> np.ndarray:
+        rows: list[np.ndarray] = []
+        have = 0
+        while have < count:
+            if not self.pending:
+                raw = self.sim.read(1.0)
+                assert raw is not None
+                block = np.empty((len(raw), 7), dtype=np.int16)
+                block[:, 0:3] = raw.gyro_raw
+                block[:, 3:6] = raw.accel_raw
+                block[:, 6] = raw.temp_raw
+                settling = min(self.settling_left, len(block))
+                self.settling_left -= settling
+                self.board.stats.settling_discarded += settling
+                if settling == len(block):
+                    continue
+                self.pending = [block[settling:]]
+            head = self.pending[0]
+            take = min(count - have, len(head))
+            rows.append(head[:take])
+            have += take
+            if take == len(head):
+                self.pending.pop(0)
+            else:
+                self.pending[0] = head[take:]
+        return np.concatenate(rows)
+
+    def send_due(self, now: float) -> None:
+        due = math.floor((now - self.run_start) * self.sim.true_odr_hz) + 1 - self.run_sent
+        if due <= 0:
+            return
+        board, stats = self.board, self.board.stats
+        ticks_per_sample = 1.0 / (lsm6dsox.TIMESTAMP_TICK_S
+                                  * lsm6dsox.ODR_RATES_HZ[self.odr_code])
+        rows = self._take(due)
+        for first in range(0, due, p.MAX_SAMPLES_PER_PACKET):
+            chunk = rows[first:first + p.MAX_SAMPLES_PER_PACKET]
+            t0 = self.run_origin_ticks + round((self.run_sent + first) * ticks_per_sample)
+            packet = p.SamplesIndexed(1, p.Samples(self.seq & 0xFFFF, t0 & 0xFFFFFFFF,
+                                                   int(chunk[0, 6]), chunk[:, 0:6]))
+            self.last_end_ticks = t0 + len(chunk) * ticks_per_sample
+            self.seq += 1
+            frame = encode_packet(packet)
+            stats.samples_read += len(chunk)
+            if len(board._tx) > TX_BUFFER_BYTES:
+                stats.packets_dropped += 1
+                stats.samples_dropped += len(chunk)
+                stats.tx_dropped_bytes += len(frame)
+                continue
+            board._tx += frame
+            stats.packets_sent += 1
+            stats.samples_sent += len(chunk)
+        self.run_sent += due

@@ -13,8 +13,22 @@ URLs
 
 Options: ``baud`` (default 921600; ignored by native USB), ``odr`` (Hz, snapped to the nearest
 LSM6DSOX rate), ``accel_fs`` (2/4/8/16 g), ``gyro_fs`` (125..2000 dps), ``timeout`` (seconds
-to wait for an answer to HELLO, default 2). Without ``odr``/``accel_fs``/``gyro_fs`` the board
-keeps its settings; with any of them it is sent CONFIGURE.
+to wait for an answer to HELLO, default 2), ``sensor`` (which sensor of the board, default 0).
+Without ``odr``/``accel_fs``/``gyro_fs`` the board keeps its settings; with any of them it is
+sent CONFIGURE.
+
+Several sensors on one board
+----------------------------
+A board with two LSM6DSOX (docs/protocol.md, "Several sensors on one board") streams both on
+one port. ``serial:///dev/ttyACM0`` is sensor 0, as always; ``serial:///dev/ttyACM0?sensor=1``
+is sensor 1, a device of its own (its own decoder, sequence numbers, clock, pipeline). Both
+may be open at once: they share the port (:class:`~drivers.link.shared_port.SharedPort`,
+reference-counted: the first to open opens the port and starts the board, the others join
+the running stream, and the last to close stops the board and closes the port). The board's
+settings are common to its sensors: a device joining with other settings is refused, and a
+self-test (which stops the stream) is refused while another sensor's device is open. Sensor
+``k > 0``'s unique id is the board's with ``-S<k>`` appended, so each sensor keeps its own
+calibration profile. A board without sensor ``k`` is refused with the number it has.
 
 Opening: STOP, HELLO -> INFO + CONFIG (HELLO is repeated every 0.5 s until the timeout), the
 WHO_AM_I and protocol version are checked, CONFIGURE when asked, then START -> ACK.
@@ -68,6 +82,7 @@ from drivers.link.ports import (
     open_error,
     port_info,
 )
+from drivers.link.shared_port import SensorInUse, SharedPort
 
 if TYPE_CHECKING:
     from drivers.text_lines import TextLineCounters
@@ -94,6 +109,7 @@ OPTIONS: dict[str, str] = {
     "accel_fs": "accelerometer full scale: 2, 4, 8 or 16 g",
     "gyro_fs": "gyroscope full scale: 125, 250, 500, 1000 or 2000 dps",
     "timeout": "seconds to wait for the board's answer to HELLO (default 2)",
+    "sensor": "which sensor of a board with several (default 0; 1 is the LSM6DSOX at 0x6B)",
 }
 
 ACK_MESSAGES: dict[int, str] = {
@@ -120,6 +136,8 @@ class LinkOptions:
     accel_fs_g: int | None = None
     gyro_fs_dps: int | None = None
     hello_timeout_s: float = DEFAULT_HELLO_TIMEOUT_S
+    sensor: int = 0
+    """Which sensor of the board (docs/protocol.md, "Several sensors on one board")."""
     other_options: tuple[tuple[str, str], ...] = ()
     """Options of a bare port this driver does not know: for the text driver if text arrives."""
 
@@ -195,6 +213,10 @@ def parse_link_url(url: str, *, allow_other: bool = False) -> LinkOptions:
             values["gyro_fs_dps"] = choice(key, text, sorted(lsm6dsox.GYRO_MDPS_PER_LSB), "dps")
         elif key == "timeout":
             values["hello_timeout_s"] = number(key, text)
+        elif key == "sensor":
+            if not text.strip().isdigit() or int(text) >= p.MAX_SENSORS:
+                raise fail(f"sensor={text!r}: use a sensor index 0..{p.MAX_SENSORS - 1}")
+            values["sensor"] = int(text)
     if passed_on:
         port = f"{port}?{urlencode(passed_on)}"
     return LinkOptions(port=port, other_options=tuple(other), **values)  # type: ignore[arg-type]
@@ -258,11 +280,10 @@ class SerialLinkDevice(Device):
         self.port = options.port
         self.info_packet: p.Info | None = None
         self.config_packet: p.Config | None = None
-        self._serial: serial.SerialBase | None = None
-        self._decoder = LinkDecoder()
+        self._link: SharedPort | None = None
+        self.sensor_packet: p.Sensor | None = None
+        self._decoder = LinkDecoder(sensor=options.sensor)
         self._state = threading.Condition()
-        self._read_lock = threading.Lock()
-        self._write_lock = threading.Lock()
         self._command_lock = threading.RLock()
         self._blocks: deque[RawBlock] = deque()
         self._replies: deque[p.Packet] = deque(maxlen=64)
@@ -379,6 +400,11 @@ class SerialLinkDevice(Device):
         when the board refuses or does not answer.
         """
         self._require_open()
+        link = self._link
+        if link is not None and link.users > 1:
+            raise DeviceError(
+                f"{self.port}: the self-test stops the board's stream, and another sensor of "
+                "this board is open: close it first")
         with self._command_lock:
             was_streaming = self._streaming
             if was_streaming:
@@ -404,9 +430,15 @@ class SerialLinkDevice(Device):
     # -- Device template ------------------------------------------------------------------------
     def _open(self) -> DeviceInfo:
         self._disconnected = False
-        self._serial = self._open_port()
         try:
-            return self._handshake()
+            self._link, opened = SharedPort.acquire(self.port, self.options.sensor,
+                                                    self._open_port, self._on_data)
+        except SensorInUse:
+            raise DeviceOpenError(
+                f"{self.port} is busy: this program has sensor {self.options.sensor} of it "
+                "open already (close that device first)") from None
+        try:
+            return self._handshake() if opened else self._join()
         except BaseException:
             self._close_port()
             raise
@@ -419,13 +451,18 @@ class SerialLinkDevice(Device):
                     return self._blocks.popleft()
             if time.monotonic() >= deadline:
                 return None
-            with self._read_lock:
+            link = self._link
+            if link is None:
+                raise DeviceIOError(f"{self.port} is closed")
+            with link.read_lock:
                 self._pump()
 
     def _close(self) -> None:
-        if not self._disconnected and self._serial is not None:
-            with contextlib.suppress(DeviceError):
+        link = self._link
+        if not self._disconnected and link is not None and link.users == 1:
+            with contextlib.suppress(DeviceError):  # the last user stops the board
                 self._write(encode_packet(p.Stop()))
+                link.streaming = False
         self._streaming = False
         self._close_port()
 
@@ -459,6 +496,8 @@ class SerialLinkDevice(Device):
             )
         if info.who_am_i != lsm6dsox.WHO_AM_I_VALUE:
             raise DeviceOpenError(who_am_i_message(self.port, info.who_am_i))
+        if self.options.sensor:
+            self.sensor_packet = self._await_sensor()
         if self.options.wants_configure:
             config = self._configure(config)
         if self.options.other_options:
@@ -467,7 +506,62 @@ class SerialLinkDevice(Device):
                         ignored)
         self.info_packet, self.config_packet = info, config
         self._start_streaming(new_origin=True, mark_gap=False)
-        return self._device_info(info, config)
+        return self._device_info(info, self._sensor_config(config))
+
+    def _join(self) -> DeviceInfo:
+        """Open another sensor of a board whose port another device has open: HELLO (answered
+        while streaming too), this sensor's SENSOR, and the stream as it runs."""
+        with self._state:
+            self._blocks.clear()
+            self._replies.clear()
+        self._decoder = LinkDecoder(sensor=self.options.sensor)
+        self._probe.clear()
+        self._write(encode_packet(p.Hello()))
+        info, config = self._await_hello()
+        if self.options.sensor:
+            self.sensor_packet = self._await_sensor()
+        ours = self._sensor_config(config)
+        opts = self.options
+        wanted = (lsm6dsox.odr_code_for(opts.odr_hz) if opts.odr_hz else ours.odr_code,
+                  opts.accel_fs_g or ours.accel_fs_g, opts.gyro_fs_dps or ours.gyro_fs_dps)
+        if wanted != (ours.odr_code, ours.accel_fs_g, ours.gyro_fs_dps):
+            raise DeviceOpenError(
+                f"{self.port}: another sensor of this board is open and streaming at "
+                f"{lsm6dsox.odr_text(ours.odr_hz)}, +-{ours.accel_fs_g} g, "
+                f"+-{ours.gyro_fs_dps} dps; the sensors of one board share their settings: "
+                "open this one with the same settings, or close the other first")
+        self.info_packet, self.config_packet = info, config
+        link = self._link
+        if link is not None and not link.streaming:
+            self._start_streaming(new_origin=True, mark_gap=False)
+        else:
+            self._streaming = True
+        return self._device_info(info, ours)
+
+    def _sensor_config(self, config: p.Config) -> p.Config:
+        """This sensor's settings: CONFIG for sensor 0, its SENSOR's for the others."""
+        if self.options.sensor == 0 or self.sensor_packet is None:
+            return config
+        return self.sensor_packet.config
+
+    def _await_sensor(self) -> p.Sensor:
+        """This sensor's SENSOR packet, or a clear refusal when the board lacks it (a PING
+        right after HELLO's answer: its PONG coming first means no such sensor)."""
+        index = self.options.sensor
+        token = secrets.randbits(32)
+        self._send(p.Ping(token))
+        answer = self._wait_for(
+            lambda pkt: (isinstance(pkt, p.Sensor) and pkt.sensor_index == index)
+            or (isinstance(pkt, p.Pong) and pkt.token == token), COMMAND_TIMEOUT_S)
+        if isinstance(answer, p.Sensor):
+            return answer
+        with self._state:
+            counts = [pkt.sensor_count for pkt in self._replies if isinstance(pkt, p.Sensor)]
+        has = f"has {counts[0]} sensors" if counts else "has one sensor (it sent no SENSOR)"
+        raise DeviceOpenError(
+            f"{self.port}: no sensor {index} on this board: it {has}; sensor 1 is a second "
+            "LSM6DSOX at I2C address 0x6B (SA0 to 3.3 V) beside one at 0x6A, and needs "
+            "firmware 1.1.0 or later")
 
     def _await_hello(self) -> tuple[p.Info, p.Config]:
         start = time.monotonic()
@@ -548,8 +642,9 @@ class SerialLinkDevice(Device):
         gyro = current.gyro_fs_dps if opts.gyro_fs_dps is None else opts.gyro_fs_dps
         wanted = f"{lsm6dsox.ODR_LABELS_HZ[odr_code]:g} Hz, +-{accel} g, +-{gyro} dps"
         with self._state:
-            self._replies = deque((r for r in self._replies if not isinstance(r, p.Config)),
-                                  maxlen=self._replies.maxlen)
+            self._replies = deque(
+                (r for r in self._replies if not isinstance(r, p.Config | p.Sensor)),
+                maxlen=self._replies.maxlen)
         ack = self._exchange(p.Configure(odr_code, accel, gyro), COMMAND_TIMEOUT_S)
         if ack.status == p.ACK_BAD_ARGUMENT:
             raise SettingRefusedError(ack_message(self.port, f"configuring {wanted}", ack),
@@ -560,6 +655,15 @@ class SerialLinkDevice(Device):
         if config is None:
             raise DeviceOpenError(f"{self.port}: the board acknowledged CONFIGURE but sent no "
                                   f"CONFIG within {COMMAND_TIMEOUT_S:g} s")
+        if self.options.sensor:  # this sensor's own clock follows in its SENSOR
+            index = self.options.sensor
+            sensor = self._wait_for(
+                lambda pkt: isinstance(pkt, p.Sensor) and pkt.sensor_index == index,
+                COMMAND_TIMEOUT_S)
+            if sensor is None:
+                raise DeviceOpenError(f"{self.port}: the board acknowledged CONFIGURE but sent "
+                                      f"no SENSOR for sensor {index}")
+            self.sensor_packet = sensor
         applied = (config.odr_code, config.accel_fs_g, config.gyro_fs_dps)
         if applied != (odr_code, accel, gyro):
             raise DeviceOpenError(
@@ -574,14 +678,18 @@ class SerialLinkDevice(Device):
             self._decoder.arm_start(new_origin=new_origin, mark_gap=mark_gap)
         self._command(p.Start(), "starting the stream")
         self._streaming = True
+        if self._link is not None:
+            self._link.streaming = True
 
     def _device_info(self, info: p.Info, config: p.Config) -> DeviceInfo:
         usb = port_info(self.port)
         odr_nominal = lsm6dsox.ODR_LABELS_HZ[config.odr_code]  # the label; odr_hz is real
+        index = self.options.sensor
+        sensor = self.sensor_packet
         return DeviceInfo(
             url=self.url,
-            name=info.name or "NUCLEO (protocol v1)",
-            unique_id=info.unique_id_hex,
+            name=(info.name or "NUCLEO (protocol v1)") + (f", sensor {index}" if index else ""),
+            unique_id=info.unique_id_hex + (f"-S{index}" if index else ""),
             sensor="LSM6DSOX",
             odr_hz=config.odr_hz,
             odr_nominal_hz=odr_nominal,
@@ -592,8 +700,11 @@ class SerialLinkDevice(Device):
                 "port": self.port,
                 "baud": self.options.baud,
                 "protocol": "NUCLEO link v1",
-                "who_am_i": info.who_am_i,
+                "who_am_i": info.who_am_i if sensor is None else sensor.who_am_i,
                 "tick_ns": config.tick_ns,
+                "sensor_index": index,
+                "i2c_address": None if sensor is None else sensor.i2c_address,
+                "sensor_count": None if sensor is None else sensor.sensor_count,
                 "usb_serial": None if usb is None else usb.serial_number,
                 "usb_vid_pid": None if usb is None else usb.vid_pid,
                 "usb_description": None if usb is None else usb.summary(),
@@ -602,7 +713,7 @@ class SerialLinkDevice(Device):
 
     # -- commands -----------------------------------------------------------------------------
     def _require_open(self) -> None:
-        if self._serial is None:
+        if self._link is None:
             raise DeviceError(f"{self.url} is not open")
 
     def _exchange(self, packet: p.Packet, timeout_s: float) -> p.Ack:
@@ -633,12 +744,11 @@ class SerialLinkDevice(Device):
         self._write(encode_packet(packet))
 
     def _write(self, data: bytes) -> None:
-        port = self._serial
-        if port is None:
+        link = self._link
+        if link is None:
             raise DeviceIOError(f"{self.port} is closed")
         try:
-            with self._write_lock:
-                port.write(data)
+            link.write(data)
         except serial.SerialTimeoutException as exc:
             raise DeviceIOError(f"{self.port}: writing timed out (the board does not read; "
                                 f"is it hung?): {exc}") from exc
@@ -648,23 +758,22 @@ class SerialLinkDevice(Device):
 
     # -- reading ------------------------------------------------------------------------------
     def _pump(self) -> None:
-        """Read what the port has (waiting at most :data:`POLL_S`) and decode it.
+        """Read what the port has (waiting at most :data:`POLL_S`) and decode it; every device
+        sharing the port gets the bytes (:meth:`_on_data`).
 
-        Call with ``_read_lock`` held.
+        Call with the shared port's ``read_lock`` held.
         """
-        port = self._serial
-        if port is None:
+        link = self._link
+        if link is None:
             raise DeviceIOError(f"{self.port} is closed")
         try:
-            waiting = port.in_waiting
-            data = port.read(waiting or 1)
-            if data and not waiting and port.in_waiting:
-                data += port.read(port.in_waiting)
-        except (serial.SerialException, OSError) as exc:
+            link.pump(lambda exc: DeviceIOError(disconnected_message(self.port, exc)))
+        except DeviceIOError:
             self._disconnected = True
-            raise DeviceIOError(disconnected_message(self.port, exc)) from exc
-        if not data:
-            return
+            raise
+
+    def _on_data(self, data: bytes) -> None:
+        """Bytes read from the port (by this device or another sharing it): decode them."""
         with self._state:
             if len(self._probe) < PROBE_BYTES:
                 self._probe += data[: PROBE_BYTES - len(self._probe)]
@@ -703,20 +812,22 @@ class SerialLinkDevice(Device):
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
                     return None
-                if self._read_lock.locked():
+                link = self._link
+                if link is None:
+                    raise DeviceIOError(f"{self.port} is closed")
+                if link.read_lock.locked():
                     self._state.wait(min(remaining, POLL_S))
                     continue
-            if self._read_lock.acquire(blocking=False):
+            if link.read_lock.acquire(blocking=False):
                 try:
                     self._pump()
                 finally:
-                    self._read_lock.release()
+                    link.read_lock.release()
 
     def _close_port(self) -> None:
-        port, self._serial = self._serial, None
-        if port is not None:
-            with contextlib.suppress(serial.SerialException, OSError):
-                port.close()
+        link, self._link = self._link, None
+        if link is not None:
+            link.release(self._on_data)
 
 
 class PortDevice(SerialLinkDevice):

@@ -50,6 +50,12 @@ def packet_from_fields(vector: dict) -> p.Packet:
         return p.Pong(fields["token"])
     if kind == p.STATUS:
         return p.Status(**fields)
+    if kind == p.SAMPLES_INDEXED:
+        return p.SamplesIndexed(fields["sensor_index"], p.Samples(
+            fields["seq"], fields["t0"], fields["temperature_raw"],
+            np.array(fields["samples"], dtype=np.int16)))
+    if kind == p.SENSOR:
+        return p.Sensor(**fields)
     raise AssertionError(f"no device packet type {kind}")
 
 

@@ -69,6 +69,10 @@ def packet_from_fields(vector: dict) -> p.Packet:
     if cls is p.SelfTestResult:
         return p.SelfTestResult(bool(fields["accel_pass"]), bool(fields["gyro_pass"]),
                                 tuple(fields["accel_delta_mg"]), tuple(fields["gyro_delta_dps"]))
+    if cls is p.SamplesIndexed:
+        return p.SamplesIndexed(fields["sensor_index"], p.Samples(
+            fields["seq"], fields["t0"], fields["temperature_raw"],
+            np.array(fields["samples"], dtype=np.int16)))
     return cls(**fields)
 
 

@@ -28,6 +28,14 @@ Time and sequence rules (also in ``docs/protocol.md``)
   same way: time goes on from the end of the last packet, with a gap.
 - After :meth:`LinkDecoder.arm_start`, SAMPLES are dropped until the ACK of START.
 
+Several sensors on one board (docs/protocol.md, a v1 extension)
+--------------------------------------------------------------
+A decoder follows one sensor, ``sensor`` (default 0). Sensor 0's samples come in SAMPLES and
+its settings in CONFIG, as for any v1 board; sensor ``k > 0``'s samples come in
+SAMPLES_INDEXED with index ``k`` and its settings in the SENSOR packet with index ``k``. The
+other sensors' sample packets are skipped (counted in ``other_sensor_packets``); sequence
+numbers and time are per sensor. SENSOR packets are handed back like any other packet.
+
 Why a gap happened (docs/protocol.md, "Bytes lost on the way")
 --------------------------------------------------------------
 The ST-LINK has no flow control and loses bytes inside its USB bridge, mid-frame: the host sees
@@ -51,7 +59,6 @@ from drivers.link import protocol as p
 from drivers.link.framing import FrameError, FrameSplitter, unframe
 
 _SAMPLES_HEADER = struct.Struct("<HIBh")
-_SAMPLE_DATA_OFFSET = 1 + p.SAMPLES_HEADER_BYTES  # in a packet without its CRC
 _WRAP32 = 1 << 32
 _MASK32 = _WRAP32 - 1
 _HALF32 = 1 << 31
@@ -89,6 +96,8 @@ class LinkCounters:
     """Sequence gaps that corrupt frames (bytes lost on the link) came before."""
     link_lost_samples: int = 0
     """The samples those gaps held (the rest of ``lost_samples`` was lost on the board)."""
+    other_sensor_packets: int = 0
+    """Valid sample packets of the board's other sensors (skipped by this decoder)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,11 +138,17 @@ class LinkDecoder:
     ----------
     config : the device's CONFIG if already known (SAMPLES cannot be converted without one;
         a CONFIG packet in the stream sets or replaces it).
+    sensor : which sensor of the board to follow (0: SAMPLES and CONFIG, as in plain v1;
+        k > 0: SAMPLES_INDEXED and SENSOR with index k).
 
     Not thread-safe: one thread feeds; the owner locks if others read :meth:`counters`.
     """
 
-    def __init__(self, config: p.Config | None = None) -> None:
+    def __init__(self, config: p.Config | None = None, *, sensor: int = 0) -> None:
+        if not 0 <= sensor < p.MAX_SENSORS:
+            raise ValueError(f"sensor index {sensor} is not 0..{p.MAX_SENSORS - 1}")
+        self.sensor = sensor
+        self._other_sensor = 0
         self._splitter = FrameSplitter()
         self._config: p.Config | None = None
         self._scale: ScaleFactors | None = None
@@ -200,7 +215,7 @@ class LinkDecoder:
             undecodable=self._undecodable + self._splitter.oversized,
             unknown_packets=self._unknown, seq_gaps=self._seq_gaps, lost_samples=self._lost,
             dropped_samples=self._dropped, link_gaps=self._link_gaps,
-            link_lost_samples=self._link_lost,
+            link_lost_samples=self._link_lost, other_sensor_packets=self._other_sensor,
         )
 
     def take_gap_reports(self) -> list[GapReport]:
@@ -231,14 +246,18 @@ class LinkDecoder:
                 self.last_error = str(exc)
                 continue
             packet_type = body[0]
-            if packet_type == p.SAMPLES:
+            if packet_type in (p.SAMPLES, p.SAMPLES_INDEXED):
                 try:
-                    count = p.samples_count(body, 1)
+                    index, offset = self._samples_index(body)
+                    count = p.samples_count(body, offset)
                 except p.PacketError as exc:
                     self._reject(exc)
                     continue
                 self._packets += 1
-                self._on_samples(body, count)
+                if index == self.sensor:
+                    self._on_samples(body, count, offset)
+                else:
+                    self._other_sensor += 1
                 continue
             try:
                 packet = p.parse_packet(packet_type, body[1:])
@@ -250,8 +269,10 @@ class LinkDecoder:
                 self._reject(exc)
                 continue
             self._packets += 1
-            if isinstance(packet, p.Config):
+            if isinstance(packet, p.Config) and self.sensor == 0:
                 self._apply_config(packet)
+            elif isinstance(packet, p.Sensor) and packet.sensor_index == self.sensor != 0:
+                self._apply_config(packet.config)
             elif isinstance(packet, p.Ack):
                 self._on_start_ack(packet)
             packets.append(packet)
@@ -292,6 +313,16 @@ class LinkDecoder:
         self._splitter.reset()
 
     # -- internals ---------------------------------------------------------------------------
+    @staticmethod
+    def _samples_index(body: bytes) -> tuple[int, int]:
+        """(sensor index, offset of the SAMPLES layout) of a SAMPLES or SAMPLES_INDEXED body."""
+        if body[0] == p.SAMPLES:
+            return 0, 1
+        if len(body) < 2 or not 1 <= body[1] < p.MAX_SENSORS:
+            index = body[1] if len(body) > 1 else None
+            raise p.PacketError(f"SAMPLES_INDEXED with sensor index {index}")
+        return body[1], 2
+
     def _reject(self, exc: Exception) -> None:
         self._undecodable += 1
         self._corrupt_since_samples += 1
@@ -322,13 +353,13 @@ class LinkDecoder:
         self._chunks: list[bytes] = []
         self._batch_lost = 0
 
-    def _on_samples(self, body: bytes, count: int) -> None:
+    def _on_samples(self, body: bytes, count: int, offset: int = 1) -> None:
         if self._config is None or self._armed is not None:
             self._dropped += count
             if self._config is None:
                 self.last_error = "SAMPLES before any CONFIG"
             return
-        seq, t0, _, temperature = _SAMPLES_HEADER.unpack_from(body, 1)
+        seq, t0, _, temperature = _SAMPLES_HEADER.unpack_from(body, offset)
         gap = self._pending_gap
         lost = 0
         if self._origin_ticks is None:  # the first packet (of this time base)
@@ -374,7 +405,7 @@ class LinkDecoder:
         self._starts.append(self._offset_s + (t_ticks - self._origin_ticks) * self._tick_s)
         self._counts.append(count)
         self._temps.append(temperature)
-        self._chunks.append(body[_SAMPLE_DATA_OFFSET:])
+        self._chunks.append(body[offset + p.SAMPLES_HEADER_BYTES:])
         self._batch_lost += lost
 
     def _flush(self) -> None:

@@ -41,6 +41,12 @@ LOG = 0x06
 PONG = 0x07
 STATUS = 0x08
 """A v1 extension: the board's health counters (docs/protocol.md, 0x08 STATUS)."""
+SAMPLES_INDEXED = 0x09
+"""A v1 extension: SAMPLES of sensor 1, 2, ... (sensor 0 keeps using SAMPLES)."""
+SENSOR = 0x0A
+"""A v1 extension: one sensor of a board with several (index, count, address, settings)."""
+MAX_SENSORS = 8
+"""Sensor indexes are 0..7 (the NUCLEO firmware has two: 0x6A and 0x6B)."""
 # Host -> device.
 HELLO = 0x81
 CONFIGURE = 0x82
@@ -57,7 +63,8 @@ COMMAND_NAMES: dict[int, str] = {
 }
 PACKET_NAMES: dict[int, str] = {
     INFO: "INFO", CONFIG: "CONFIG", SAMPLES: "SAMPLES", ACK: "ACK", SELFTEST: "SELFTEST",
-    LOG: "LOG", PONG: "PONG", STATUS: "STATUS", **COMMAND_NAMES,
+    LOG: "LOG", PONG: "PONG", STATUS: "STATUS", SAMPLES_INDEXED: "SAMPLES_INDEXED",
+    SENSOR: "SENSOR", **COMMAND_NAMES,
 }
 
 # ACK status codes.
@@ -83,6 +90,8 @@ _SELFTEST = struct.Struct("<BB3h3h")
 _CONFIGURE = struct.Struct("<BBH")
 _U32 = struct.Struct("<I")
 _STATUS = struct.Struct("<BBB10I")
+_SENSOR = struct.Struct("<BBBBIBHIB")
+SENSOR_FLAG_ANSWERING = 0x01
 
 STATUS_VERSION = 1
 RESET_CAUSES: dict[int, str] = {
@@ -421,6 +430,86 @@ class Status:
         return bool(self.flags & STATUS_FLAG_CLOCK_FALLBACK)
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class SamplesIndexed:
+    """0x09 SAMPLES_INDEXED (a v1 extension): SAMPLES of sensor ``sensor_index`` (1..7).
+
+    The payload is the sensor index followed by exactly a SAMPLES payload; ``seq`` counts
+    this sensor's packets only. Sensor 0 is never sent this way (its data go in SAMPLES, so
+    a v1 reader that skips this type still gets sensor 0 intact).
+    """
+
+    TYPE: ClassVar[int] = SAMPLES_INDEXED
+    sensor_index: int
+    samples: Samples
+
+    def payload(self) -> bytes:
+        if not 1 <= self.sensor_index < MAX_SENSORS:
+            raise PacketError(f"SAMPLES_INDEXED sensor_index must be 1..{MAX_SENSORS - 1}, "
+                              f"not {self.sensor_index}")
+        return bytes((self.sensor_index,)) + self.samples.payload()
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> SamplesIndexed:
+        if len(payload) < 1:
+            raise PacketError("SAMPLES_INDEXED payload is empty")
+        index = payload[0]
+        if not 1 <= index < MAX_SENSORS:
+            raise PacketError(f"SAMPLES_INDEXED sensor_index is {index}, expected "
+                              f"1..{MAX_SENSORS - 1}")
+        return cls(index, Samples.from_payload(payload[1:]))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, SamplesIndexed):
+            return NotImplemented
+        return self.sensor_index == other.sensor_index and self.samples == other.samples
+
+
+@dataclass(frozen=True, slots=True)
+class Sensor:
+    """0x0A SENSOR (a v1 extension): one sensor of the board, after CONFIG.
+
+    Sent for every sensor (index 0 too) after INFO + CONFIG (HELLO) and after CONFIG
+    (CONFIGURE). ``sensor_count`` says how many the board found; the settings are laid out
+    as CONFIG's and describe this sensor's own trimmed clock.
+    """
+
+    TYPE: ClassVar[int] = SENSOR
+    sensor_index: int
+    sensor_count: int
+    i2c_address: int
+    who_am_i: int
+    odr_mhz: int
+    accel_fs_g: int
+    gyro_fs_dps: int
+    tick_ns: int
+    flags: int = SENSOR_FLAG_ANSWERING
+
+    def payload(self) -> bytes:
+        return _SENSOR.pack(self.sensor_index, self.sensor_count, self.i2c_address,
+                            self.who_am_i, self.odr_mhz, self.accel_fs_g, self.gyro_fs_dps,
+                            self.tick_ns, self.flags)
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> Sensor:
+        _exact_length("SENSOR", payload, _SENSOR.size)
+        sensor = cls(*_SENSOR.unpack(payload))
+        if not sensor.sensor_index < sensor.sensor_count <= MAX_SENSORS:
+            raise PacketError(f"SENSOR index {sensor.sensor_index} of "
+                              f"{sensor.sensor_count} sensors")
+        Config.from_payload(payload[4:15])  # the same checks as CONFIG
+        return sensor
+
+    @property
+    def config(self) -> Config:
+        """This sensor's settings as a CONFIG."""
+        return Config(self.odr_mhz, self.accel_fs_g, self.gyro_fs_dps, self.tick_ns)
+
+    @property
+    def answering(self) -> bool:
+        return bool(self.flags & SENSOR_FLAG_ANSWERING)
+
+
 # -- host to device -------------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
 class _NoPayload:
@@ -507,10 +596,11 @@ class GetStatus(_NoPayload):
 
 PACKET_CLASSES: dict[int, type] = {
     cls.TYPE: cls
-    for cls in (Info, Config, Samples, Ack, SelfTestResult, Log, Pong, Status,
-                Hello, Configure, Start, Stop, SelfTest, Ping, GetStatus)
+    for cls in (Info, Config, Samples, Ack, SelfTestResult, Log, Pong, Status, SamplesIndexed,
+                Sensor, Hello, Configure, Start, Stop, SelfTest, Ping, GetStatus)
 }
-DEVICE_PACKET_TYPES = frozenset({INFO, CONFIG, SAMPLES, ACK, SELFTEST, LOG, PONG, STATUS})
+DEVICE_PACKET_TYPES = frozenset({INFO, CONFIG, SAMPLES, ACK, SELFTEST, LOG, PONG, STATUS,
+                                 SAMPLES_INDEXED, SENSOR})
 HOST_PACKET_TYPES = frozenset(COMMAND_NAMES)
 
 

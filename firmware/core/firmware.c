@@ -12,8 +12,10 @@
 #define I2C_BITS_PER_POLL 80u
 #define I2C_USABLE_PERCENT 80u
 #define TEMPERATURE_BATCH_MHZ 12500u
-/* A full SAMPLES packet on the wire: 396 bytes + 2 of COBS + the 0x00, for 32 samples. */
+/* A full SAMPLES packet on the wire: 396 bytes + 2 of COBS + the 0x00, for 32 samples; a
+ * SAMPLES_INDEXED one is a byte longer. */
 #define WIRE_BYTES_PER_FULL_PACKET 399u
+#define WIRE_BYTES_PER_FULL_INDEXED_PACKET 400u
 
 static const lsm_settings DEFAULT_SETTINGS = {4, 4, 250}; /* 104 Hz, +-4 g, +-250 dps */
 
@@ -68,13 +70,36 @@ static void send_info(fw_state *fw)
     send_reply(fw, link_encode_info(&info, fw->wire));
 }
 
-/* SAMPLES never wait: without room the packet is dropped and its sequence number tells. */
-static void send_samples(void *ctx, const fifo_packet *packet)
+/* SENSOR, one per sensor (docs/protocol.md, 0x0A), after CONFIG; a one-sensor board sends
+ * none, so its bytes stay exactly those of plain v1. */
+static void send_sensors(fw_state *fw)
 {
-    fw_state *fw = ctx;
+    if (fw->sensor_count < 2)
+        return;
+    for (uint8_t i = 0; i < fw->sensor_count; i++) {
+        const lsm6dsox *chip = i ? &fw->chip1 : &fw->chip;
+        bool ok = i ? fw->sensor1_ok : fw->sensor_ok;
+        link_sensor sensor = {
+            i, fw->sensor_count, chip->address, chip->who_am_i,
+            {lsm_odr_mhz(chip), chip->settings.accel_fs_g, chip->settings.gyro_fs_dps,
+             lsm_tick_ns(chip)},
+            ok ? LINK_SENSOR_ANSWERING : 0u,
+        };
+        send_reply(fw, link_encode_sensor(&sensor, fw->wire));
+    }
+}
+
+/* SAMPLES never wait: without room the packet is dropped and its sequence number tells.
+ * Sensor 0's go out as SAMPLES, sensor 1's as SAMPLES_INDEXED. */
+static void send_packet(fw_state *fw, uint8_t sensor, const fifo_packet *packet)
+{
     const fw_platform *p = fw->platform;
-    size_t n = link_encode_samples(packet->seq, packet->t0, packet->temperature_raw,
-                                   (const int16_t(*)[6])packet->samples, packet->count, fw->wire);
+    size_t n = sensor
+        ? link_encode_samples_indexed(sensor, packet->seq, packet->t0, packet->temperature_raw,
+                                      (const int16_t(*)[6])packet->samples, packet->count,
+                                      fw->wire)
+        : link_encode_samples(packet->seq, packet->t0, packet->temperature_raw,
+                              (const int16_t(*)[6])packet->samples, packet->count, fw->wire);
     if (p->tx_free(p->ctx) >= n) {
         p->tx_write(p->ctx, fw->wire, n);
         fw->counters.samples_sent += packet->count;
@@ -82,6 +107,16 @@ static void send_samples(void *ctx, const fifo_packet *packet)
         fw->counters.tx_dropped_packets++;
         fw->counters.tx_dropped_bytes += (uint32_t)n;
     }
+}
+
+static void send_samples(void *ctx, const fifo_packet *packet)
+{
+    send_packet(ctx, 0, packet);
+}
+
+static void send_samples1(void *ctx, const fifo_packet *packet)
+{
+    send_packet(ctx, 1, packet);
 }
 
 /* ---- STATUS (docs/protocol.md, 0x08) */
@@ -103,8 +138,9 @@ void fw_status(fw_state *fw, link_status *status)
     status->i2c_errors = fw->counters.i2c_errors;
     status->i2c_recoveries = board.i2c_recoveries;
     status->i2c_retries = fw->counters.i2c_retries;
-    status->fifo_overruns = fw->stream.counters.overruns;
-    status->samples_read = fw->stream.counters.samples;
+    /* Per board: every sensor's overruns and samples add up. */
+    status->fifo_overruns = fw->stream.counters.overruns + fw->stream1.counters.overruns;
+    status->samples_read = fw->stream.counters.samples + fw->stream1.counters.samples;
     status->samples_sent = fw->counters.samples_sent;
     status->watchdog_resets = board.watchdog_resets;
 }
@@ -211,15 +247,56 @@ static void describe_sensor_error(fw_state *fw, int err, text *t)
 
 /* Probe (when needed) and configure with the current settings; false on failure, with a
  * message in `t` when given. */
+static int probe_sensor0(fw_state *fw)
+{
+    /* With two sensors, 0x6B is sensor 1's: sensor 0 is looked for at 0x6A only. */
+    return fw->sensor_count > 1 ? lsm_probe_at(&fw->chip, LSM6DSOX_ADDRESS_SA0_LOW)
+                                : lsm_probe(&fw->chip);
+}
+
+/* Sensor 1 with sensor 0's settings; false when it does not answer (sensor 0 goes on). */
+static bool bring_up_sensor1(fw_state *fw)
+{
+    if (fw->sensor_count < 2)
+        return false;
+    int err = fw->chip1.address && fw->chip1.who_am_i == LSM6DSOX_WHO_AM_I_VALUE
+        ? LSM_OK : lsm_probe_at(&fw->chip1, LSM6DSOX_ADDRESS_SA0_HIGH);
+    if (!err)
+        err = lsm_configure(&fw->chip1, &fw->chip.settings);
+    if (err == LSM_ERR_BUS && fw->chip1.address) {
+        err = lsm_probe_at(&fw->chip1, LSM6DSOX_ADDRESS_SA0_HIGH);
+        if (!err)
+            err = lsm_configure(&fw->chip1, &fw->chip.settings);
+    }
+    fw->sensor1_ok = err == LSM_OK;
+    if (!fw->sensor1_ok)
+        fw->counters.bus_errors++;
+    return fw->sensor1_ok;
+}
+
+/* At power-on: a second LSM6DSOX at 0x6B when sensor 0 answered at 0x6A. */
+static void find_second_sensor(fw_state *fw)
+{
+    fw->sensor_count = 1;
+    if (!fw->sensor_ok || fw->chip.address != LSM6DSOX_ADDRESS_SA0_LOW)
+        return;
+    if (lsm_probe_at(&fw->chip1, LSM6DSOX_ADDRESS_SA0_HIGH) != LSM_OK) {
+        fw->chip1.address = 0;
+        return;
+    }
+    fw->sensor_count = 2;
+    bring_up_sensor1(fw);
+}
+
 static bool bring_up_sensor(fw_state *fw, text *t)
 {
     int err = fw->chip.address && fw->chip.who_am_i == LSM6DSOX_WHO_AM_I_VALUE
-        ? LSM_OK : lsm_probe(&fw->chip);
+        ? LSM_OK : probe_sensor0(fw);
     if (!err)
         err = lsm_configure(&fw->chip, &fw->chip.settings);
     if (err == LSM_ERR_BUS && fw->chip.address) {
         /* Answered before but not now: probe again (another address after a swap). */
-        err = lsm_probe(&fw->chip);
+        err = probe_sensor0(fw);
         if (!err)
             err = lsm_configure(&fw->chip, &fw->chip.settings);
     }
@@ -228,6 +305,9 @@ static bool bring_up_sensor(fw_state *fw, text *t)
         fw->counters.bus_errors++;
         if (t)
             describe_sensor_error(fw, err, t);
+    } else if (fw->sensor_count > 1) {
+        bring_up_sensor1(fw); /* configured alike, whenever sensor 0 is */
+        fw->last_retry1_us = now_us(fw);
     }
     return fw->sensor_ok;
 }
@@ -237,14 +317,33 @@ static bool bring_up_sensor(fw_state *fw, text *t)
  * since it was configured (counted 2 % short, so an MCU clock running fast cannot cut the
  * discard short). Discarding keeps the protocol's rule that a packet's samples are
  * consecutive and valid, where marking would need a flag v1 does not have. */
-static uint32_t settling_samples_left(fw_state *fw)
+static uint32_t settling_samples_left(fw_state *fw, const lsm6dsox *chip)
 {
-    uint8_t code = fw->chip.settings.odr_code;
+    uint8_t code = chip->settings.odr_code;
     uint32_t accel = lsm_turn_on_discard(code, false), gyro = lsm_turn_on_discard(code, true);
     uint32_t needed = accel > gyro ? accel : gyro;
-    uint64_t elapsed_us = (uint32_t)(now_us(fw) - fw->chip.configured_us);
-    uint64_t produced = elapsed_us * lsm_odr_mhz(&fw->chip) * 98u / 100000000000u;
+    uint64_t elapsed_us = (uint32_t)(now_us(fw) - chip->configured_us);
+    uint64_t produced = elapsed_us * lsm_odr_mhz(chip) * 98u / 100000000000u;
     return produced >= needed ? 0u : needed - (uint32_t)produced;
+}
+
+/* Sensor 1's stream; a failure loses sensor 1 only. */
+static void start_stream1(fw_state *fw)
+{
+    int16_t temperature = 0;
+    if (!fw->sensor1_ok)
+        return;
+    int err = lsm_fifo_reset(&fw->chip1, true);
+    if (!err)
+        err = lsm_read_temperature(&fw->chip1, &temperature);
+    if (err) {
+        fw->sensor1_ok = false;
+        fw->last_retry1_us = now_us(fw);
+        return;
+    }
+    fifo_stream_restart(&fw->stream1, lsm_odr_nominal_mhz(fw->chip1.settings.odr_code),
+                        temperature);
+    fifo_stream_discard(&fw->stream1, settling_samples_left(fw, &fw->chip1));
 }
 
 static bool start_stream(fw_state *fw)
@@ -257,7 +356,8 @@ static bool start_stream(fw_state *fw)
         return false;
     fifo_stream_restart(&fw->stream, lsm_odr_nominal_mhz(fw->chip.settings.odr_code),
                         temperature);
-    fifo_stream_discard(&fw->stream, settling_samples_left(fw));
+    fifo_stream_discard(&fw->stream, settling_samples_left(fw, &fw->chip));
+    start_stream1(fw);
     fw->streaming = true;
     fw->last_poll_us = now_us(fw);
     return true;
@@ -276,17 +376,38 @@ static void sensor_lost(fw_state *fw)
     fw->chip.configured = false;
     if (fw->streaming) {
         fifo_stream_flush(&fw->stream, now_us(fw), true, send_samples, fw);
+        if (fw->sensor1_ok)
+            fifo_stream_flush(&fw->stream1, now_us(fw), true, send_samples1, fw);
         fw->streaming = false;
     }
     fw->last_retry_us = now_us(fw);
     send_log(fw, LINK_LOG_ERROR, message);
 }
 
+static void sensor1_lost(fw_state *fw)
+{
+    fw->counters.bus_errors++;
+    fw->sensor1_ok = false;
+    fw->chip1.configured = false;
+    fifo_stream_flush(&fw->stream1, now_us(fw), true, send_samples1, fw);
+    fw->last_retry1_us = now_us(fw);
+    send_log(fw, LINK_LOG_ERROR, "sensor 1, the LSM6DSOX at 0x6B, stopped answering on I2C1; "
+                                 "sensor 0 goes on, looking for it every 0.5 s");
+}
+
 /* ---- rates */
 
 bool fw_rate_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, char *why, size_t size)
 {
+    return fw_rate_fits_sensors(odr_code, baud, i2c_hz, 1, why, size);
+}
+
+bool fw_rate_fits_sensors(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, uint8_t sensors,
+                          char *why, size_t size)
+{
     uint32_t odr_mhz = lsm_odr_nominal_mhz(odr_code);
+    if (sensors < 1)
+        sensors = 1;
     text t;
     text_init(&t, why, size);
     if (!odr_mhz) {
@@ -294,10 +415,13 @@ bool fw_rate_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, char *why, s
         return false;
     }
     /* UART, 8N1: baud / 10 bytes/s; full packets take 399 bytes per 32 samples. */
-    uint64_t need_bytes_milli = (uint64_t)odr_mhz * WIRE_BYTES_PER_FULL_PACKET / LINK_MAX_SAMPLES;
+    uint64_t need_bytes_milli = (uint64_t)odr_mhz *
+        (WIRE_BYTES_PER_FULL_PACKET + (sensors - 1u) * WIRE_BYTES_PER_FULL_INDEXED_PACKET) /
+        LINK_MAX_SAMPLES;
     if (baud && need_bytes_milli * 10u > (uint64_t)baud * 1000u) {
         uint8_t highest = (uint8_t)(odr_code - 1u);
-        while (highest > LSM_ODR_CODE_MIN && !fw_rate_fits(highest, baud, 0, NULL, 0))
+        while (highest > LSM_ODR_CODE_MIN &&
+               !fw_rate_fits_sensors(highest, baud, 0, sensors, NULL, 0))
             highest--;
         text_str(&t, "ODR ");
         text_mhz(&t, lsm_odr_label_mhz(odr_code));
@@ -307,6 +431,11 @@ bool fw_rate_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, char *why, s
         text_u32(&t, baud);
         text_str(&t, " baud carries ");
         text_u32(&t, baud / 10u);
+        if (sensors > 1) {
+            text_str(&t, " for ");
+            text_u32(&t, sensors);
+            text_str(&t, " sensors");
+        }
         text_str(&t, " (highest ODR ");
         text_mhz(&t, lsm_odr_label_mhz(highest));
         text_str(&t, " Hz)");
@@ -317,18 +446,25 @@ bool fw_rate_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, char *why, s
     if (i2c_hz) {
         uint64_t words_milli = (uint64_t)odr_mhz * (2u * LSM_TIMESTAMP_DECIMATION + 1u) /
                                LSM_TIMESTAMP_DECIMATION + TEMPERATURE_BATCH_MHZ;
-        uint64_t need_bits = words_milli * I2C_BITS_PER_WORD / 1000u +
-                             (uint64_t)I2C_BITS_PER_POLL * (1000000u / FW_POLL_INTERVAL_US);
+        uint64_t need_bits = sensors * (words_milli * I2C_BITS_PER_WORD / 1000u +
+                             (uint64_t)I2C_BITS_PER_POLL * (1000000u / FW_POLL_INTERVAL_US));
         uint64_t usable_bits = (uint64_t)i2c_hz * I2C_USABLE_PERCENT / 100u;
         if (need_bits > usable_bits) {
             uint8_t highest = (uint8_t)(odr_code - 1u);
-            while (highest > LSM_ODR_CODE_MIN && !fw_rate_fits(highest, 0, i2c_hz, NULL, 0))
+            while (highest > LSM_ODR_CODE_MIN &&
+                   !fw_rate_fits_sensors(highest, 0, i2c_hz, sensors, NULL, 0))
                 highest--;
             text_str(&t, "ODR ");
             text_mhz(&t, lsm_odr_label_mhz(odr_code));
             text_str(&t, " Hz needs about ");
             text_u32(&t, (uint32_t)(need_bits / 1000u));
-            text_str(&t, " kbit/s on I2C1; the bus at ");
+            text_str(&t, " kbit/s on I2C1");
+            if (sensors > 1) {
+                text_str(&t, " for ");
+                text_u32(&t, sensors);
+                text_str(&t, " sensors");
+            }
+            text_str(&t, "; the bus at ");
             text_u32(&t, i2c_hz / 1000u);
             text_str(&t, " kHz carries about ");
             text_u32(&t, (uint32_t)(usable_bits / 1000u));
@@ -367,6 +503,7 @@ static void on_hello(fw_state *fw)
         bring_up_sensor(fw, &t);
     send_info(fw);
     send_config(fw);
+    send_sensors(fw);
     if (!fw->sensor_ok)
         send_log(fw, LINK_LOG_ERROR, message);
 }
@@ -396,7 +533,8 @@ static uint8_t check_configure(fw_state *fw, const lsm_settings *s, text *t)
         text_str(t, "streaming: send STOP first");
         return LINK_ACK_BUSY;
     }
-    if (!fw_rate_fits(s->odr_code, fw->identity.baud, fw->identity.i2c_hz, t->buf, t->size)) {
+    if (!fw_rate_fits_sensors(s->odr_code, fw->identity.baud, fw->identity.i2c_hz,
+                              fw->sensor_count, t->buf, t->size)) {
         t->length = strlen(t->buf);
         return LINK_ACK_BAD_ARGUMENT;
     }
@@ -420,6 +558,7 @@ static void on_configure(fw_state *fw, const uint8_t *payload)
     }
     send_ack(fw, LINK_CONFIGURE, status, message);
     send_config(fw);
+    send_sensors(fw);
 }
 
 static void on_start(fw_state *fw)
@@ -451,6 +590,12 @@ static void on_start(fw_state *fw)
     text_u32(&t, fw->chip.settings.gyro_fs_dps);
     text_str(&t, " dps from the LSM6DSOX at ");
     text_hex8(&t, fw->chip.address);
+    if (fw->sensor_count > 1) {
+        text_str(&t, fw->sensor1_ok ? " and, as sensor 1, at " : " (sensor 1 at ");
+        text_hex8(&t, fw->chip1.address);
+        if (!fw->sensor1_ok)
+            text_str(&t, " does not answer)");
+    }
     send_log(fw, LINK_LOG_INFO, message);
     send_status(fw, true); /* the counters at the start, for the host to compare with */
 }
@@ -459,9 +604,13 @@ static void on_stop(fw_state *fw)
 {
     if (fw->streaming) {
         fifo_stream_flush(&fw->stream, now_us(fw), true, send_samples, fw);
+        if (fw->sensor1_ok)
+            fifo_stream_flush(&fw->stream1, now_us(fw), true, send_samples1, fw);
         fw->streaming = false;
         if (lsm_fifo_reset(&fw->chip, false))
             fw->sensor_ok = false;
+        if (fw->sensor1_ok && lsm_fifo_reset(&fw->chip1, false))
+            fw->sensor1_ok = false;
     }
     fw->want_streaming = false;
     send_ack(fw, LINK_STOP, LINK_ACK_OK, NULL);
@@ -554,10 +703,15 @@ void fw_init(fw_state *fw, const fw_platform *platform, const fw_identity *ident
     fw->uptime_last_us = now_us(fw);
     link_rx_init(&fw->rx);
     lsm_init(&fw->chip, &fw->sensor_bus);
+    lsm_init(&fw->chip1, &fw->sensor_bus);
     fw->chip.settings = DEFAULT_SETTINGS;
+    fw->chip1.settings = DEFAULT_SETTINGS;
+    fw->sensor_count = 1;
     fifo_stream_init(&fw->stream, FW_FLUSH_AFTER_US);
+    fifo_stream_init(&fw->stream1, FW_FLUSH_AFTER_US);
     platform->delay_us(platform->ctx, FW_SENSOR_BOOT_US); /* powered up with the board */
     bring_up_sensor(fw, NULL);
+    find_second_sensor(fw);
     fw->last_retry_us = now_us(fw);
 }
 
@@ -576,49 +730,68 @@ void fw_receive(fw_state *fw, const uint8_t *data, size_t length)
  * declared lost. A burst read that failed part-way may have popped words on the chip; the
  * stream then sees a TAG_CNT jump and cuts the packet there (a measured gap, not a wrong
  * sample). */
-static int fifo_status_retrying(fw_state *fw, uint16_t *words, bool *overrun)
+static int fifo_status_retrying(fw_state *fw, lsm6dsox *chip, uint16_t *words,
+                                bool *overrun)
 {
-    int err = lsm_fifo_status(&fw->chip, words, overrun);
+    int err = lsm_fifo_status(chip, words, overrun);
     for (unsigned i = 0; err && i < FW_I2C_RETRIES; i++) {
         fw->counters.i2c_retries++;
-        err = lsm_fifo_status(&fw->chip, words, overrun);
+        err = lsm_fifo_status(chip, words, overrun);
     }
     return err;
 }
 
-static int fifo_read_retrying(fw_state *fw, uint16_t words)
+static int fifo_read_retrying(fw_state *fw, lsm6dsox *chip, uint16_t words)
 {
-    int err = lsm_fifo_read(&fw->chip, fw->burst, words);
+    int err = lsm_fifo_read(chip, fw->burst, words);
     for (unsigned i = 0; err && i < FW_I2C_RETRIES; i++) {
         fw->counters.i2c_retries++;
-        err = lsm_fifo_read(&fw->chip, fw->burst, words);
+        err = lsm_fifo_read(chip, fw->burst, words);
     }
     return err;
 }
 
-static void drain_fifo(fw_state *fw)
+/* Drain one sensor's FIFO into its stream; false when the sensor is lost. */
+static bool drain_fifo(fw_state *fw, uint8_t sensor)
 {
+    lsm6dsox *chip = sensor ? &fw->chip1 : &fw->chip;
+    fifo_stream *stream = sensor ? &fw->stream1 : &fw->stream;
+    fifo_packet_sink sink = sensor ? send_samples1 : send_samples;
     uint16_t words = 0;
     bool overrun = false;
-    if (fifo_status_retrying(fw, &words, &overrun)) {
-        sensor_lost(fw);
-        return;
-    }
+    if (fifo_status_retrying(fw, chip, &words, &overrun))
+        return false;
     if (overrun) {
-        fifo_stream_overrun(&fw->stream, send_samples, fw);
-        send_log(fw, LINK_LOG_WARNING, "FIFO overrun: samples were lost before they could be "
-                                       "read (the host sees a gap)");
+        fifo_stream_overrun(stream, sink, fw);
+        send_log(fw, LINK_LOG_WARNING, sensor
+                 ? "sensor 1 FIFO overrun: samples were lost before they could be read (the "
+                   "host sees a gap)"
+                 : "FIFO overrun: samples were lost before they could be read (the host sees "
+                   "a gap)");
     }
     /* Read what is there now, in bursts; what arrives meanwhile waits for the next poll. */
     while (words) {
         uint16_t burst = words < FW_FIFO_BURST_WORDS ? words : (uint16_t)FW_FIFO_BURST_WORDS;
-        if (fifo_read_retrying(fw, burst)) {
-            sensor_lost(fw);
-            return;
-        }
-        fifo_stream_feed(&fw->stream, fw->burst, burst, now_us(fw), send_samples, fw);
+        if (fifo_read_retrying(fw, chip, burst))
+            return false;
+        fifo_stream_feed(stream, fw->burst, burst, now_us(fw), sink, fw);
         words = (uint16_t)(words - burst);
     }
+    return true;
+}
+
+/* Sensor 1 lost: look for it every FW_RETRY_INTERVAL_US; back, it streams again. */
+static void retry_sensor1(fw_state *fw, uint32_t now)
+{
+    if (fw->sensor_count < 2 || fw->sensor1_ok ||
+        (uint32_t)(now - fw->last_retry1_us) < FW_RETRY_INTERVAL_US)
+        return;
+    fw->last_retry1_us = now;
+    if (!bring_up_sensor1(fw))
+        return;
+    send_log(fw, LINK_LOG_INFO, "sensor 1, the LSM6DSOX at 0x6B, answers again");
+    if (fw->streaming)
+        start_stream1(fw);
 }
 
 static void report_tx_drops(fw_state *fw)
@@ -653,13 +826,19 @@ void fw_poll(fw_state *fw)
     }
     if (!fw->streaming)
         return;
+    retry_sensor1(fw, now);
     if ((uint32_t)(now - fw->last_poll_us) >= FW_POLL_INTERVAL_US) {
         fw->last_poll_us = now;
-        drain_fifo(fw);
-        if (!fw->streaming)
+        if (!drain_fifo(fw, 0)) {
+            sensor_lost(fw);
             return;
+        }
+        if (fw->sensor1_ok && !drain_fifo(fw, 1))
+            sensor1_lost(fw);
     }
     fifo_stream_flush(&fw->stream, now_us(fw), false, send_samples, fw);
+    if (fw->sensor1_ok)
+        fifo_stream_flush(&fw->stream1, now_us(fw), false, send_samples1, fw);
     report_tx_drops(fw);
     if ((uint32_t)(now_us(fw) - fw->last_status_us) >= FW_STATUS_INTERVAL_US)
         send_status(fw, false);

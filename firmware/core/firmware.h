@@ -16,7 +16,7 @@
 #include "platform.h"
 
 #define FW_VERSION_MAJOR 1
-#define FW_VERSION_MINOR 0
+#define FW_VERSION_MINOR 1
 #define FW_VERSION_PATCH 0
 
 #define FW_POLL_INTERVAL_US 2000u      /* FIFO polls while streaming */
@@ -27,6 +27,7 @@
 #define FW_SENSOR_BOOT_US 20000u       /* LSM6DSOX boot after power-up: 10 ms (AN5272) */
 #define FW_STATUS_INTERVAL_US 1000000u /* STATUS while streaming */
 #define FW_I2C_RETRIES 3u              /* a failed FIFO transfer is tried again this often */
+#define FW_MAX_SENSORS 2u              /* LSM6DSOX at 0x6A and 0x6B (SA0 low and high) */
 
 typedef struct fw_identity {
     uint8_t unique_id[12]; /* the MCU's 96-bit unique id, in memory order */
@@ -56,9 +57,15 @@ typedef struct fw_state {
     const fw_platform *platform;
     fw_identity identity;
     link_rx rx;
-    lsm6dsox chip;
+    lsm6dsox chip;        /* sensor 0: the first LSM6DSOX found (SAMPLES, SELF_TEST) */
     fifo_stream stream;
     bool sensor_ok;       /* probed and configured */
+    /* Sensor 1: a second LSM6DSOX at 0x6B when sensor 0 is at 0x6A (SAMPLES_INDEXED). */
+    lsm6dsox chip1;
+    fifo_stream stream1;
+    bool sensor1_ok;
+    uint8_t sensor_count; /* 1, or 2 when the second answered at power-on */
+    uint32_t last_retry1_us;
     bool streaming;
     bool want_streaming;  /* the host asked for data: resume after the sensor comes back */
     uint32_t last_poll_us;
@@ -93,5 +100,8 @@ bool fw_led_lit(fw_led_mode mode, uint32_t now_ms);
 /* Whether the link and the I2C bus can carry an ODR code; when not, `why` (room for `size`
  * bytes) says what limits it. Baud 0 means native USB. */
 bool fw_rate_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, char *why, size_t size);
+/* The same for `sensors` sensors streaming at once (their traffic adds up). */
+bool fw_rate_fits_sensors(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, uint8_t sensors,
+                          char *why, size_t size);
 
 #endif

@@ -52,21 +52,57 @@ size_t link_encode_config(const link_config *config, uint8_t *wire)
     return link_frame(LINK_CONFIG, payload, sizeof payload, wire);
 }
 
-size_t link_encode_samples(uint16_t seq, uint32_t t0, int16_t temperature_raw,
-                           const int16_t (*samples)[6], uint8_t count, uint8_t *wire)
+/* SAMPLES, or SAMPLES_INDEXED with the sensor index before the same layout. */
+static size_t encode_samples(uint8_t type, uint8_t sensor_index, uint16_t seq, uint32_t t0,
+                             int16_t temperature_raw, const int16_t (*samples)[6],
+                             uint8_t count, uint8_t *wire)
 {
-    uint8_t payload[LINK_SAMPLES_HEADER + LINK_MAX_SAMPLES * LINK_SAMPLE_BYTES];
+    uint8_t payload[1u + LINK_SAMPLES_HEADER + LINK_MAX_SAMPLES * LINK_SAMPLE_BYTES];
     if (count == 0 || count > LINK_MAX_SAMPLES)
         return 0;
-    put_u16(payload, seq);
-    put_u32(payload + 2, t0);
-    payload[6] = count;
-    put_u16(payload + 7, (uint16_t)temperature_raw);
-    uint8_t *p = payload + LINK_SAMPLES_HEADER;
+    uint8_t *p = payload;
+    if (type == LINK_SAMPLES_INDEXED)
+        *p++ = sensor_index;
+    put_u16(p, seq);
+    put_u32(p + 2, t0);
+    p[6] = count;
+    put_u16(p + 7, (uint16_t)temperature_raw);
+    p += LINK_SAMPLES_HEADER;
     for (uint8_t i = 0; i < count; i++)
         for (int axis = 0; axis < 6; axis++, p += 2)
             put_u16(p, (uint16_t)samples[i][axis]);
-    return link_frame(LINK_SAMPLES, payload, (size_t)(p - payload), wire);
+    return link_frame(type, payload, (size_t)(p - payload), wire);
+}
+
+size_t link_encode_samples(uint16_t seq, uint32_t t0, int16_t temperature_raw,
+                           const int16_t (*samples)[6], uint8_t count, uint8_t *wire)
+{
+    return encode_samples(LINK_SAMPLES, 0, seq, t0, temperature_raw, samples, count, wire);
+}
+
+size_t link_encode_samples_indexed(uint8_t sensor_index, uint16_t seq, uint32_t t0,
+                                   int16_t temperature_raw, const int16_t (*samples)[6],
+                                   uint8_t count, uint8_t *wire)
+{
+    if (sensor_index == 0 || sensor_index > 7)
+        return 0;
+    return encode_samples(LINK_SAMPLES_INDEXED, sensor_index, seq, t0, temperature_raw,
+                          samples, count, wire);
+}
+
+size_t link_encode_sensor(const link_sensor *sensor, uint8_t *wire)
+{
+    uint8_t payload[LINK_SENSOR_PAYLOAD];
+    payload[0] = sensor->index;
+    payload[1] = sensor->count;
+    payload[2] = sensor->address;
+    payload[3] = sensor->who_am_i;
+    put_u32(payload + 4, sensor->config.odr_mhz);
+    payload[8] = sensor->config.accel_fs_g;
+    put_u16(payload + 9, sensor->config.gyro_fs_dps);
+    put_u32(payload + 11, sensor->config.tick_ns);
+    payload[15] = sensor->flags;
+    return link_frame(LINK_SENSOR, payload, sizeof payload, wire);
 }
 
 size_t link_encode_ack(uint8_t command, uint8_t status, const char *message, uint8_t *wire)

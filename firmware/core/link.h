@@ -29,7 +29,12 @@ enum {
     LINK_LOG = 0x06,
     LINK_PONG = 0x07,
     LINK_STATUS = 0x08, /* v1 extension: the board's health counters */
+    LINK_SAMPLES_INDEXED = 0x09, /* v1 extension: SAMPLES of sensor 1, 2, ... */
+    LINK_SENSOR = 0x0A,          /* v1 extension: one sensor of several */
 };
+
+#define LINK_SENSOR_PAYLOAD 16u
+#define LINK_SENSOR_ANSWERING 0x01u
 
 /* Host to device. */
 enum {
@@ -114,6 +119,16 @@ typedef struct link_status {
     uint32_t watchdog_resets;
 } link_status;
 
+/* SENSOR (docs/protocol.md, 0x0A): one sensor of a board with several. */
+typedef struct link_sensor {
+    uint8_t index;
+    uint8_t count;
+    uint8_t address;
+    uint8_t who_am_i;
+    link_config config;
+    uint8_t flags; /* LINK_SENSOR_ANSWERING */
+} link_sensor;
+
 /* Frame a packet of `type` + `payload` (at most LINK_MAX_PAYLOAD bytes). */
 size_t link_frame(uint8_t type, const uint8_t *payload, size_t length, uint8_t *wire);
 
@@ -122,6 +137,11 @@ size_t link_encode_config(const link_config *config, uint8_t *wire);
 /* `samples` holds `count` (1..32) rows of gx, gy, gz, ax, ay, az in raw LSB. */
 size_t link_encode_samples(uint16_t seq, uint32_t t0, int16_t temperature_raw,
                            const int16_t (*samples)[6], uint8_t count, uint8_t *wire);
+/* SAMPLES_INDEXED: the same layout after the sensor index (1..7). */
+size_t link_encode_samples_indexed(uint8_t sensor_index, uint16_t seq, uint32_t t0,
+                                   int16_t temperature_raw, const int16_t (*samples)[6],
+                                   uint8_t count, uint8_t *wire);
+size_t link_encode_sensor(const link_sensor *sensor, uint8_t *wire);
 /* `message` may be NULL or empty. */
 size_t link_encode_ack(uint8_t command, uint8_t status, const char *message, uint8_t *wire);
 size_t link_encode_selftest(const link_selftest *result, uint8_t *wire);

@@ -161,6 +161,21 @@ int lsm_probe(lsm6dsox *chip)
     return LSM_ERR_WHO_AM_I;
 }
 
+int lsm_probe_at(lsm6dsox *chip, uint8_t address)
+{
+    const fw_platform *p = chip->platform;
+    uint8_t value = 0;
+    chip->configured = false;
+    chip->who_am_i = 0;
+    if (p->i2c_read(p->ctx, address, LSM_WHO_AM_I, &value, 1)) {
+        chip->address = 0;
+        return LSM_ERR_BUS;
+    }
+    chip->address = address;
+    chip->who_am_i = value;
+    return value == LSM6DSOX_WHO_AM_I_VALUE ? LSM_OK : LSM_ERR_WHO_AM_I;
+}
+
 static int wait_for_reset(lsm6dsox *chip)
 {
     const fw_platform *p = chip->platform;

@@ -132,6 +132,10 @@ void lsm_init(lsm6dsox *chip, const fw_platform *platform);
 /* Find the chip at 0x6A, then 0x6B; read WHO_AM_I. LSM_OK, LSM_ERR_BUS or LSM_ERR_WHO_AM_I. */
 int lsm_probe(lsm6dsox *chip);
 
+/* Look at one address only: LSM_OK (an LSM6DSOX answers), LSM_ERR_BUS or LSM_ERR_WHO_AM_I.
+ * The address is kept either way (0 when nothing answered). */
+int lsm_probe_at(lsm6dsox *chip, uint8_t address);
+
 /* Run the configuration sequence, check it by reading the registers back, read the trim.
  * Leaves the sensors on and the FIFO filling in continuous mode. */
 int lsm_configure(lsm6dsox *chip, const lsm_settings *settings);

@@ -134,6 +134,11 @@ int fwh_streaming(const host_board *board)
     return board->fw.streaming;
 }
 
+int fwh_sensor_count(const host_board *board)
+{
+    return board->fw.sensor_count;
+}
+
 /* Counters, in this order: commands, bus_errors, tx_dropped_packets, words, unknown_tags,
  * incomplete_slots, lost_slots, overruns, samples, packets, dropped_packets, rx frames,
  * rx bad_frames, settling (samples discarded as turn-on transient), tx_dropped_bytes,

@@ -68,6 +68,12 @@ class _LinkConfig(ctypes.Structure):
                 ("gyro_fs_dps", ctypes.c_uint16), ("tick_ns", ctypes.c_uint32))
 
 
+class _LinkSensor(ctypes.Structure):
+    _fields_ = (("index", ctypes.c_uint8), ("count", ctypes.c_uint8),
+                ("address", ctypes.c_uint8), ("who_am_i", ctypes.c_uint8),
+                ("config", _LinkConfig), ("flags", ctypes.c_uint8))
+
+
 class _LinkSelfTest(ctypes.Structure):
     _fields_ = (("accel_pass", ctypes.c_uint8), ("gyro_pass", ctypes.c_uint8),
                 ("accel_delta_mg", ctypes.c_int16 * 3), ("gyro_delta_dps", ctypes.c_int16 * 3))
@@ -138,6 +144,17 @@ def _declare(lib: ctypes.CDLL) -> None:
     lib.link_encode_samples.restype = size
     lib.link_encode_samples.argtypes = [ctypes.c_uint16, ctypes.c_uint32, ctypes.c_int16,
                                         ctypes.POINTER(ctypes.c_int16), ctypes.c_uint8, wire]
+    lib.link_encode_samples_indexed.restype = size
+    lib.link_encode_samples_indexed.argtypes = [
+        ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_int16,
+        ctypes.POINTER(ctypes.c_int16), ctypes.c_uint8, wire]
+    lib.link_encode_sensor.restype = size
+    lib.link_encode_sensor.argtypes = [ctypes.POINTER(_LinkSensor), wire]
+    lib.fwh_sensor_count.restype = ctypes.c_int
+    lib.fwh_sensor_count.argtypes = [ctypes.c_void_p]
+    lib.fw_rate_fits_sensors.restype = ctypes.c_bool
+    lib.fw_rate_fits_sensors.argtypes = [ctypes.c_uint8, ctypes.c_uint32, ctypes.c_uint32,
+                                         ctypes.c_uint8, ctypes.c_char_p, size]
     lib.link_encode_ack.restype = size
     lib.link_encode_ack.argtypes = [ctypes.c_uint8, ctypes.c_uint8, ctypes.c_char_p, wire]
     lib.link_encode_selftest.restype = size
@@ -183,6 +200,38 @@ class ForwardingBus(I2CBus):
         self.inner.delay(seconds)
 
 
+class SharedBus(I2CBus):
+    """Several chips (each an :class:`I2CBus` answering at its own ``address``) on one I2C bus,
+    as two LSM6DSOX with SA0 low and high: a transfer goes to the chip at its address, and
+    nothing acknowledges elsewhere. The first chip's clock is the bus's."""
+
+    def __init__(self, *chips: I2CBus) -> None:
+        self.chips = {int(chip.address): chip for chip in chips}  # type: ignore[attr-defined]
+        self.first = chips[0]
+
+    def _chip(self, address: int) -> I2CBus:
+        chip = self.chips.get(address)
+        if chip is None:
+            raise DeviceIOError(f"no ACK from I2C address 0x{address:02X}")
+        return chip
+
+    def write_register(self, address: int, register: int, data: bytes) -> None:
+        self._chip(address).write_register(address, register, data)
+
+    def read_registers(self, address: int, register: int, length: int) -> bytes:
+        return self._chip(address).read_registers(address, register, length)
+
+    def close(self) -> None:
+        for chip in self.chips.values():
+            chip.close()
+
+    def monotonic(self) -> float:
+        return self.first.monotonic()
+
+    def delay(self, seconds: float) -> None:
+        self.first.delay(seconds)
+
+
 def c_encode(lib: ctypes.CDLL, packet: p.Packet) -> bytes:
     """The wire frame (COBS + 0x00) the firmware's C encoder makes of a device packet."""
     wire = (ctypes.c_uint8 * 516)()
@@ -199,6 +248,18 @@ def c_encode(lib: ctypes.CDLL, packet: p.Packet) -> bytes:
         n = lib.link_encode_samples(packet.seq, packet.t0, packet.temperature_raw,
                                     rows.ctypes.data_as(ctypes.POINTER(ctypes.c_int16)),
                                     rows.shape[0], wire)
+    elif isinstance(packet, p.SamplesIndexed):
+        inner = packet.samples
+        rows = np.ascontiguousarray(np.asarray(inner.data, dtype=np.int16).reshape(-1, 6))
+        n = lib.link_encode_samples_indexed(
+            packet.sensor_index, inner.seq, inner.t0, inner.temperature_raw,
+            rows.ctypes.data_as(ctypes.POINTER(ctypes.c_int16)), rows.shape[0], wire)
+    elif isinstance(packet, p.Sensor):
+        sensor = _LinkSensor(packet.sensor_index, packet.sensor_count, packet.i2c_address,
+                             packet.who_am_i, _LinkConfig(packet.odr_mhz, packet.accel_fs_g,
+                                                          packet.gyro_fs_dps, packet.tick_ns),
+                             packet.flags)
+        n = lib.link_encode_sensor(ctypes.byref(sensor), wire)
     elif isinstance(packet, p.Ack):
         n = lib.link_encode_ack(packet.command, packet.status, packet.message.encode(), wire)
     elif isinstance(packet, p.SelfTestResult):
@@ -376,6 +437,11 @@ class FirmwareCore:
     @property
     def streaming(self) -> bool:
         return bool(self.lib.fwh_streaming(self._handle))
+
+    @property
+    def sensor_count(self) -> int:
+        """Sensors the firmware found at power-on (1, or 2 at 0x6A and 0x6B)."""
+        return int(self.lib.fwh_sensor_count(self._handle))
 
     def counters(self) -> dict[str, int]:
         values = (ctypes.c_uint32 * len(COUNTER_NAMES))()

@@ -6,6 +6,9 @@ this machine, in real time, so the app connects to it exactly as to a NUCLEO boa
     python firmware/host/serve.py --scenario wobble
     inclinometer --device /dev/pts/7            # the port it prints
 
+With ``--sensors 2`` a second emulated LSM6DSOX (seed + 1000) sits at 0x6B on the same bus:
+open it as ``serial:///dev/pts/7?sensor=1``.
+
 Needs gcc and make (it builds the host library into a temporary folder). Ctrl+C stops it.
 """
 
@@ -19,7 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository, for drivers/
 
-from fwcore import FirmwareCore, PtyBoard, build_library
+from fwcore import FirmwareCore, PtyBoard, SharedBus, build_library
 
 from drivers.lsm6dsox_direct.emulated_chip import EmulatedLsm6dsox
 from drivers.sim import SCENARIOS
@@ -34,16 +37,22 @@ def main(argv: list[str] | None = None) -> int:
                         help="the UART rate the firmware limits the ODR by (0: native USB)")
     parser.add_argument("--i2c-hz", type=int, default=400_000,
                         help="the I2C clock the firmware limits the ODR by (0: no limit)")
+    parser.add_argument("--sensors", type=int, choices=(1, 2), default=1,
+                        help="LSM6DSOX on the bus: 2 puts a second one at 0x6B (sensor 1)")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="inclinometer-fw-") as build:
         lib = build_library(Path(build))
 
         def core() -> FirmwareCore:
-            chip = EmulatedLsm6dsox(SimOptions(args.scenario, seed=args.seed))
-            return FirmwareCore(lib, chip, baud=args.baud, i2c_hz=args.i2c_hz)
+            chips = [EmulatedLsm6dsox(SimOptions(args.scenario, seed=args.seed + 1000 * k),
+                                      address=0x6A + k) for k in range(args.sensors)]
+            return FirmwareCore(lib, SharedBus(*chips), baud=args.baud, i2c_hz=args.i2c_hz)
 
         board = PtyBoard(core)
         print(f"firmware core on {board.port}: inclinometer --device {board.port}", flush=True)
+        if args.sensors > 1:
+            print(f"sensor 1: inclinometer --device 'serial://{board.port}?sensor=1'",
+                  flush=True)
         try:
             threading.Event().wait()
         except KeyboardInterrupt:

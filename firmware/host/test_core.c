@@ -563,6 +563,256 @@ static void test_rates(void)
     CHECK(strstr(why, "highest ODR 1667 Hz") != NULL);
 }
 
+/* ---- two LSM6DSOX on one bus (0x6A and 0x6B): both found, both streamed */
+
+typedef struct two_chips {
+    uint8_t regs[2][256];
+    uint32_t next_slot[2];          /* the FIFO's next time slot per chip */
+    uint8_t fifo[2][8 * 3 * LSM_FIFO_WORD_BYTES];
+    size_t fifo_length[2], fifo_read[2];
+    uint32_t now_us;
+    uint8_t tx[1 << 17];
+    size_t tx_length;
+    bool second_silent;             /* 0x6B stops answering */
+} two_chips;
+
+static int two_index(const two_chips *bus, uint8_t address)
+{
+    if (address == LSM6DSOX_ADDRESS_SA0_LOW)
+        return 0;
+    if (address == LSM6DSOX_ADDRESS_SA0_HIGH && !bus->second_silent)
+        return 1;
+    return -1;
+}
+
+static int two_write(void *ctx, uint8_t address, uint8_t reg, const uint8_t *data, size_t n)
+{
+    two_chips *bus = ctx;
+    int c = two_index(bus, address);
+    if (c < 0)
+        return 1;
+    for (size_t i = 0; i < n; i++)
+        bus->regs[c][(uint8_t)(reg + i)] = data[i];
+    bus->regs[c][LSM_CTRL3_C] &= (uint8_t)~LSM_CTRL3_C_SW_RESET;
+    return 0;
+}
+
+static int two_read(void *ctx, uint8_t address, uint8_t reg, uint8_t *data, size_t n)
+{
+    two_chips *bus = ctx;
+    int c = two_index(bus, address);
+    if (c < 0)
+        return 1;
+    bus->regs[c][LSM_WHO_AM_I] = LSM6DSOX_WHO_AM_I_VALUE;
+    bus->regs[c][LSM_STATUS_REG] = LSM_STATUS_XLDA | LSM_STATUS_GDA;
+    if (reg == LSM_FIFO_STATUS1 && n == 2) {
+        /* 8 new slots per poll; chip 1's data start at slot 5000 and its clock at 10^6. */
+        uint32_t base = c ? 5000u : 0u;
+        uint16_t words = make_slots(bus->fifo[c], base + bus->next_slot[c], 8,
+                                    c ? 1000000u - 5000u * 380u : 0u, c ? 380u : 385u,
+                                    UINT32_MAX);
+        bus->next_slot[c] += 8;
+        bus->fifo_length[c] = (size_t)words * LSM_FIFO_WORD_BYTES;
+        bus->fifo_read[c] = 0;
+        data[0] = (uint8_t)words;
+        data[1] = 0;
+        return 0;
+    }
+    if (reg == LSM_FIFO_DATA_OUT_TAG) {
+        if (bus->fifo_read[c] + n > bus->fifo_length[c])
+            return 3;
+        memcpy(data, bus->fifo[c] + bus->fifo_read[c], n);
+        bus->fifo_read[c] += n;
+        return 0;
+    }
+    for (size_t i = 0; i < n; i++)
+        data[i] = bus->regs[c][(uint8_t)(reg + i)];
+    return 0;
+}
+
+static uint32_t two_micros(void *ctx)
+{
+    return ((two_chips *)ctx)->now_us += 37;
+}
+
+static void two_delay(void *ctx, uint32_t us)
+{
+    ((two_chips *)ctx)->now_us += us;
+}
+
+static size_t two_tx_free(void *ctx)
+{
+    two_chips *bus = ctx;
+    return sizeof bus->tx - bus->tx_length;
+}
+
+static void two_tx_write(void *ctx, const uint8_t *data, size_t n)
+{
+    two_chips *bus = ctx;
+    memcpy(bus->tx + bus->tx_length, data, n);
+    bus->tx_length += n;
+}
+
+typedef struct two_streams {
+    int packets[2], samples[2], sensors, acks_refused, logs;
+    uint8_t sensor_address[2], sensor_count;
+    bool in_order[2];      /* seq +1 per packet, per sensor */
+    bool consecutive[2];   /* gyro x (the slot) +1 per sample, per sensor */
+    bool right_chip[2];    /* sensor 0's slots below 5000, sensor 1's from 5000 */
+    int32_t last_seq[2], last_slot[2];
+    char refusal[160];
+} two_streams;
+
+static void read_two(const two_chips *bus, two_streams *out)
+{
+    static link_rx rx;
+    link_rx_init(&rx);
+    memset(out, 0, sizeof *out);
+    for (int c = 0; c < 2; c++) {
+        out->in_order[c] = out->consecutive[c] = out->right_chip[c] = true;
+        out->last_seq[c] = out->last_slot[c] = -1;
+    }
+    size_t offset = 0;
+    uint8_t type;
+    const uint8_t *payload;
+    size_t length;
+    while (link_rx_feed(&rx, bus->tx, bus->tx_length, &offset, &type, &payload, &length)) {
+        if (type == LINK_SENSOR && length == LINK_SENSOR_PAYLOAD && payload[0] < 2) {
+            out->sensors++;
+            out->sensor_count = payload[1];
+            out->sensor_address[payload[0]] = payload[2];
+        } else if (type == LINK_ACK && length >= 2 && payload[1] != LINK_ACK_OK) {
+            out->acks_refused++;
+            size_t n = length - 2 < sizeof out->refusal - 1 ? length - 2 : sizeof out->refusal - 1;
+            memcpy(out->refusal, payload + 2, n);
+            out->refusal[n] = 0;
+        } else if (type == LINK_LOG) {
+            out->logs++;
+        } else if (type == LINK_SAMPLES || type == LINK_SAMPLES_INDEXED) {
+            int c = type == LINK_SAMPLES_INDEXED;
+            const uint8_t *p = payload + c;
+            if (c && payload[0] != 1) {
+                out->right_chip[1] = false;
+                continue;
+            }
+            int32_t seq = get_u16(p);
+            uint8_t count = p[6];
+            CHECK(length == (size_t)c + LINK_SAMPLES_HEADER + 12u * count);
+            if (out->last_seq[c] >= 0 && seq != out->last_seq[c] + 1)
+                out->in_order[c] = false;
+            out->last_seq[c] = seq;
+            for (uint8_t i = 0; i < count; i++) {
+                int32_t slot = get_u16(p + LINK_SAMPLES_HEADER + 12u * i);
+                if (out->last_slot[c] >= 0 && slot != out->last_slot[c] + 1)
+                    out->consecutive[c] = false;
+                if ((slot >= 5000) != (c == 1))
+                    out->right_chip[c] = false;
+                out->last_slot[c] = slot;
+            }
+            out->packets[c]++;
+            out->samples[c] += count;
+        }
+    }
+}
+
+static void test_two_sensors(void)
+{
+    static two_chips bus;
+    static fw_state fw;
+    static two_streams seen;
+    memset(&bus, 0, sizeof bus);
+    fw_platform platform = {&bus, two_write, two_read, two_micros, two_delay, two_tx_free,
+                            two_tx_write, NULL};
+    fw_identity identity = {{0}, "NUCLEO-F746ZG", 921600, 400000};
+    fw_init(&fw, &platform, &identity);
+    CHECK(fw.sensor_ok && fw.sensor1_ok && fw.sensor_count == 2);
+    CHECK(fw.chip.address == LSM6DSOX_ADDRESS_SA0_LOW);
+    CHECK(fw.chip1.address == LSM6DSOX_ADDRESS_SA0_HIGH);
+    /* Both configured alike (104 Hz, 4 g, 250 dps). */
+    CHECK(bus.regs[0][LSM_CTRL1_XL] == 0x48 && bus.regs[1][LSM_CTRL1_XL] == 0x48);
+    CHECK(bus.regs[0][LSM_CTRL2_G] == 0x40 && bus.regs[1][LSM_CTRL2_G] == 0x40);
+
+    /* HELLO: INFO, CONFIG, then SENSOR 0 and 1 with their addresses. */
+    uint8_t wire[LINK_MAX_WIRE];
+    fw_receive(&fw, wire, link_frame(LINK_HELLO, NULL, 0, wire));
+    read_two(&bus, &seen);
+    CHECK(seen.sensors == 2 && seen.sensor_count == 2);
+    CHECK(seen.sensor_address[0] == 0x6A && seen.sensor_address[1] == 0x6B);
+
+    /* 1667 Hz does not fit two sensors on I2C at 400 kHz; 833 Hz does. */
+    bus.tx_length = 0;
+    uint8_t configure[4] = {8, 4, 0xFA, 0x00};
+    fw_receive(&fw, wire, link_frame(LINK_CONFIGURE, configure, 4, wire));
+    read_two(&bus, &seen);
+    CHECK(seen.acks_refused == 1 && strstr(seen.refusal, "for 2 sensors") != NULL);
+    CHECK(strstr(seen.refusal, "highest ODR 833 Hz") != NULL);
+    CHECK(seen.sensors == 2); /* CONFIG and SENSOR follow the ACK, unchanged */
+    CHECK(bus.regs[1][LSM_CTRL1_XL] == 0x48);
+    configure[0] = 7;
+    fw_receive(&fw, wire, link_frame(LINK_CONFIGURE, configure, 4, wire));
+    CHECK(bus.regs[0][LSM_CTRL1_XL] == 0x78 && bus.regs[1][LSM_CTRL1_XL] == 0x78);
+
+    /* Stream: both sensors' packets, each with its own sequence numbers from 0. */
+    bus.tx_length = 0;
+    fw_receive(&fw, wire, link_frame(LINK_START, NULL, 0, wire));
+    for (int i = 0; i < 400; i++) {
+        bus.now_us += FW_POLL_INTERVAL_US;
+        fw_poll(&fw);
+    }
+    read_two(&bus, &seen);
+    CHECK(seen.packets[0] > 20 && seen.packets[1] > 20);
+    CHECK(seen.samples[0] > 1000 && seen.samples[1] > 1000);
+    CHECK(seen.in_order[0] && seen.in_order[1]);
+    CHECK(seen.consecutive[0] && seen.consecutive[1]);
+    CHECK(seen.right_chip[0] && seen.right_chip[1]);
+    CHECK(seen.last_seq[0] == seen.packets[0] - 1 && seen.last_seq[1] == seen.packets[1] - 1);
+    link_status status;
+    fw_status(&fw, &status);
+    CHECK(status.samples_sent == (uint32_t)(seen.samples[0] + seen.samples[1]));
+
+    /* Sensor 1 goes silent: a LOG, sensor 0 streams on; back, sensor 1 streams again. */
+    bus.tx_length = 0;
+    bus.second_silent = true;
+    for (int i = 0; i < 100; i++) {
+        bus.now_us += FW_POLL_INTERVAL_US;
+        fw_poll(&fw);
+    }
+    CHECK(fw.streaming && fw.sensor_ok && !fw.sensor1_ok);
+    read_two(&bus, &seen);
+    CHECK(seen.logs == 1 && seen.packets[0] > 5);
+    bus.second_silent = false;
+    bus.tx_length = 0;
+    for (int i = 0; i < 400; i++) {
+        bus.now_us += FW_POLL_INTERVAL_US;
+        fw_poll(&fw);
+    }
+    CHECK(fw.sensor1_ok);
+    read_two(&bus, &seen);
+    CHECK(seen.packets[1] > 5 && seen.right_chip[1]);
+
+    /* STOP: nothing after its ACK. */
+    fw_receive(&fw, wire, link_frame(LINK_STOP, NULL, 0, wire));
+    CHECK(!fw.streaming);
+}
+
+static void test_rates_two_sensors(void)
+{
+    /* docs/protocol.md section 6, two sensors: the UART and I2C limits. */
+    const struct { uint32_t baud; uint8_t highest; } table[] = {
+        {115200, 6}, {230400, 7}, {460800, 8}, {921600, 9},
+    };
+    char why[160];
+    for (size_t i = 0; i < sizeof table / sizeof table[0]; i++) {
+        CHECK(fw_rate_fits_sensors(table[i].highest, table[i].baud, 0, 2, why, sizeof why));
+        CHECK(!fw_rate_fits_sensors((uint8_t)(table[i].highest + 1), table[i].baud, 0, 2, why,
+                                    sizeof why));
+    }
+    CHECK(fw_rate_fits_sensors(7, 921600, 400000, 2, why, sizeof why));
+    CHECK(!fw_rate_fits_sensors(8, 921600, 400000, 2, why, sizeof why));
+    CHECK(strstr(why, "highest ODR 833 Hz") != NULL);
+    CHECK(fw_rate_fits_sensors(8, 921600, 400000, 1, why, sizeof why));
+}
+
 int main(void)
 {
     test_crc();
@@ -579,6 +829,8 @@ int main(void)
     test_core_with_fake_bus();
     test_status_and_retries();
     test_rates();
+    test_two_sensors();
+    test_rates_two_sensors();
     test_uart_divisor();
     printf("%d checks, %d failed\n", checks, failures);
     return failures ? 1 : 0;
