@@ -24,8 +24,9 @@ Two sensors (``sensors=2``, firmware 1.1.0): a second simulated LSM6DSOX "at 0x6
 own unit (seed + 1000: its own errors, trim and noise) and the same scenario, streamed as
 SAMPLES_INDEXED (sensor 1) with its own sequence numbers and clock, and described by SENSOR
 packets after CONFIG (docs/protocol.md, "Several sensors on one board"). The two simulators
-are independent: the motion is the same scenario, drawn per unit, not one rigid body. Rates
-two sensors cannot carry are refused. Faults (drops, overruns, cuts) touch sensor 0 only.
+are independent: the motion is the same scenario, drawn per unit, not one rigid body. A rate
+that fits one sensor but not two streams sensor 0 alone: sensor 1 is paused (its SENSOR says
+so, a LOG says why), as the firmware does. Faults (drops, overruns, cuts) touch sensor 0 only.
 
 Timing model: the board's clock runs with the wall clock from power-on (``initial_ticks`` at
 power-on; it keeps running across an unplug unless :meth:`replug` is told ``power_cycle``).
@@ -237,11 +238,11 @@ class EmulatedNucleo:
             raise ValueError(f"sensors={sensors}: the NUCLEO board carries 1 or 2 LSM6DSOX")
         self.sensors = sensors
         odr_code = lsm6dsox.odr_code_for(odr_hz)
-        of = f" for {sensors} sensors" if sensors > 1 else ""
-        if not odr_fits_link(lsm6dsox.ODR_RATES_HZ[odr_code], baud, sensors):
-            raise ValueError(f"{odr_hz:g} Hz does not fit a {baud} baud link{of}")
-        if not odr_fits_sensor_bus(lsm6dsox.ODR_RATES_HZ[odr_code], sensor_bus_hz, sensors):
-            raise ValueError(f"{odr_hz:g} Hz does not fit I2C at {sensor_bus_hz} Hz{of}")
+        # The one-sensor rule: a rate that fits sensor 0 alone pauses sensor 1.
+        if not odr_fits_link(lsm6dsox.ODR_RATES_HZ[odr_code], baud):
+            raise ValueError(f"{odr_hz:g} Hz does not fit a {baud} baud link")
+        if not odr_fits_sensor_bus(lsm6dsox.ODR_RATES_HZ[odr_code], sensor_bus_hz):
+            raise ValueError(f"{odr_hz:g} Hz does not fit I2C at {sensor_bus_hz} Hz")
         self.scenario = scenario
         self.seed = seed
         self.baud = baud
@@ -362,10 +363,41 @@ class EmulatedNucleo:
         if self.sensors < 2:
             return []
         configs = [self.config, self._second.config]
+        paused = p.SENSOR_FLAG_PAUSED if self.sensor1_paused else 0
         return [p.Sensor(index, self.sensors, address, self.who_am_i, config.odr_mhz,
-                         config.accel_fs_g, config.gyro_fs_dps, config.tick_ns)
+                         config.accel_fs_g, config.gyro_fs_dps, config.tick_ns,
+                         p.SENSOR_FLAG_ANSWERING | (paused if index else 0))
                 for index, (address, config) in enumerate(zip((0x6A, 0x6B), configs,
                                                                strict=True))]
+
+    def _fits_all(self, odr_code: int, *, link: bool = True, bus: bool = True) -> bool:
+        odr = lsm6dsox.ODR_RATES_HZ[odr_code]
+        return ((not link or odr_fits_link(odr, self.baud, self.sensors))
+                and (not bus or odr_fits_sensor_bus(odr, self.sensor_bus_hz, self.sensors)))
+
+    @property
+    def sensor1_paused(self) -> bool:
+        """The rate fits sensor 0 alone: sensor 1 is not streamed (as the firmware)."""
+        return self.sensors > 1 and not self._fits_all(self._settings[0])
+
+    def pause_message(self) -> str:
+        """The firmware's LOG for a paused sensor 1 (empty while both stream)."""
+        if not self.sensor1_paused:
+            return ""
+        code = self._settings[0]
+        highest = max(c for c in lsm6dsox.ODR_LABELS_HZ if c == 1 or self._fits_all(c))
+        where = (f"I2C {(self.sensor_bus_hz or 0) // 1000} kHz"
+                 if not self._fits_all(code, link=False)
+                 else f"the UART at {self.baud} baud")
+        return (f"sensor 1 (0x6B) paused: {lsm6dsox.ODR_LABELS_HZ[code]:g} Hz does not fit "
+                f"two sensors on {where} (highest {lsm6dsox.ODR_LABELS_HZ[highest]:g} Hz)")
+
+    def _queue_sensors(self) -> None:
+        """SENSOR packets after CONFIG, and the LOG when sensor 1 is paused."""
+        for sensor in self.sensor_packets():
+            self._queue(sensor)
+        if self.sensor1_paused:
+            self._queue(p.Log(1, self.pause_message()))
 
     def status(self) -> p.Status:
         """The STATUS the board would send now (its counters since power-on)."""
@@ -538,8 +570,7 @@ class EmulatedNucleo:
         if isinstance(packet, p.Hello):
             self._queue(self.info)
             self._queue(self.config)
-            for sensor in self.sensor_packets():
-                self._queue(sensor)
+            self._queue_sensors()
         elif isinstance(packet, p.Configure):
             self._configure(packet)
         elif isinstance(packet, p.Start):
@@ -549,7 +580,9 @@ class EmulatedNucleo:
             config = self.config
             self._queue(p.Log(1, f"streaming at {lsm6dsox.odr_text(config.odr_hz)}, "
                                  f"+-{config.accel_fs_g} g, "
-                                 f"+-{config.gyro_fs_dps} dps"))
+                                 f"+-{config.gyro_fs_dps} dps"
+                                 + (" (sensor 1 at 0x6B paused: the rate does not fit two "
+                                    "sensors)" if self.sensor1_paused else "")))
             if self.sends_status:
                 self._last_status = time.monotonic()
                 self.stats.status_sent += 1
@@ -577,21 +610,19 @@ class EmulatedNucleo:
             problem = f"accel_fs_g {command.accel_fs_g} is not 2, 4, 8 or 16"
         elif command.gyro_fs_dps not in lsm6dsox.GYRO_MDPS_PER_LSB:
             problem = f"gyro_fs_dps {command.gyro_fs_dps} is not 125, 250, 500, 1000 or 2000"
-        elif not odr_fits_link(lsm6dsox.ODR_RATES_HZ[command.odr_code], self.baud,
-                               self.sensors):
+        # The one-sensor rule (a rate that fits sensor 0 alone pauses sensor 1).
+        elif not odr_fits_link(lsm6dsox.ODR_RATES_HZ[command.odr_code], self.baud):
             odr = lsm6dsox.ODR_RATES_HZ[command.odr_code]
-            needed = odr * link_bytes_per_odr_sample(self.sensors)
+            needed = odr * link_bytes_per_odr_sample()
             problem = (f"{lsm6dsox.odr_label_hz(odr):g} Hz needs {needed:,.0f} bytes/s; "
-                       f"{self.baud} baud carries {link_capacity_bytes_s(self.baud or 0):,.0f}"
-                       + (f" for {self.sensors} sensors" if self.sensors > 1 else ""))
+                       f"{self.baud} baud carries {link_capacity_bytes_s(self.baud or 0):,.0f}")
         elif not odr_fits_sensor_bus(lsm6dsox.ODR_RATES_HZ[command.odr_code],
-                                     self.sensor_bus_hz, self.sensors):
+                                     self.sensor_bus_hz):
             odr = lsm6dsox.ODR_RATES_HZ[command.odr_code]
             bus_hz = self.sensor_bus_hz or 0
             problem = (f"ODR {lsm6dsox.odr_label_hz(odr):g} Hz needs about "
-                       f"{sensor_bus_bits_s(odr, self.sensors) / 1e3:.0f} kbit/s on I2C1"
-                       + (f" for {self.sensors} sensors" if self.sensors > 1 else "")
-                       + f"; the bus at {bus_hz / 1e3:g} kHz carries about "
+                       f"{sensor_bus_bits_s(odr) / 1e3:.0f} kbit/s on I2C1"
+                       f"; the bus at {bus_hz / 1e3:g} kHz carries about "
                        f"{_BUS_USABLE * bus_hz / 1e3:.0f}")
         if problem:
             self._queue(p.Ack(p.CONFIGURE, p.ACK_BAD_ARGUMENT, problem))
@@ -606,8 +637,7 @@ class EmulatedNucleo:
                 self._second.configure(self._settings)
             self._queue(p.Ack(p.CONFIGURE, p.ACK_OK))
         self._queue(self.config)
-        for sensor in self.sensor_packets():
-            self._queue(sensor)
+        self._queue_sensors()
 
     def _start(self) -> None:
         now = time.monotonic()
@@ -617,7 +647,7 @@ class EmulatedNucleo:
         self._last_send = now
         self._run_origin_ticks = max(self._board_ticks(now), math.ceil(self._last_end_ticks))
         self._last_status = now
-        if self.sensors > 1:
+        if self.sensors > 1 and not self.sensor1_paused:
             self._second.start(now)
 
     # -- samples --------------------------------------------------------------------------------
@@ -667,7 +697,7 @@ class EmulatedNucleo:
             self._seq += 1
         self._run_sent += due
         self._last_send = now
-        if self.sensors > 1:
+        if self.sensors > 1 and not self.sensor1_paused:
             self._second.send_due(now)
 
     def _send_packet(self, packet: p.Samples, first_sample: int) -> None:

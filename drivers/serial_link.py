@@ -28,7 +28,11 @@ the running stream, and the last to close stops the board and closes the port). 
 settings are common to its sensors: a device joining with other settings is refused, and a
 self-test (which stops the stream) is refused while another sensor's device is open. Sensor
 ``k > 0``'s unique id is the board's with ``-S<k>`` appended, so each sensor keeps its own
-calibration profile. A board without sensor ``k`` is refused with the number it has.
+calibration profile. A board without sensor ``k`` is refused with the number it has. At a
+rate that fits sensor 0 alone (1667 Hz on the NUCLEO's I2C at 400 kHz) the board streams
+sensor 0 only and pauses the others: opening a paused sensor is refused with the board's
+reason (:class:`~drivers.errors.SettingRefusedError`), and a paused SENSOR arriving while it
+streams makes its reads fail with that reason, never an empty stream.
 
 Opening: STOP, HELLO -> INFO + CONFIG (HELLO is repeated every 0.5 s until the timeout), the
 WHO_AM_I and protocol version are checked, CONFIGURE when asked, then START -> ACK.
@@ -295,6 +299,7 @@ class SerialLinkDevice(Device):
         self._board_status: BoardStatus | None = None
         self._link_losses = [0, 0, 0]  # gaps, corrupt frames, samples not yet reported
         self._link_note_at = -math.inf
+        self._paused_while_streaming: p.Sensor | None = None
 
     # -- discovery -----------------------------------------------------------------------------
     @classmethod
@@ -430,6 +435,7 @@ class SerialLinkDevice(Device):
     # -- Device template ------------------------------------------------------------------------
     def _open(self) -> DeviceInfo:
         self._disconnected = False
+        self._paused_while_streaming = None
         try:
             self._link, opened = SharedPort.acquire(self.port, self.options.sensor,
                                                     self._open_port, self._on_data)
@@ -449,6 +455,9 @@ class SerialLinkDevice(Device):
             with self._state:
                 if self._blocks:
                     return self._blocks.popleft()
+                paused = self._paused_while_streaming
+            if paused is not None:
+                raise DeviceError(self._paused_message(paused, self._pause_reason()))
             if time.monotonic() >= deadline:
                 return None
             link = self._link
@@ -504,6 +513,7 @@ class SerialLinkDevice(Device):
             ignored = ", ".join(key for key, _ in self.options.other_options)
             log.warning("%s speaks protocol v1: ignoring the text-line options %s", self.port,
                         ignored)
+        self._refuse_if_paused()
         self.info_packet, self.config_packet = info, config
         self._start_streaming(new_origin=True, mark_gap=False)
         return self._device_info(info, self._sensor_config(config))
@@ -520,6 +530,7 @@ class SerialLinkDevice(Device):
         info, config = self._await_hello()
         if self.options.sensor:
             self.sensor_packet = self._await_sensor()
+            self._refuse_if_paused()
         ours = self._sensor_config(config)
         opts = self.options
         wanted = (lsm6dsox.odr_code_for(opts.odr_hz) if opts.odr_hz else ours.odr_code,
@@ -543,6 +554,36 @@ class SerialLinkDevice(Device):
         if self.options.sensor == 0 or self.sensor_packet is None:
             return config
         return self.sensor_packet.config
+
+    def _refuse_if_paused(self) -> None:
+        """Refuse to open a sensor the board does not stream at this rate (it fits sensor 0
+        alone): the board's LOG after SENSOR says why."""
+        sensor = self.sensor_packet
+        if not self.options.sensor or sensor is None or not sensor.paused:
+            return
+        reason = self._pause_reason()
+        raise SettingRefusedError(self._paused_message(sensor, reason), reason)
+
+    def _pause_reason(self) -> str:
+        """The board's latest LOG about this sensor's pause (it follows the SENSOR packets;
+        a PING round trip makes sure it arrived). Empty when there is none."""
+        prefix = f"sensor {self.options.sensor} ("
+        with contextlib.suppress(DeviceError):
+            token = secrets.randbits(32)
+            self._send(p.Ping(token))
+            self._wait_for(lambda pkt: isinstance(pkt, p.Pong) and pkt.token == token,
+                           COMMAND_TIMEOUT_S)
+        with self._state:
+            return next((entry.text for entry in reversed(self._logs)
+                         if entry.text.startswith(prefix) and "paused" in entry.text), "")
+
+    def _paused_message(self, sensor: p.Sensor, reason: str) -> str:
+        rate = lsm6dsox.odr_text(sensor.config.odr_hz)
+        why = reason or "the rate does not fit all of the board's sensors"
+        return (f"{self.port}: sensor {sensor.sensor_index} (the LSM6DSOX at "
+                f"0x{sensor.i2c_address:02X}) is paused at {rate}: the board streams sensor 0 "
+                f"alone at this rate ({why}). Open the board at a rate all its sensors fit "
+                "(?odr=...), or sensor 0 alone.")
 
     def _await_sensor(self) -> p.Sensor:
         """This sensor's SENSOR packet, or a clear refusal when the board lacks it (a PING
@@ -783,6 +824,9 @@ class SerialLinkDevice(Device):
                     self._unread_logs.append(packet)
                     log.log(10 + 10 * min(packet.level, 3), "%s: %s", self.port, packet.text)
                     continue
+                if (isinstance(packet, p.Sensor) and packet.paused and self._streaming
+                        and packet.sensor_index == self.options.sensor):
+                    self._paused_while_streaming = packet
                 if isinstance(packet, p.Status):
                     counters = self._decoder.counters()
                     self._board_status = board_status_of(

@@ -152,13 +152,13 @@ def test_the_firmware_streams_both_sensors_and_a_v1_reader_still_gets_sensor_0(
     # Each SENSOR reports its own chip's trimmed clock; sensor 0's equals CONFIG.
     assert sensors[0].config == hello[1]
     assert sensors[1].odr_mhz == lsm6dsox.odr_mhz(4, chips[1].unit.freq_fine)
-    # 1667 Hz does not fit two sensors on I2C at 400 kHz: refused with the reason.
-    core.send(p.Configure(8, 4, 500))
-    refused = packets_of(core.take_output())
-    assert refused[0] == p.Ack(p.CONFIGURE, p.ACK_BAD_ARGUMENT, refused[0].message)
-    assert "for 2 sensors" in refused[0].message and "highest ODR 833 Hz" in refused[0].message
+    # 833 Hz fits both sensors on I2C at 400 kHz: neither is paused.
     core.send(p.Configure(7, 4, 500))
     wire += core.take_output()
+    answer = packets_of(bytes(wire))
+    assert answer[0] == p.Ack(p.CONFIGURE, p.ACK_OK)
+    assert [pk.paused for pk in answer if isinstance(pk, p.Sensor)] == [False, False]
+    assert not any(isinstance(pk, p.Log) for pk in answer)
     core.send(p.Start())
     core.run(2.0)
     core.send(p.Stop())
@@ -204,6 +204,63 @@ def test_the_firmware_streams_both_sensors_and_a_v1_reader_still_gets_sensor_0(
     old = v1.counters()
     assert old.unknown_packets == len(indexed) + 2  # SAMPLES_INDEXED and the two SENSOR
     assert old.crc_errors == old.undecodable == old.seq_gaps == 0
+    core.close()
+
+
+PAUSED_1667 = ("sensor 1 (0x6B) paused: 1667 Hz does not fit two sensors on I2C 400 kHz "
+               "(highest 833 Hz)")
+
+
+def test_every_one_sensor_rate_is_accepted_and_sensor_1_pauses_above_833_hz(
+        firmware_lib) -> None:
+    """A v1 host keeps every rate a one-sensor board has (the IKS01A3's own LSM6DSO at 0x6B
+    must not cost it 1667 Hz): sensor 0 streams alone, sensor 1 is paused and a LOG says why."""
+    core, chips = two_chip_core(firmware_lib)
+    for code, label in lsm6dsox.ODR_LABELS_HZ.items():
+        core.send(p.Configure(code, 4, 500))
+        answer = packets_of(core.take_output())
+        sensors = [pk for pk in answer if isinstance(pk, p.Sensor)]
+        logs = [pk.text for pk in answer if isinstance(pk, p.Log)]
+        if label > 1667:  # refused as by a one-sensor board, with its message
+            assert answer[0].status == p.ACK_BAD_ARGUMENT, label
+            assert "highest ODR 1667 Hz" in answer[0].message
+            assert "sensors" not in answer[0].message
+            continue
+        assert answer[0] == p.Ack(p.CONFIGURE, p.ACK_OK), label
+        assert answer[1].odr_code == code  # CONFIG: sensor 0 at the rate asked
+        assert [s.answering for s in sensors] == [True, True]
+        assert [s.paused for s in sensors] == [False, label > 833], label
+        assert logs == ([PAUSED_1667] if label > 833 else []), label
+    # After the refusals the board is still at 1667 Hz: a HELLO says sensor 1 is paused, why.
+    core.send(p.Configure(8, 4, 500))
+    core.take_output()
+    core.send(p.Hello())
+    hello_bytes = core.take_output()
+    hello = packets_of(hello_bytes)
+    assert [type(pk) for pk in hello] == [p.Info, p.Config, p.Sensor, p.Sensor, p.Log]
+    assert hello[3].paused and hello[4].text == PAUSED_1667
+    # Streaming: sensor 0 alone at 1667 Hz, its chip's samples in order; nothing of sensor 1.
+    core.send(p.Start())
+    core.run(1.0)
+    core.send(p.Stop())
+    wire = core.take_output()
+    packets = packets_of(wire)
+    assert not any(isinstance(pk, p.SamplesIndexed) for pk in packets)
+    start_log = next(pk.text for pk in packets if isinstance(pk, p.Log))
+    assert "(sensor 1 at 0x6B paused: the rate does not fit two sensors)" in start_log
+    decoder = LinkDecoder()
+    decoder.feed(hello_bytes + wire)  # CONFIG first: the rate of the samples
+    data = np.concatenate([b.accel_raw for b in decoder.take_blocks()])
+    assert len(data) > 0.9 * 1667
+    assert contains_run(chips[0].truth()["accel_raw"], data)
+    assert decoder.counters().seq_gaps == decoder.counters().crc_errors == 0
+    # Back at 833 Hz both stream again.
+    core.send(p.Configure(7, 4, 500), p.Start())
+    core.run(0.5)
+    core.send(p.Stop())
+    packets = packets_of(core.take_output())
+    assert [pk.paused for pk in packets if isinstance(pk, p.Sensor)] == [False, False]
+    assert sum(isinstance(pk, p.SamplesIndexed) for pk in packets) > 5
     core.close()
 
 
@@ -332,9 +389,14 @@ def test_sharing_rules_say_what_is_wrong(two_sensor_board) -> None:
         with pytest.raises(DeviceOpenError, match="no sensor 1 on this board: it has one sensor"):
             devices["lonely"].open()
         devices["zero"].close()
-        # Two sensors at 1667 Hz do not fit I2C at 400 kHz: the board refuses and says why.
-        with pytest.raises(SettingRefusedError, match="for 2 sensors"):
-            devices["fast"].open()
+        # 1667 Hz fits sensor 0 alone: it opens and streams; sensor 1 is paused, and opening
+        # it says so with the board's reason instead of giving an empty stream.
+        devices["fast"].open()
+        assert read_samples(devices["fast"], 100)
+        with pytest.raises(SettingRefusedError, match="is paused at 1667 Hz") as refused:
+            devices["one"].open()
+        assert refused.value.reason == board.pause_message() == PAUSED_1667
+        assert devices["fast"].counters.other_sensor_packets == 0
     finally:
         for device in devices.values():
             device.close()
@@ -366,8 +428,8 @@ def test_simulate_pty_serves_two_sensors() -> None:
     finally:
         stop.set()
         server.join(timeout=10)
-    refused = build_parser().parse_args(["simulate", "--pty", "--sensors", "2", "--odr", "1667"])
-    assert simulate_command(refused, io.StringIO()) == 2  # two sensors: up to 833 Hz on I2C
+    refused = build_parser().parse_args(["simulate", "--pty", "--sensors", "2", "--odr", "3333"])
+    assert simulate_command(refused, io.StringIO()) == 2  # not even one sensor: 1667 Hz on I2C
 
 
 @pytest.mark.parametrize(("baud", "i2c_hz", "highest_hz"), [
@@ -426,6 +488,55 @@ def test_the_app_opens_both_sensors_of_the_firmware_core_on_a_pty(firmware_lib) 
             assert contains_run(chips[address].truth()["accel_raw"], data), key
             other = 0x6B if address == 0x6A else 0x6A
             assert not contains_run(chips[other].truth()["accel_raw"], data[:20]), key
+    finally:
+        one.close()
+        zero.close()
+        board.close()
+
+
+def test_sensor_1_paused_while_it_streams_fails_its_reads_with_the_reason(
+        two_sensor_board) -> None:
+    """Another program reconfigures the board to a rate only sensor 0 fits: the device of
+    sensor 1 raises the board's reason instead of waiting on an empty stream."""
+    board = two_sensor_board
+    zero = create_device(f"serial://{board.port}")
+    one = create_device(f"serial://{board.port}?sensor=1")
+    try:
+        zero.open()
+        one.open()
+        assert read_samples(one, 50)
+        for command in (p.Stop(), p.Configure(8, 4, 250), p.Start()):
+            assert zero.send_command(command).ok
+        with pytest.raises(DeviceError, match=r"sensor 1 .* is paused at 1667 Hz") as raised:
+            read_samples(one, 10_000)
+        assert PAUSED_1667 in str(raised.value)
+        assert read_samples(zero, 500)  # sensor 0 goes on at 1667 Hz
+    finally:
+        one.close()
+        zero.close()
+
+
+def test_the_firmware_core_on_a_pty_refuses_a_paused_sensor_1(firmware_lib) -> None:
+    """The firmware's own core (serve.py --sensors 2): at 1667 Hz the app's sensor 0 streams,
+    ``?sensor=1`` is refused with the firmware's reason."""
+    from fwcore import PtyBoard
+
+    def core() -> FirmwareCore:
+        chips = [EmulatedLsm6dsox(SimOptions("static", seed=seed), address=address)
+                 for seed, address in ((6, 0x6A), (1006, 0x6B))]
+        return FirmwareCore(firmware_lib, SharedBus(*chips))
+
+    board = PtyBoard(core)
+    zero = create_device(f"serial://{board.port}?odr=1667")
+    one = create_device(f"serial://{board.port}?sensor=1&odr=1667")
+    try:
+        info = zero.open()
+        assert info.odr_nominal_hz == 1667
+        assert read_samples(zero, 300)
+        zero.close()
+        with pytest.raises(SettingRefusedError, match="paused") as refused:
+            one.open()
+        assert refused.value.reason == PAUSED_1667
     finally:
         one.close()
         zero.close()

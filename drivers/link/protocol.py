@@ -92,6 +92,8 @@ _U32 = struct.Struct("<I")
 _STATUS = struct.Struct("<BBB10I")
 _SENSOR = struct.Struct("<BBBBIBHIB")
 SENSOR_FLAG_ANSWERING = 0x01
+SENSOR_FLAG_PAUSED = 0x02
+"""SENSOR flags bit 1: the rate fits sensor 0 alone, so this sensor is not streamed."""
 
 STATUS_VERSION = 1
 RESET_CAUSES: dict[int, str] = {
@@ -508,6 +510,11 @@ class Sensor:
     @property
     def answering(self) -> bool:
         return bool(self.flags & SENSOR_FLAG_ANSWERING)
+
+    @property
+    def paused(self) -> bool:
+        """The board streams sensor 0 alone at this rate: this sensor sends no samples."""
+        return bool(self.flags & SENSOR_FLAG_PAUSED)
 
 
 # -- host to device -------------------------------------------------------------------------

@@ -70,6 +70,8 @@ static void send_info(fw_state *fw)
     send_reply(fw, link_encode_info(&info, fw->wire));
 }
 
+static void describe_pause(fw_state *fw, text *t);
+
 /* SENSOR, one per sensor (docs/protocol.md, 0x0A), after CONFIG; a one-sensor board sends
  * none, so its bytes stay exactly those of plain v1. */
 static void send_sensors(fw_state *fw)
@@ -83,9 +85,17 @@ static void send_sensors(fw_state *fw)
             i, fw->sensor_count, chip->address, chip->who_am_i,
             {lsm_odr_mhz(chip), chip->settings.accel_fs_g, chip->settings.gyro_fs_dps,
              lsm_tick_ns(chip)},
-            ok ? LINK_SENSOR_ANSWERING : 0u,
+            (uint8_t)((ok ? LINK_SENSOR_ANSWERING : 0u) |
+                      (i && fw->sensor1_paused ? LINK_SENSOR_PAUSED : 0u)),
         };
         send_reply(fw, link_encode_sensor(&sensor, fw->wire));
+    }
+    if (fw->sensor1_paused) {
+        char message[MESSAGE_SIZE];
+        text t;
+        text_init(&t, message, sizeof message);
+        describe_pause(fw, &t);
+        send_log(fw, LINK_LOG_INFO, message);
     }
 }
 
@@ -327,11 +337,17 @@ static uint32_t settling_samples_left(fw_state *fw, const lsm6dsox *chip)
     return produced >= needed ? 0u : needed - (uint32_t)produced;
 }
 
+/* Whether sensor 1 streams: it answers and the rate fits both sensors. */
+static bool sensor1_streams(const fw_state *fw)
+{
+    return fw->sensor1_ok && !fw->sensor1_paused;
+}
+
 /* Sensor 1's stream; a failure loses sensor 1 only. */
 static void start_stream1(fw_state *fw)
 {
     int16_t temperature = 0;
-    if (!fw->sensor1_ok)
+    if (!fw->sensor1_ok || fw->sensor1_paused)
         return;
     int err = lsm_fifo_reset(&fw->chip1, true);
     if (!err)
@@ -376,7 +392,7 @@ static void sensor_lost(fw_state *fw)
     fw->chip.configured = false;
     if (fw->streaming) {
         fifo_stream_flush(&fw->stream, now_us(fw), true, send_samples, fw);
-        if (fw->sensor1_ok)
+        if (sensor1_streams(fw))
             fifo_stream_flush(&fw->stream1, now_us(fw), true, send_samples1, fw);
         fw->streaming = false;
     }
@@ -477,6 +493,42 @@ bool fw_rate_fits_sensors(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, uint
     return true;
 }
 
+/* A rate that fits sensor 0 alone pauses sensor 1 (docs/protocol.md, "Several sensors on one
+ * board"): v1 hosts keep every rate a one-sensor board has. */
+static void update_pause(fw_state *fw)
+{
+    fw->sensor1_paused = fw->sensor_count > 1 &&
+        !fw_rate_fits_sensors(fw->chip.settings.odr_code, fw->identity.baud,
+                              fw->identity.i2c_hz, fw->sensor_count, NULL, 0);
+}
+
+/* "sensor 1 (0x6B) paused: 1667 Hz does not fit two sensors on I2C 400 kHz (highest 833 Hz)" */
+static void describe_pause(fw_state *fw, text *t)
+{
+    uint8_t code = fw->chip.settings.odr_code, highest = code;
+    uint32_t baud = fw->identity.baud, i2c_hz = fw->identity.i2c_hz;
+    while (highest > LSM_ODR_CODE_MIN &&
+           !fw_rate_fits_sensors(highest, baud, i2c_hz, fw->sensor_count, NULL, 0))
+        highest--;
+    text_str(t, "sensor 1 (");
+    text_hex8(t, fw->chip1.address);
+    text_str(t, ") paused: ");
+    text_mhz(t, lsm_odr_label_mhz(code));
+    text_str(t, " Hz does not fit two sensors on ");
+    if (!fw_rate_fits_sensors(code, 0, i2c_hz, fw->sensor_count, NULL, 0)) {
+        text_str(t, "I2C ");
+        text_u32(t, i2c_hz / 1000u);
+        text_str(t, " kHz");
+    } else {
+        text_str(t, "the UART at ");
+        text_u32(t, baud);
+        text_str(t, " baud");
+    }
+    text_str(t, " (highest ");
+    text_mhz(t, lsm_odr_label_mhz(highest));
+    text_str(t, " Hz)");
+}
+
 /* ---- commands */
 
 static bool check_length(fw_state *fw, uint8_t command, size_t length, size_t expected)
@@ -533,8 +585,8 @@ static uint8_t check_configure(fw_state *fw, const lsm_settings *s, text *t)
         text_str(t, "streaming: send STOP first");
         return LINK_ACK_BUSY;
     }
-    if (!fw_rate_fits_sensors(s->odr_code, fw->identity.baud, fw->identity.i2c_hz,
-                              fw->sensor_count, t->buf, t->size)) {
+    /* The rule of a one-sensor board: a rate only sensor 0 fits pauses sensor 1. */
+    if (!fw_rate_fits(s->odr_code, fw->identity.baud, fw->identity.i2c_hz, t->buf, t->size)) {
         t->length = strlen(t->buf);
         return LINK_ACK_BAD_ARGUMENT;
     }
@@ -555,6 +607,7 @@ static void on_configure(fw_state *fw, const uint8_t *payload)
             fw->chip.settings = previous;
             status = LINK_ACK_SENSOR_ERROR;
         }
+        update_pause(fw);
     }
     send_ack(fw, LINK_CONFIGURE, status, message);
     send_config(fw);
@@ -591,9 +644,11 @@ static void on_start(fw_state *fw)
     text_str(&t, " dps from the LSM6DSOX at ");
     text_hex8(&t, fw->chip.address);
     if (fw->sensor_count > 1) {
-        text_str(&t, fw->sensor1_ok ? " and, as sensor 1, at " : " (sensor 1 at ");
+        text_str(&t, sensor1_streams(fw) ? " and, as sensor 1, at " : " (sensor 1 at ");
         text_hex8(&t, fw->chip1.address);
-        if (!fw->sensor1_ok)
+        if (fw->sensor1_paused)
+            text_str(&t, " paused: the rate does not fit two sensors)");
+        else if (!fw->sensor1_ok)
             text_str(&t, " does not answer)");
     }
     send_log(fw, LINK_LOG_INFO, message);
@@ -604,7 +659,7 @@ static void on_stop(fw_state *fw)
 {
     if (fw->streaming) {
         fifo_stream_flush(&fw->stream, now_us(fw), true, send_samples, fw);
-        if (fw->sensor1_ok)
+        if (sensor1_streams(fw))
             fifo_stream_flush(&fw->stream1, now_us(fw), true, send_samples1, fw);
         fw->streaming = false;
         if (lsm_fifo_reset(&fw->chip, false))
@@ -833,11 +888,11 @@ void fw_poll(fw_state *fw)
             sensor_lost(fw);
             return;
         }
-        if (fw->sensor1_ok && !drain_fifo(fw, 1))
+        if (sensor1_streams(fw) && !drain_fifo(fw, 1))
             sensor1_lost(fw);
     }
     fifo_stream_flush(&fw->stream, now_us(fw), false, send_samples, fw);
-    if (fw->sensor1_ok)
+    if (sensor1_streams(fw))
         fifo_stream_flush(&fw->stream1, now_us(fw), false, send_samples1, fw);
     report_tx_drops(fw);
     if ((uint32_t)(now_us(fw) - fw->last_status_us) >= FW_STATUS_INTERVAL_US)

@@ -64,6 +64,7 @@ typedef struct fw_state {
     lsm6dsox chip1;
     fifo_stream stream1;
     bool sensor1_ok;
+    bool sensor1_paused;  /* the rate fits sensor 0 alone: sensor 1 is not streamed */
     uint8_t sensor_count; /* 1, or 2 when the second answered at power-on */
     uint32_t last_retry1_us;
     bool streaming;

@@ -35,6 +35,8 @@ enum {
 
 #define LINK_SENSOR_PAYLOAD 16u
 #define LINK_SENSOR_ANSWERING 0x01u
+/* Paused: the rate fits sensor 0 alone, so this sensor is configured but not streamed. */
+#define LINK_SENSOR_PAUSED 0x02u
 
 /* Host to device. */
 enum {
@@ -126,7 +128,7 @@ typedef struct link_sensor {
     uint8_t address;
     uint8_t who_am_i;
     link_config config;
-    uint8_t flags; /* LINK_SENSOR_ANSWERING */
+    uint8_t flags; /* LINK_SENSOR_ANSWERING, LINK_SENSOR_PAUSED */
 } link_sensor;
 
 /* Frame a packet of `type` + `payload` (at most LINK_MAX_PAYLOAD bytes). */

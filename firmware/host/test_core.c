@@ -655,12 +655,13 @@ static void two_tx_write(void *ctx, const uint8_t *data, size_t n)
 
 typedef struct two_streams {
     int packets[2], samples[2], sensors, acks_refused, logs;
-    uint8_t sensor_address[2], sensor_count;
+    uint8_t sensor_address[2], sensor_count, sensor_flags[2];
     bool in_order[2];      /* seq +1 per packet, per sensor */
     bool consecutive[2];   /* gyro x (the slot) +1 per sample, per sensor */
     bool right_chip[2];    /* sensor 0's slots below 5000, sensor 1's from 5000 */
     int32_t last_seq[2], last_slot[2];
     char refusal[160];
+    char log[160]; /* the last LOG's text */
 } two_streams;
 
 static void read_two(const two_chips *bus, two_streams *out)
@@ -681,6 +682,7 @@ static void read_two(const two_chips *bus, two_streams *out)
             out->sensors++;
             out->sensor_count = payload[1];
             out->sensor_address[payload[0]] = payload[2];
+            out->sensor_flags[payload[0]] = payload[15];
         } else if (type == LINK_ACK && length >= 2 && payload[1] != LINK_ACK_OK) {
             out->acks_refused++;
             size_t n = length - 2 < sizeof out->refusal - 1 ? length - 2 : sizeof out->refusal - 1;
@@ -688,6 +690,9 @@ static void read_two(const two_chips *bus, two_streams *out)
             out->refusal[n] = 0;
         } else if (type == LINK_LOG) {
             out->logs++;
+            size_t n = length - 1 < sizeof out->log - 1 ? length - 1 : sizeof out->log - 1;
+            memcpy(out->log, payload + 1, n);
+            out->log[n] = 0;
         } else if (type == LINK_SAMPLES || type == LINK_SAMPLES_INDEXED) {
             int c = type == LINK_SAMPLES_INDEXED;
             const uint8_t *p = payload + c;
@@ -739,20 +744,62 @@ static void test_two_sensors(void)
     CHECK(seen.sensors == 2 && seen.sensor_count == 2);
     CHECK(seen.sensor_address[0] == 0x6A && seen.sensor_address[1] == 0x6B);
 
-    /* 1667 Hz does not fit two sensors on I2C at 400 kHz; 833 Hz does. */
+    CHECK(seen.sensor_flags[0] == LINK_SENSOR_ANSWERING);
+    CHECK(seen.sensor_flags[1] == LINK_SENSOR_ANSWERING && seen.logs == 0);
+
+    /* 1667 Hz fits sensor 0 alone (I2C at 400 kHz): accepted, sensor 1 paused and a LOG says
+     * why; sensor 0 streams at 1667 Hz, sensor 1 sends nothing. */
     bus.tx_length = 0;
     uint8_t configure[4] = {8, 4, 0xFA, 0x00};
     fw_receive(&fw, wire, link_frame(LINK_CONFIGURE, configure, 4, wire));
     read_two(&bus, &seen);
-    CHECK(seen.acks_refused == 1 && strstr(seen.refusal, "for 2 sensors") != NULL);
-    CHECK(strstr(seen.refusal, "highest ODR 833 Hz") != NULL);
-    CHECK(seen.sensors == 2); /* CONFIG and SENSOR follow the ACK, unchanged */
-    CHECK(bus.regs[1][LSM_CTRL1_XL] == 0x48);
+    CHECK(seen.acks_refused == 0 && fw.sensor1_paused);
+    CHECK(seen.sensors == 2 && seen.sensor_flags[0] == LINK_SENSOR_ANSWERING);
+    CHECK(seen.sensor_flags[1] == (LINK_SENSOR_ANSWERING | LINK_SENSOR_PAUSED));
+    CHECK(seen.logs == 1 && strcmp(seen.log, "sensor 1 (0x6B) paused: 1667 Hz does not fit two "
+                                             "sensors on I2C 400 kHz (highest 833 Hz)") == 0);
+    CHECK(bus.regs[0][LSM_CTRL1_XL] == 0x88);
+    bus.tx_length = 0;
+    fw_receive(&fw, wire, link_frame(LINK_START, NULL, 0, wire));
+    for (int i = 0; i < 200; i++) {
+        bus.now_us += FW_POLL_INTERVAL_US;
+        fw_poll(&fw);
+    }
+    fw_receive(&fw, wire, link_frame(LINK_STOP, NULL, 0, wire));
+    read_two(&bus, &seen);
+    CHECK(seen.packets[0] > 10 && seen.samples[0] > 500 && seen.packets[1] == 0);
+    int packets_alone = seen.packets[0];
+    link_status status;
+    fw_status(&fw, &status);
+    CHECK(status.samples_sent == (uint32_t)seen.samples[0]);
+    uint32_t sent_alone = status.samples_sent;
+    CHECK(seen.in_order[0] && seen.consecutive[0] && seen.right_chip[0]);
+    CHECK(seen.logs == 1 && strstr(seen.log, "(sensor 1 at 0x6B paused: the rate does not fit "
+                                             "two sensors)") != NULL);
+    /* HELLO while paused: SENSOR 1 says so, and the LOG follows. */
+    bus.tx_length = 0;
+    fw_receive(&fw, wire, link_frame(LINK_HELLO, NULL, 0, wire));
+    read_two(&bus, &seen);
+    CHECK(seen.sensor_flags[1] == (LINK_SENSOR_ANSWERING | LINK_SENSOR_PAUSED));
+    CHECK(seen.logs == 1 && strstr(seen.log, "sensor 1 (0x6B) paused") != NULL);
+    /* 3333 Hz does not fit even sensor 0: refused as on a one-sensor board, nothing changes. */
+    bus.tx_length = 0;
+    configure[0] = 9;
+    fw_receive(&fw, wire, link_frame(LINK_CONFIGURE, configure, 4, wire));
+    read_two(&bus, &seen);
+    CHECK(seen.acks_refused == 1 && strstr(seen.refusal, "highest ODR 1667 Hz") != NULL);
+    CHECK(strstr(seen.refusal, "sensors") == NULL && fw.chip.settings.odr_code == 8);
+    /* 833 Hz fits both: sensor 1 streams again, no LOG. */
+    bus.tx_length = 0;
     configure[0] = 7;
     fw_receive(&fw, wire, link_frame(LINK_CONFIGURE, configure, 4, wire));
     CHECK(bus.regs[0][LSM_CTRL1_XL] == 0x78 && bus.regs[1][LSM_CTRL1_XL] == 0x78);
+    read_two(&bus, &seen);
+    CHECK(!fw.sensor1_paused && seen.logs == 0);
+    CHECK(seen.sensor_flags[1] == LINK_SENSOR_ANSWERING);
 
-    /* Stream: both sensors' packets, each with its own sequence numbers from 0. */
+    /* Stream: both sensors' packets, each with its own sequence numbers (sensor 1's from 0,
+     * sensor 0's going on from its run alone). */
     bus.tx_length = 0;
     fw_receive(&fw, wire, link_frame(LINK_START, NULL, 0, wire));
     for (int i = 0; i < 400; i++) {
@@ -765,10 +812,10 @@ static void test_two_sensors(void)
     CHECK(seen.in_order[0] && seen.in_order[1]);
     CHECK(seen.consecutive[0] && seen.consecutive[1]);
     CHECK(seen.right_chip[0] && seen.right_chip[1]);
-    CHECK(seen.last_seq[0] == seen.packets[0] - 1 && seen.last_seq[1] == seen.packets[1] - 1);
-    link_status status;
+    CHECK(seen.last_seq[0] == packets_alone + seen.packets[0] - 1);
+    CHECK(seen.last_seq[1] == seen.packets[1] - 1);
     fw_status(&fw, &status);
-    CHECK(status.samples_sent == (uint32_t)(seen.samples[0] + seen.samples[1]));
+    CHECK(status.samples_sent - sent_alone == (uint32_t)(seen.samples[0] + seen.samples[1]));
 
     /* Sensor 1 goes silent: a LOG, sensor 0 streams on; back, sensor 1 streams again. */
     bus.tx_length = 0;
