@@ -9,7 +9,9 @@ LSM6DSOX really runs at (6666.67 Hz / ODR_Coeff, trimmed: "104 Hz" is 104.17 Hz)
 the rate the board reports, and the board clock against the computer's; then |a| at rest (0.5 g
 or 2 g is a look-alike part answering WHO_AM_I 0x6C, such as an LSM6DSO32: a warning); then the
 sensor's self-test (it must lie still). Rates the board refuses (its link or sensor bus cannot carry
-them) are listed with its reason; they are not failures. Last, the board's own health counters
+them) are listed with its reason; they are not failures. On a board with two sensors a rate
+that fits sensor 0 alone is checked as usual, with the board's note that sensor 1 is paused
+there. Last, the board's own health counters
 (STATUS) and how they rose during the check: a FIFO overrun, dropped or damaged bytes, a stuck
 I2C bus or a watchdog reset fail it; I2C retries are reported. Exit status 0 when everything
 passed.
@@ -87,6 +89,8 @@ class RateResult:
     board's tick reports."""
     reported_hz: float = 0.0
     """The rate the board reports (CONFIG)."""
+    paused: str = ""
+    """The board's LOG when it paused another sensor at this rate (it fits sensor 0 alone)."""
 
     @property
     def rate_ppm(self) -> float:
@@ -161,12 +165,14 @@ def check_rate(port: str, odr_hz: float, seconds: float) -> RateResult:
         tick_ns = float(info.extra.get("tick_ns") or 25_000)
         real_hz = lsm6dsox.real_odr_hz(odr_hz) * 25_000.0 / tick_ns
         measured_hz = (len(t) - 1) / device_span if device_span > 0 else 0.0
+        paused = next((entry.text for entry in device.recent_logs()
+                       if entry.text.startswith("sensor ") and " paused: " in entry.text), "")
         return RateResult(
             odr_hz, samples=len(t), expected=duration * info.odr_hz,
             lost=counters.lost_samples, seq_gaps=counters.seq_gaps,
             crc_errors=counters.crc_errors + counters.undecodable, worst_step_error=worst,
             clock_ppm=clock_ppm, measured_hz=measured_hz, real_hz=real_hz,
-            reported_hz=info.odr_hz,
+            reported_hz=info.odr_hz, paused=paused,
         )
     finally:
         device.close()
@@ -280,6 +286,8 @@ def check_board(port: str, rates: list[float], seconds: float, self_test: bool,
               f"{result.clock_ppm:>+9.0f}  {'ok' if result.passed else 'FAIL'}", file=out)
         if result.rate_problem():
             print(f"         rate: {result.rate_problem()}", file=out)
+        if result.paused:
+            print(f"         note: {result.paused}", file=out)
 
     device = SerialLinkDevice(f"serial://{port}")
     try:

@@ -94,6 +94,8 @@ def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
     if args.sensors > 1:
         print(f"Sensor 1 (0x6B, seed {args.seed + 1000}): inclinometer --device "
               f"'serial://{board.port}?sensor=1'", file=out)
+        if board.sensor1_paused:
+            print(f"Note: {board.pause_message()}; sensor 0 streams alone.", file=out)
     out.flush()
     stop = stop or threading.Event()
     if threading.current_thread() is threading.main_thread():

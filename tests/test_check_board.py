@@ -48,6 +48,26 @@ def test_the_firmware_core_passes_and_says_which_rates_it_refuses(firmware_lib) 
     assert report.rstrip().endswith("PASS: the board works.")
 
 
+def test_a_two_sensor_board_passes_1667_hz_with_sensor_1_paused() -> None:
+    """An IKS01A3 with an adapter: the second chip costs no rate; the board says it paused it."""
+    board = EmulatedNucleo("static", seed=3, sensors=2, sensor_bus_hz=400_000)
+    out = io.StringIO()
+    try:
+        passed = check_board(board.port, [1667.0, 3333.0], 0.5, False, out)
+    finally:
+        board.close()
+    report = out.getvalue()
+    assert passed, report
+    rows = report.splitlines()
+    lines = {line.split()[0]: line for line in rows if line.strip()}
+    assert lines["1667"].endswith("ok")
+    notes = [line.strip() for line in rows if line.strip().startswith("note:")]
+    assert notes == ["note: sensor 1 (0x6B) paused: 1667 Hz does not fit two sensors on I2C "
+                     "400 kHz (highest 833 Hz)"]
+    assert rows.index("         " + notes[0]) == rows.index(lines["1667"]) + 1
+    assert "refused by the board" in lines["3333"] and "sensors" not in lines["3333"]
+
+
 def test_lost_packets_fail_the_check() -> None:
     board = EmulatedNucleo("static", seed=3, faults=NucleoFaults(drop_seqs=frozenset({20, 21})))
     out = io.StringIO()
