@@ -388,7 +388,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     odr = args.odr or MODES[args.mode]
     command = " ".join([Path(sys.executable).name, *sys.argv])
     print(f"soak: mode {args.mode}, {args.minutes:g} min, load {'on' if args.load else 'off'}")
-    print(machine_line(), flush=True)
+    args.machine_start = machine_line()
+    print(args.machine_start, flush=True)
     busy = []
     board = None
     folder = tempfile.TemporaryDirectory(prefix="soak-", dir=args.dir)
@@ -550,7 +551,7 @@ def report(args: argparse.Namespace, command: str, url: str, label_hz: float, tr
     print("=" * 78, flush=True)
     return {
         "command": command, "mode": args.mode, "minutes": args.minutes, "load": args.load,
-        "machine": machine_line(), "url": url, "wall_s": wall_s,
+        "machine": args.machine_start, "machine_end": machine_line(), "url": url, "wall_s": wall_s,
         "rates": {"label_hz": label_hz, "reported_hz": tally.rate_hz, "true_hz": true_rate,
                   "measured_hz": measured},
         "rss": rss_rows,
