@@ -10,6 +10,7 @@ has its counters stored at the start and, once the file is closed, at the end.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import threading
@@ -19,8 +20,8 @@ from typing import Any
 
 from app.core.alarms import AlarmEvent, AlarmMonitor, save_alarm_events
 from app.core.calibration import SensorCalibration
-from app.core.filters import DEFAULT_FILTER
-from app.core.pipeline import Pipeline
+from app.core.filters import DEFAULT_FILTER, create_filter
+from app.core.pipeline import Pipeline, require_online
 from app.core.recording.errors import RecordingError
 from app.core.recording.format import KEY_REFERENCE, recording_metadata, simulator_metadata
 from app.core.recording.writer import RecordingWriter, WriterStatus
@@ -114,6 +115,14 @@ def record_device(
     ``alarms`` watch the filtered angles of every block; ``on_alarms`` gets each block's
     crossings as they happen, and the file stores them all when it is closed.
     """
+    # Load the filters' compiled kernels before the device streams: the first block would
+    # otherwise wait for them (0.3 s from numba's cache, seconds on a cold one) while the
+    # sensor's FIFO overflows (benchmarks/soak-results: three of four losses were this).
+    for name in {pipeline.filter.name if pipeline else filter_name or DEFAULT_FILTER,
+                 *(comparisons or ())}:
+        with contextlib.suppress(ValueError):  # unknown or offline: refused further on
+            require_online(name)
+            create_filter(name).warm_up()
     info = device.open()
     try:
         if pipeline is None:
