@@ -10,6 +10,9 @@
 ``inclinometer check-board PORT``   put a NUCLEO board through its paces (app/cli_check.py)
 ``inclinometer calibrate|allan|calibrate-temperature ...``
                                     the calibration lab, headless (app/cli_calibration.py)
+``inclinometer joint A.csv B.csv --out J.csv``
+                                    a hinge's angle between two sensors (app/cli_joint.py)
+``inclinometer record-arm URL DIR`` a simulated measuring arm, one recording per sensor
 ``inclinometer --version``
 """
 
@@ -31,6 +34,7 @@ from app.cli_calibration import CALIBRATION_COMMANDS, add_calibration_parsers, c
 from app.cli_check import add_check_parser, check_command
 from app.cli_diagnose import add_diagnose_parser, diagnose_command
 from app.cli_faults import add_evaluate_faults_parser, evaluate_faults_command
+from app.cli_joint import add_joint_parser, joint_command, record_arm_command
 from app.cli_recording import (
     add_param_argument,
     add_recording_parsers,
@@ -69,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_diagnose_parser(commands)
     add_evaluate_faults_parser(commands)
     add_calibration_parsers(commands)
+    add_joint_parser(commands)
     return parser
 
 
@@ -450,6 +455,10 @@ def main(argv: list[str] | None = None) -> int:
         return diagnose_command(args)
     if args.command == "evaluate-faults":
         return evaluate_faults_command(args)
+    if args.command == "joint":
+        return joint_command(args)
+    if args.command == "record-arm":
+        return record_arm_command(args)
     if args.command in CALIBRATION_COMMANDS:
         return calibration_command(args)
     if args.filter is not None:

@@ -2,7 +2,8 @@
 
 URL: ``sim://SCENARIO?key=value&...``, for example ``sim://wobble?odr=416&seed=7``.
 
-Scenarios (:data:`SCENARIOS`): static, slow-tilt, wobble, vibration, translation, tour,
+Scenarios (:data:`SCENARIOS`): static, slow-tilt, wobble, vibration, translation, handheld,
+strokes, arm (a measuring arm: one stream per ``sensor=K``), tour,
 interactive. Options every scenario accepts:
 
 - ``odr`` Hz, snapped to the nearest LSM6DSOX rate 12.5 ... 6667 (default 104); the chip runs
@@ -47,7 +48,7 @@ from app.core.samples import RawBlock, ScaleFactors
 from app.core.version import __version__
 from drivers import lsm6dsox
 from drivers.base import Device, DeviceDescriptor, DeviceInfo
-from drivers.errors import DeviceError, DeviceIOError
+from drivers.errors import DeviceError, DeviceIOError, DeviceUrlError
 from drivers.sim.error_model import (
     REFERENCE_TEMP_DEGC,
     STREAM_SCENARIO,
@@ -96,13 +97,16 @@ class SimulatedDevice(Device):
     ) -> None:
         super().__init__(url)
         self.options: SimOptions = parse_sim_url(url, overrides)
-        unit = UnitErrors.draw(self.options.seed)
+        try:
+            self.scenario: Scenario = self._new_scenario()
+        except ValueError as exc:  # parameters that contradict each other
+            raise DeviceUrlError(f"{url}: {exc}") from None
+        unit = self.scenario.unit_errors(self.options.seed)
         if self.options.warmup is not None:
             rise, tau = self.options.warmup
             unit = replace(unit, self_heating_degc=rise, self_heating_time_constant_s=tau)
         self.unit_errors: UnitErrors = unit if self.options.errors else unit.without_errors()
-        self.unique_id = unique_id_for_seed(self.options.seed)
-        self.scenario: Scenario = self._new_scenario()
+        self.unique_id = unique_id_for_seed(unit.seed)
         self._clock = clock
         self._stop = threading.Event()
         self._generation_lock = threading.Lock()

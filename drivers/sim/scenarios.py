@@ -14,9 +14,10 @@ for the user and ``cls.parameters`` lists the URL options of that scenario.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
@@ -24,6 +25,7 @@ import numpy as np
 from app.core import quaternion as quat
 from app.core.orientation import quaternion_from_roll_pitch
 from app.core.samples import STANDARD_GRAVITY_M_S2
+from drivers.sim.error_model import GYRO_BIAS_LIMIT_RAD_S, UnitErrors
 
 _GOLDEN_ANGLE_RAD = math.pi * (3.0 - math.sqrt(5.0))
 _TWO_PI = 2.0 * math.pi
@@ -425,6 +427,10 @@ class Scenario(ABC):
     def motion(self, t: np.ndarray) -> Motion:
         """The true motion at true times ``t`` (N,), seconds."""
 
+    def unit_errors(self, seed: int) -> UnitErrors:
+        """The simulated unit that measures this motion for the device seed ``seed``."""
+        return UnitErrors.draw(seed)
+
     def orientation(self, t: np.ndarray) -> np.ndarray:
         """Sensor-to-earth quaternions (N, 4) at times ``t``."""
         return self.motion(np.asarray(t, dtype=np.float64)).orientation_quat
@@ -766,6 +772,184 @@ class Handheld(_HandScenario):
     JITTER_DPS = (5.0, 15.0)
 
 
+def _random_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A uniformly random unit quaternion (w >= 0)."""
+    return quat.normalize(rng.normal(size=4))
+
+
+def _random_unit(rng: np.random.Generator) -> np.ndarray:
+    v = rng.normal(size=3)
+    return v / np.linalg.norm(v)
+
+
+class Arm(Scenario):
+    """A hand-held chain of ``links`` links joined by hinges, one sensor on each link.
+
+    The base link is moved like :class:`Handheld` (tilts of tens of degrees, hand translation,
+    rest breaks; ``base`` scales its rotation, ``level`` its speed). Each hinge ``k`` (between
+    links ``k-1`` and ``k``) turns about a random axis fixed in link ``k-1``, through a smooth
+    random angle in [``joint_min``, ``joint_max``] (``mid + half * tanh(s(t))``, ``s`` a sum of
+    sines up to ``joint_band`` Hz). Each sensor is mounted on its link in a random orientation,
+    so the hinge axis is unknown in every sensor's frame. Sensors sit away from the hinges
+    (links 0.2-0.35 m long), so they feel the centripetal and tangential accelerations of the
+    joints as well as the hand's.
+
+    ``sensor`` picks which link's sensor this stream is. The arm itself (motion, axes,
+    mountings) depends on the seed only, so streams of one seed with different ``sensor`` are
+    one consistent arm. Each sensor is its own simulated unit (:meth:`unit_errors`: its own
+    biases, noise and id), but all share the arm's sample clock, as one board reading every
+    chip on one trigger would. Gyroscope turn-on biases are drawn within +-``bias`` dps; with
+    ``calibrated`` (the default) the units have no scale or cross-axis errors and a residual
+    accelerometer bias of at most 2 mg, as after the app's six-face calibration (the
+    bias, its drift and temperature dependence, noise and quantisation stay).
+    """
+
+    name = "arm"
+    description = "sensors on a hand-held chain of links joined by hinges (measuring arm)"
+    parameters: ClassVar[dict[str, Param]] = {
+        "links": Param(2, 2, 6, "number of links, each carrying one sensor"),
+        "sensor": Param(0, 0, 5, "which link's sensor this stream is (0: the base)"),
+        "level": Param(0.5, 0.0, 1.0, "speed of the hand: 0 like BROAD's slow trials, 1 fast"),
+        "base": Param(1.0, 0.0, 1.0, "scale of the base's rotation (small: poorly excited axes)"),
+        "joint_min": Param(10.0, 0.0, 180.0, "smallest joint angle, degrees"),
+        "joint_max": Param(130.0, 0.0, 180.0, "largest joint angle, degrees"),
+        "joint_band": Param(0.5, 0.02, 3.0, "highest frequency of the joint motion, Hz"),
+        "bias": Param(0.5, 0.0, 5.0, "largest gyroscope turn-on bias per axis, dps"),
+        "calibrated": Param(True, doc="1: units as after a six-face calibration (no scale or "
+                            "cross-axis errors, accelerometer bias within +-2 mg); 0: raw units "
+                            "(1 % scale and cross-axis errors, +-20 mg)"),
+        "move": Param(30.0, 3.0, 3600.0, "seconds of base motion between rest breaks"),
+        "rest": Param(10.0, 0.0, 3600.0, "seconds of each rest break of the base"),
+    }
+    accel_fs_g = 8
+    gyro_fs_dps = 2000
+    LINK_LENGTH_M: ClassVar[tuple[float, float]] = (0.2, 0.35)
+    CALIBRATED_ACCEL_BIAS: ClassVar[float] = 0.1
+    """Accelerometer bias left by a calibration, as a fraction of the raw unit's (2 of 20 mg)."""
+    LEVER_STEP_S: ClassVar[float] = 5e-4
+    """Step of the central difference that gives the lever arms' acceleration."""
+
+    def __init__(self, rng: np.random.Generator | None = None, **params: float) -> None:
+        super().__init__(rng, **params)
+        p = self.params
+        links = int(p["links"])
+        if not 0 <= int(p["sensor"]) < links:
+            raise ValueError(f"arm: sensor={p['sensor']} but the arm has links 0 to {links - 1}")
+        if not p["joint_min"] < p["joint_max"]:
+            raise ValueError("arm: joint_min must be below joint_max")
+        rng = self.rng
+        level = float(p["level"])
+        rotation = np.radians(_between(*Handheld.ROTATION_DEG, level)) * float(p["base"])
+        band = _between(Handheld.BAND_HZ[0], Handheld.BAND_HZ[1], level)
+        rotation_band = _between(Handheld.ROTATION_BAND_HZ[0], Handheld.ROTATION_BAND_HZ[1], level)
+        self.hand = HandMotion(
+            rng,
+            band_hz=(float(band[0]), float(band[1])),
+            accel_rms=np.full(3, float(_between(*Handheld.ACCEL_RMS, level)) / math.sqrt(3.0)),
+            rotation_band_hz=(float(rotation_band[0]), float(rotation_band[1])),
+            rotation=np.maximum(rotation, 1e-6),
+            coupling=0.0,
+            jitter=np.full(3, math.radians(float(_between(*Handheld.JITTER_DPS, level)))),
+            breaks=RestBreaks(p["move"], p["rest"]),
+        )
+        self.base_quat = quaternion_from_roll_pitch(0.0, 0.0, float(rng.uniform(-180.0, 180.0)))
+        self.links = links
+        self.sensor = int(p["sensor"])
+        self.axes = np.array([_random_unit(rng) for _ in range(links - 1)])
+        """(links-1, 3) hinge k's axis in the frame of link k-1 (and of link k)."""
+        self.mountings = np.array([_random_rotation(rng) for _ in range(links)])
+        """(links, 4) sensor k's frame in link k's frame (sensor-to-link quaternions)."""
+        lengths = rng.uniform(*self.LINK_LENGTH_M, size=links)
+        self.hinge_offsets = np.array([_random_unit(rng) * length for length in lengths])
+        """(links, 3) from joint k (the grip for k = 0) to joint k+1, link k's frame, m."""
+        self.sensor_offsets = np.array(
+            [o * rng.uniform(0.3, 0.7) + 0.02 * rng.normal(size=3) for o in self.hinge_offsets]
+        )
+        self._joint_mid = math.radians(0.5 * (p["joint_min"] + p["joint_max"]))
+        self._joint_half = math.radians(0.5 * (p["joint_max"] - p["joint_min"]))
+        self._joint_sines = [
+            _flat_band(rng, 6, (0.03, float(p["joint_band"])), np.full(3, 0.9), 0)
+            for _ in range(links - 1)
+        ]
+        self._joint_offsets = rng.normal(scale=0.4, size=links - 1)
+
+    # -- the truth a joint-angle estimator seeks ------------------------------------------------
+    def joint_angles(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, links-1) true joint angles (rad) and their rates (rad/s) at times ``t``."""
+        t = np.asarray(t, dtype=np.float64)
+        angles = np.empty((len(t), self.links - 1))
+        rates = np.empty_like(angles)
+        for k, sines in enumerate(self._joint_sines):
+            s, s_dot = sines.evaluate(t)
+            th = np.tanh(s[:, 0] + self._joint_offsets[k])
+            angles[:, k] = self._joint_mid + self._joint_half * th
+            rates[:, k] = self._joint_half * (1.0 - th * th) * s_dot[:, 0]
+        return angles, rates
+
+    def joint_angles_deg(self, t: np.ndarray) -> np.ndarray:
+        """(N, links-1) true joint angles in degrees."""
+        return np.degrees(self.joint_angles(t)[0])
+
+    def axis_in_sensor(self, joint: int, sensor: int) -> np.ndarray:
+        """Hinge ``joint``'s axis (1 ... links-1) in sensor ``sensor``'s frame."""
+        if sensor not in (joint - 1, joint):
+            raise ValueError(f"hinge {joint} joins sensors {joint - 1} and {joint}, not {sensor}")
+        return quat.rotate_inverse(self.mountings[sensor], self.axes[joint - 1])
+
+    def unit_errors(self, seed: int) -> UnitErrors:
+        """Sensor ``sensor``'s own unit (biases within +-``bias`` dps) on the arm's clock."""
+        digest = hashlib.blake2b(f"arm:{seed}:{self.sensor}".encode(), digest_size=7).digest()
+        unit = UnitErrors.draw(int.from_bytes(digest, "big"))
+        clock = UnitErrors.draw(seed)
+        scale = math.radians(float(self.params["bias"])) / GYRO_BIAS_LIMIT_RAD_S
+        unit = replace(
+            unit, gyro_bias_rad_s=unit.gyro_bias_rad_s * scale,
+            freq_fine=clock.freq_fine, clock_residual=clock.clock_residual,
+        )
+        if not self.params["calibrated"]:
+            return unit
+        zero, none = np.zeros(3), np.zeros((3, 3))
+        return replace(
+            unit, accel_scale_error=zero, accel_cross_axis=none, gyro_scale_error=zero,
+            gyro_cross_axis=none, accel_scale_tc_per_degc=zero, gyro_scale_tc_per_degc=zero,
+            accel_bias_m_s2=unit.accel_bias_m_s2 * self.CALIBRATED_ACCEL_BIAS,
+        )
+
+    # -- motion ---------------------------------------------------------------------------------
+    def _chain(
+        self, t: np.ndarray, with_rate: bool
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """The sensor's link's orientation (N, 4), body rate (N, 3) or None, and the lever from
+        the grip to the sensor (N, 3, earth frame)."""
+        q_hand, rate, _ = self.hand.evaluate(t)
+        q = quat.multiply(self.base_quat, q_hand)
+        angles, angle_rates = self.joint_angles(t)
+        lever = np.zeros((len(t), 3))
+        for k in range(self.sensor):
+            lever += quat.rotate(q, self.hinge_offsets[k])
+            axis = self.axes[k]
+            q_joint = quat.from_axis_angle(axis, angles[:, k])
+            if with_rate:
+                q, rate = compose(q, rate, q_joint, angle_rates[:, k, None] * axis)
+            else:
+                q = quat.multiply(q, q_joint)
+        lever += quat.rotate(q, self.sensor_offsets[self.sensor])
+        return q, (rate if with_rate else None), lever
+
+    def motion(self, t: np.ndarray) -> Motion:
+        t = np.asarray(t, dtype=np.float64)
+        q_link, rate, lever = self._chain(t, True)
+        h = self.LEVER_STEP_S
+        lever_plus = self._chain(t + h, False)[2]
+        lever_minus = self._chain(t - h, False)[2]
+        accel = self.hand.evaluate(t)[2] + (lever_plus - 2.0 * lever + lever_minus) / (h * h)
+        mounting = self.mountings[self.sensor]
+        assert rate is not None
+        q_sensor, rate_sensor = compose(q_link, rate, np.broadcast_to(mounting, q_link.shape),
+                                        np.zeros_like(rate))
+        return Motion(q_sensor, rate_sensor, accel)
+
+
 class Tour(Scenario):
     """The six calibration orientations in turn, each held still, with smooth turns between."""
 
@@ -908,7 +1092,8 @@ class Interactive(Scenario):
 SCENARIOS: dict[str, type[Scenario]] = {
     cls.name: cls
     for cls in (
-        Static, SlowTilt, Wobble, Vibration, Translation, Handheld, Strokes, Tour, Interactive
+        Static, SlowTilt, Wobble, Vibration, Translation, Handheld, Strokes, Arm, Tour,
+        Interactive,
     )
 }
 """URL name -> scenario class (``cls.description``: one line for the user), in display order."""

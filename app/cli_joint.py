@@ -1,0 +1,204 @@
+"""``inclinometer joint A.csv B.csv --out J.csv [--axis auto|AX,AY,AZ:BX,BY,BZ]`` and
+``inclinometer record-arm "sim://arm?..." --duration S DIR``.
+
+The angle of the hinge between the sensor of recording A and that of recording B
+(:mod:`app.core.joint`), one row per row of A. Output: ``# inclinometer-joint 1``, ``# key:
+<JSON>`` lines (sources, axes, how well the motion determined them, alignment), then ``t``
+(A's clock, s) and ``joint_deg`` (empty where B has no sample or before the angle is known).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+EXIT_USAGE = 2
+MAGIC = "# inclinometer-joint 1"
+AXIS_SPREAD_LIMIT_DEG = 2.0
+"""An axis whose quarter-by-quarter estimates differ more than this is reported as poor."""
+
+
+def add_joint_parser(commands: argparse._SubParsersAction) -> None:
+    joint = commands.add_parser(
+        "joint",
+        help="the angle of a hinge between two sensors' recordings",
+        description=(
+            "Estimate the angle of a hinge joint between the sensors of two recordings "
+            "(format v1, e.g. sim://arm's). Each link's 6D orientation (VQF), the hinge "
+            "axis from the gyroscopes (or --axis), the heading offset between the two "
+            "orientations from the hinge, fused with the gyroscopes' rate about the axis. "
+            "Writes t and joint_deg, one row per row of A; B is interpolated to A's times "
+            "when their rows differ."
+        ),
+    )
+    joint.add_argument("first", metavar="A.csv", help="the recording of the sensor on link 1")
+    joint.add_argument("second", metavar="B.csv", help="the recording of the sensor on link 2")
+    joint.add_argument("--out", required=True, metavar="J.csv", help="the file to write")
+    joint.add_argument(
+        "--axis", default="auto", metavar="auto|AX,AY,AZ:BX,BY,BZ",
+        help="the hinge axis in A's and B's sensor frames (any length, same direction in "
+        "space); 'auto' (default): estimated from the motion",
+    )
+    joint.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    arm = commands.add_parser(
+        "record-arm",
+        help="record a simulated measuring arm: one v1 file per sensor, with the truth",
+        description=(
+            "Run every sensor of one sim://arm (same seed: one arm) as fast as possible and "
+            "write DIR/sensor0.csv, sensor1.csv, ...: raw samples, the true orientation and, "
+            "from sensor 1 on, joint_ref_deg, the true angle of the hinge between sensor K-1 "
+            "and K; the true axes are in the 'arm' metadata key."
+        ),
+    )
+    arm.add_argument("url", metavar="URL", help="a sim://arm URL, e.g. "
+                     "'sim://arm?links=3&seed=4&odr=208' (sensor= is set for each file)")
+    arm.add_argument("directory", metavar="DIR", help="where to write the files")
+    arm.add_argument("--duration", type=float, default=180.0, metavar="S",
+                     help="seconds of device time (default %(default)g)")
+    arm.add_argument("--force", action="store_true", help="overwrite existing files")
+
+
+def record_arm_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """The ``record-arm`` sub-command."""
+    from app.services.arm_recordings import record_arm
+    from drivers.errors import DeviceError
+
+    out = sys.stdout if out is None else out
+    try:
+        written = record_arm(args.url, args.duration, Path(args.directory),
+                             overwrite=args.force)
+    except (ValueError, DeviceError) as exc:
+        print(f"inclinometer record-arm: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as exc:
+        print(f"inclinometer record-arm: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    for item in written:
+        print(f"{item.path}: sensor {item.sensor}, {item.samples} samples", file=out)
+    return 0
+
+
+def parse_axes(text: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """None for ``auto``, else the two axes of ``AX,AY,AZ:BX,BY,BZ``; ValueError if malformed."""
+    if text.strip().lower() == "auto":
+        return None
+    parts = text.split(":")
+    if len(parts) != 2:
+        raise ValueError(f"--axis {text!r}: write auto or AX,AY,AZ:BX,BY,BZ")
+    axes = []
+    for part in parts:
+        try:
+            values = [float(v) for v in part.split(",")]
+        except ValueError:
+            raise ValueError(f"--axis {text!r}: {part!r} is not three numbers") from None
+        vector = np.array(values)
+        if len(values) != 3 or not np.all(np.isfinite(vector)) or np.linalg.norm(vector) == 0:
+            raise ValueError(f"--axis {text!r}: {part!r} is not a non-zero 3-vector")
+        axes.append(vector / np.linalg.norm(vector))
+    return axes[0], axes[1]
+
+
+def _fail(message: str) -> int:
+    print(f"inclinometer joint: {message}", file=sys.stderr)
+    return EXIT_USAGE
+
+
+def _vector(v: np.ndarray) -> str:
+    return "(" + ", ".join(f"{x:+.4f}" for x in v) + ")"
+
+
+def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    from app.core.joint.alignment import align_to
+    from app.core.joint.offline import joint_angle_offline
+    from app.core.recording.errors import RecordingError
+    from app.core.recording.reader import read_recording
+    from app.core.recording.writer import format_table
+
+    out = sys.stdout if out is None else out
+    try:
+        axes = parse_axes(args.axis)
+    except ValueError as exc:
+        return _fail(str(exc))
+    target = Path(args.out)
+    if target.exists() and not args.force:
+        return _fail(f"{target} exists; choose another name or add --force")
+    if not target.resolve().parent.is_dir():
+        return _fail(f"--out {target}: no such directory")
+    blocks = []
+    for name in (args.first, args.second):
+        try:
+            recording = read_recording(name)
+        except RecordingError as exc:
+            return _fail(str(exc))
+        except OSError as exc:
+            return _fail(f"{name}: cannot read the recording: {exc.strerror or exc}")
+        if len(recording) < 2:
+            return _fail(f"{name}: fewer than two samples")
+        calibration = recording.calibration
+        blocks.append(recording.sample_block(calibration))
+    first, other = blocks
+    second, covered, how = align_to(first, other)
+    rows = np.flatnonzero(covered)
+    if len(rows) < 2:
+        return _fail("the two recordings do not overlap in time")
+    part1 = _take(first, rows)
+    part2 = _take(second, rows)
+    try:
+        result = joint_angle_offline(part1, part2, axes)
+    except ValueError as exc:
+        return _fail(str(exc))
+    angle = np.full(len(first), np.nan)
+    angle[rows] = result.angles.angle_deg
+    info: dict[str, Any] = {
+        "sources": [str(args.first), str(args.second)],
+        "alignment": how,
+        "axis_in_first": result.j1.tolist(),
+        "axis_in_second": result.j2.tolist(),
+        "axis_source": "given" if axes is not None else "estimated from the gyroscopes",
+        "units": {"t": "s", "joint_deg": "deg"},
+        "convention": "angle of the second link about the axis (right hand, the axis as in "
+                      "the first sensor's frame); zero at an arbitrary fixed pose",
+    }
+    estimate = result.axis_estimate
+    if estimate is not None:
+        info["axis_quality"] = {
+            "smallest_singular_value_rad_s": estimate.smallest_singular,
+            "uncertainty_deg": estimate.uncertainty_deg.tolist(),
+            "residual_rms_dps": math.degrees(estimate.residual_rms_rad_s),
+            "spread_over_quarters_deg": result.axis_spread_deg,
+            "samples": estimate.samples,
+        }
+    head = MAGIC + "\n" + "".join(f"# {k}: {json.dumps(v)}\n" for k, v in info.items())
+    text = head + "t,joint_deg\n" + format_table([first.t_s, angle])
+    try:
+        target.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        return _fail(f"cannot write {target}: {exc.strerror or exc}")
+    print(f"axis in A: {_vector(result.j1)}   axis in B: {_vector(result.j2)}"
+          f"   ({info['axis_source']})", file=out)
+    if estimate is not None:
+        spread = result.axis_spread_deg
+        good = estimate.well_determined and spread < AXIS_SPREAD_LIMIT_DEG  # NaN: not good
+        verdict = "well determined" if good else "POORLY determined"
+        residual = info["axis_quality"]["residual_rms_dps"]
+        print(f"axis fit: {estimate.samples} samples, residual {residual:.3f} dps, smallest "
+              f"singular value {estimate.smallest_singular:.3f} rad/s (0: motion that cannot "
+              f"show the axis), spread over the quarters {spread:.3f} deg, 1-sigma from "
+              f"the residuals {max(estimate.uncertainty_deg):.3f} deg: {verdict}", file=out)
+    known = np.isfinite(angle)
+    print(f"{target}: {len(angle)} rows ({int(known.sum())} with an angle), alignment: {how}",
+          file=out)
+    return 0
+
+
+def _take(block: Any, rows: np.ndarray) -> Any:
+    from app.core.samples import SampleBlock
+
+    return SampleBlock(block.t_s[rows], block.accel_m_s2[rows], block.gyro_rad_s[rows],
+                       block.temp_degc[rows], block.gap[rows])
