@@ -16,6 +16,7 @@ is the same and their relative alignment exact.
 
 from __future__ import annotations
 
+import itertools
 import math
 import threading
 from collections import deque
@@ -90,7 +91,7 @@ def fit_lower_envelope(device_t: np.ndarray, host_t: np.ndarray,
     if span >= min_drift_span_s and len(d) >= 3:
         hull = _lower_hull(x, y)
         mean_x = float(x.mean())
-        for a, b in zip(hull[:-1], hull[1:], strict=True):
+        for a, b in itertools.pairwise(hull):
             if x[a] <= mean_x <= x[b] and x[b] > x[a]:
                 scale = float((y[b] - y[a]) / (x[b] - x[a]))
                 break
