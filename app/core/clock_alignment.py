@@ -17,7 +17,6 @@ is the same and their relative alignment exact.
 from __future__ import annotations
 
 import itertools
-import math
 import threading
 from collections import deque
 from dataclasses import dataclass
@@ -95,8 +94,8 @@ def fit_lower_envelope(device_t: np.ndarray, host_t: np.ndarray,
             if x[a] <= mean_x <= x[b] and x[b] > x[a]:
                 scale = float((y[b] - y[a]) / (x[b] - x[a]))
                 break
-        if not (0.5 < scale < 2.0 or math.isclose(scale, 1.0)):
-            scale = 1.0  # a clock jump, not a drift: fall back to the offset alone
+        if not scale > 0.0:
+            scale = 1.0  # not a clock (times out of order): fall back to the offset alone
     offset = float(np.min(y - scale * x))
     residual = y - (offset + scale * x)
     spread = float(np.quantile(residual, SPREAD_QUANTILE)) * 1e3

@@ -22,3 +22,16 @@ def averaged_angles(quat: np.ndarray) -> TiltAngles | None:
     return TiltAngles(*(float(v) for v in (
         angles.roll_deg, angles.pitch_deg, angles.tilt_deg, angles.direction_deg
     )))
+
+
+def averaged_angle_deg(angles_deg: np.ndarray) -> float | None:
+    """Circular mean (degrees, -180 ... 180) of angles in degrees, NaNs left out; None if empty.
+
+    Averaged on the unit circle like the tilt readout's up vector, so exact across the wrap.
+    """
+    angles = np.asarray(angles_deg, dtype=np.float64).ravel()
+    angles = angles[np.isfinite(angles)]
+    if len(angles) == 0:
+        return None
+    rad = np.radians(angles)
+    return float(np.degrees(np.arctan2(np.sin(rad).mean(), np.cos(rad).mean())))
