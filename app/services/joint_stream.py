@@ -1,4 +1,5 @@
-"""The live joint angle between two members of a :class:`~app.services.sensor_group.SensorGroup`.
+"""The live joint angle between two members of a :class:`~app.services.sensor_group.SensorGroup`
+(or the files of a :class:`~app.services.session_replay.SessionReplay`).
 
 :meth:`JointStream.step` takes the samples both members' pipelines wrote since the last call
 (calibrated accelerometer and gyroscope), puts the second sensor's on the first one's clock
@@ -21,6 +22,7 @@ from app.core.ring_buffer import RingBuffer
 from app.core.ring_follower import RingFollower
 from app.core.samples import SampleBlock
 from app.services.sensor_group import SensorGroup
+from app.services.session_replay import SessionReplay
 
 COLUMNS = {"t": 1, "angle": 1, "orientation_angle": 1, "device_t": 1}
 CAPACITY = 200_000
@@ -45,7 +47,7 @@ class AxisQuality:
 class JointStream:
     """Joint angle of the hinge between group members ``first`` and ``second``."""
 
-    def __init__(self, group: SensorGroup, first: int, second: int,
+    def __init__(self, group: SensorGroup | SessionReplay, first: int, second: int,
                  axes: tuple[np.ndarray, np.ndarray] | None = None,
                  capacity: int = CAPACITY) -> None:
         if first == second:
@@ -54,9 +56,10 @@ class JointStream:
         self.first, self.second = first, second
         self.estimator = JointEstimator(axes=axes)
         self.angles = RingBuffer(capacity, COLUMNS)
-        a, b = group.members[first], group.members[second]
-        self._follow_a = RingFollower(lambda: a.pipeline.samples, _SAMPLE_NAMES)
-        self._follow_b = RingFollower(lambda: b.pipeline.samples, _SAMPLE_NAMES)
+        self._follow_a = RingFollower(lambda: group.pipeline(first).samples, _SAMPLE_NAMES,
+                                      from_start=True)
+        self._follow_b = RingFollower(lambda: group.pipeline(second).samples, _SAMPLE_NAMES,
+                                      from_start=True)
         self._pending_a: dict[str, np.ndarray] | None = None
         self._held_b: dict[str, np.ndarray] | None = None
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from PySide6.QtCore import QObject, Signal
@@ -22,6 +23,12 @@ from PySide6.QtCore import QObject, Signal
 from app.core.clock_alignment import ClockAligner, ClockFit
 from app.core.devices import DeviceInfo
 from app.core.pipeline import Pipeline
+from app.core.recording.session import (
+    JointConfig,
+    SessionSensor,
+    manifest_path,
+    write_session,
+)
 from app.services.session import DeviceSession
 
 
@@ -56,6 +63,7 @@ class MemberAlignment:
 
     role: str
     offset_s: float
+    scale: float
     drift_ppm: float
     spread_ms: float
     points: int
@@ -63,7 +71,8 @@ class MemberAlignment:
     """True when this clock is shared with another member (exact relative alignment)."""
 
     def as_dict(self) -> dict[str, object]:
-        return {"role": self.role, "offset_s": self.offset_s, "drift_ppm": self.drift_ppm,
+        return {"role": self.role, "offset_s": self.offset_s, "scale": self.scale,
+                "drift_ppm": self.drift_ppm,
                 "spread_ms": self.spread_ms, "points": self.points,
                 "shared_clock": self.shared_clock}
 
@@ -74,11 +83,13 @@ class SensorGroup(QObject):
     membersChanged = Signal()
     memberConnected = Signal(int, object)  # index, DeviceInfo
     error = Signal(str)
+    sessionRecorded = Signal(str)  # the manifest's path, once every file is closed
 
     def __init__(self, parent: QObject | None = None) -> None:
         super().__init__(parent)
         self.members: list[GroupMember] = []
         self.epoch_s = time.monotonic()
+        self._recording: _GroupRecording | None = None
 
     # -- members ------------------------------------------------------------------------------
     def add(self, url: str, role: str | None = None) -> GroupMember:
@@ -92,6 +103,8 @@ class SensorGroup(QObject):
             lambda device_t, host_t, m=member: m.aligner.add(device_t, host_t))
         session.connected.connect(lambda info, m=member: self._on_connected(m, info))
         session.error.connect(lambda text, m=member: self.error.emit(f"{m.role}: {text}"))
+        session.recordingChanged.connect(
+            lambda status, m=member: self._on_recording_changed(m, status))
         self.members.append(member)
         session.requestConnect.emit(url)
         self.membersChanged.emit()
@@ -107,6 +120,9 @@ class SensorGroup(QObject):
                     break
         if member in self.members:
             self.memberConnected.emit(self.members.index(member), info)
+
+    def pipeline(self, index: int) -> Pipeline:
+        return self.members[index].pipeline
 
     def connected_count(self) -> int:
         return sum(m.info is not None for m in self.members)
@@ -152,6 +168,83 @@ class SensorGroup(QObject):
                 out.append(None)
                 continue
             shared = any(o is not member and o.aligner is member.aligner for o in self.members)
-            out.append(MemberAlignment(member.role, fit.offset_s - self.epoch_s, fit.drift_ppm,
-                                       fit.spread_ms, fit.points, shared))
+            out.append(MemberAlignment(member.role, fit.offset_s - self.epoch_s, fit.scale,
+                                       fit.drift_ppm, fit.spread_ms, fit.points, shared))
         return out
+
+    # -- recording ----------------------------------------------------------------------------
+    @property
+    def recording(self) -> bool:
+        return self._recording is not None
+
+    def start_recording(self, directory: str | Path, name: str,
+                        joints: list[JointConfig] | None = None, note: str = "") -> Path:
+        """Record every member to ``DIR/NAME-sensorK.csv`` (format v1); :meth:`stop_recording`
+        writes ``DIR/NAME.session.json`` (docs/recording-format.md, "Session manifest").
+
+        Returns the manifest's path. Raises ValueError when a member is not connected, a
+        file exists or the directory does not.
+        """
+        directory = Path(directory)
+        if self._recording is not None:
+            raise ValueError("the sensors are being recorded already")
+        if not self.members or any(m.info is None for m in self.members):
+            raise ValueError("connect every sensor before recording the session")
+        if not directory.is_dir():
+            raise ValueError(f"{directory}: no such directory")
+        files = [f"{name}-sensor{k}.csv" for k in range(len(self.members))]
+        target = manifest_path(directory, name)
+        for path in [target, *(directory / f for f in files)]:
+            if path.exists():
+                raise ValueError(f"{path} exists; choose another session name")
+        self._recording = _GroupRecording(target, files, list(joints or []), note,
+                                          set(self.members))
+        for member, file in zip(self.members, files, strict=True):
+            member.session.requestStartRecording.emit(str(directory / file), note)
+        return target
+
+    def stop_recording(self) -> None:
+        """Close every file; the manifest is written when the last one is closed."""
+        plan = self._recording
+        if plan is None:
+            return
+        plan.stopping = True
+        plan.alignment = self.alignment()
+        for member in self.members:
+            member.session.requestStopRecording.emit()
+
+    def _on_recording_changed(self, member: GroupMember, status: object) -> None:
+        plan = self._recording
+        if plan is None or status is not None or not plan.stopping:
+            return
+        plan.waiting.discard(member)
+        if plan.waiting:
+            return
+        self._recording = None
+        sensors = []
+        for k, (m, file) in enumerate(zip(self.members, plan.files, strict=True)):
+            align = plan.alignment[k] if k < len(plan.alignment) else None
+            if align is None:
+                sensors.append(SessionSensor(file=file, role=m.role, url=m.url))
+            else:
+                sensors.append(SessionSensor(
+                    file=file, role=m.role, offset_s=align.offset_s, scale=align.scale,
+                    drift_ppm=align.drift_ppm, spread_ms=align.spread_ms,
+                    shared_clock=align.shared_clock, url=m.url))
+        try:
+            write_session(plan.manifest, sensors, plan.joints, plan.note)
+        except (OSError, ValueError) as exc:
+            self.error.emit(f"cannot write the session manifest {plan.manifest}: {exc}")
+            return
+        self.sessionRecorded.emit(str(plan.manifest))
+
+
+@dataclass(eq=False)
+class _GroupRecording:
+    manifest: Path
+    files: list[str]
+    joints: list[JointConfig]
+    note: str
+    waiting: set[GroupMember]
+    stopping: bool = False
+    alignment: list[MemberAlignment | None] = field(default_factory=list)
