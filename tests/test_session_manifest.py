@@ -139,3 +139,49 @@ def test_bad_manifests_get_clear_messages(tmp_path) -> None:
         path.write_text(text)
         with pytest.raises(SessionManifestError, match=expected):
             load_session(path)
+
+
+# -- inclinometer joint MANIFEST ----------------------------------------------------------------
+def _shift_t(source: Path, target: Path, seconds: float) -> None:
+    """A copy of a v1 file whose clock reads ``seconds`` more (another device's clock)."""
+    lines = source.read_text(encoding="utf-8").splitlines(keepends=True)
+    header_at = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    column = lines[header_at].strip().split(",").index("t")
+    out = lines[:header_at + 1]
+    for line in lines[header_at + 1:]:
+        fields = line.rstrip("\n").split(",")
+        fields[column] = repr(float(fields[column]) + seconds)
+        out.append(",".join(fields) + "\n")
+    target.write_text("".join(out), encoding="utf-8")
+
+
+def _joint_column(path: Path) -> np.ndarray:
+    rows = [line for line in path.read_text().splitlines() if not line.startswith("#")][1:]
+    return np.array([float(r.split(",")[1]) if r.split(",")[1] else np.nan for r in rows])
+
+
+def test_cli_joint_takes_a_manifest_and_applies_its_time_maps(tmp_path, capsys) -> None:
+    from app import cli
+    from app.services.arm_recordings import record_arm
+
+    record_arm("sim://arm?odr=104&seed=5", 20.0, tmp_path)
+    _shift_t(tmp_path / "sensor1.csv", tmp_path / "shifted1.csv", 5.0)
+    manifest = write_session(tmp_path / "arm.session.json",
+                             [SessionSensor("sensor0.csv", "link 0 (base)"),
+                              SessionSensor("shifted1.csv", "link 1", offset_s=-5.0)],
+                             [JointConfig(0, 1)])
+    direct, via = tmp_path / "direct.csv", tmp_path / "via.csv"
+    assert cli.main(["joint", str(tmp_path / "sensor0.csv"), str(tmp_path / "sensor1.csv"),
+                     "--out", str(direct)]) == 0
+    assert cli.main(["joint", str(manifest), "--out", str(via)]) == 0
+    assert "axis in A:" in capsys.readouterr().out
+    a, b = _joint_column(direct), _joint_column(via)
+    assert len(a) == len(b) > 1000 and np.isfinite(a).sum() > 1000
+    np.testing.assert_allclose(b, a, atol=1e-6, equal_nan=True)
+    # Bad use gets a clear message.
+    assert cli.main(["joint", str(manifest), str(tmp_path / "sensor0.csv"),
+                     "--out", str(tmp_path / "x.csv")]) == 2
+    assert "manifest alone" in capsys.readouterr().err
+    assert cli.main(["joint", str(tmp_path / "sensor0.csv"), "--out",
+                     str(tmp_path / "x.csv")]) == 2
+    assert "session manifest" in capsys.readouterr().err

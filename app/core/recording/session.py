@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -221,3 +222,28 @@ def load_session(manifest_path: str | os.PathLike[str]) -> Session:
                    app_version=str(document.get("app_version", "")),
                    note=str(document.get("note", "")),
                    extra={k: v for k, v in document.items() if k not in known})
+
+
+def session_joint_files(session: Session, joint: int = 0
+                        ) -> tuple[Path, Path, JointConfig, Callable[[np.ndarray], np.ndarray]]:
+    """What ``inclinometer joint MANIFEST`` needs: the two files of joint ``joint`` (the first
+    two sensors when the manifest names no joint), the joint, and the map of the second
+    file's ``t`` onto the first file's clock. Raises SessionManifestError."""
+    if session.joints:
+        if not 0 <= joint < len(session.joints):
+            raise SessionManifestError(
+                f"{session.manifest}: no joint {joint} (it has {len(session.joints)})",
+                session.manifest)
+        config = session.joints[joint]
+    elif len(session.sensors) >= 2:
+        config = JointConfig(0, 1)
+    else:
+        raise SessionManifestError(f"{session.manifest}: a joint needs two sensors; the "
+                                   "session has one", session.manifest)
+    first, second = session.sensors[config.first], session.sensors[config.second]
+
+    def on_first_clock(t: np.ndarray) -> np.ndarray:
+        return (second.to_common(t) - first.offset_s) / first.scale
+
+    paths = session.paths
+    return paths[config.first], paths[config.second], config, on_first_clock
