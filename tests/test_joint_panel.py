@@ -56,7 +56,7 @@ def test_the_joint_dock_shows_the_simulated_arms_joint_angle(qtbot, window, arti
     qtbot.waitUntil(lambda: panel.value_deg is not None, timeout=TIMEOUT_MS)
     # The plot shows the stream's angles; after the axis settled they follow the truth.
     x, y = panel.curve.getData()
-    assert x is not None and len(x) > 500
+    assert x is not None and len(x) > 500 and int(np.isfinite(y).sum()) > 300
     rows = stream.angles.latest(len(stream.angles))
     late = rows["device_t"] > 20.0
     truth_source = SimulatedDevice(ARM + "&sensor=1")
@@ -68,7 +68,7 @@ def test_the_joint_dock_shows_the_simulated_arms_joint_angle(qtbot, window, arti
     assert text.endswith("°") and abs(float(text[:-1]) - panel.value_deg) < 0.051
     assert "axis: estimated" in panel.quality.text()
     assert "shared clock" in panel.quality.text()
-    assert panel.table.rowCount() == 2 and "shared clock" in panel.table.item(0, 2).text()
+    assert panel.table.rowCount() == 2 and "shared clock" in panel.table.item(0, 1).text()
     assert window.grab().save(os.path.join(artifacts_dir, "joint_dock_sim_arm.png"))
     assert panel.grab().save(os.path.join(artifacts_dir, "joint_panel.png"))
     # Hold freezes the figure; radians change the unit.

@@ -78,55 +78,14 @@ class JointPanel(QWidget):
         self.value_deg: float | None = None
         """The figure the readout shows (degrees), None when there is none."""
 
-        outer = QVBoxLayout(self)
-        outer.setContentsMargins(6, 6, 6, 6)
-
-        sensors_box = QGroupBox("Sensors")
-        sensors = QVBoxLayout(sensors_box)
-        self.table = QTableWidget(0, 3)
-        self.table.setHorizontalHeaderLabels(["role", "device", "clock → common time"])
-        self.table.verticalHeader().hide()
-        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
-        self.table.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
-        self.table.setMaximumHeight(110)
-        sensors.addWidget(self.table)
-        buttons = QHBoxLayout()
-        self.add_button = QPushButton("Add sensor…")
-        self.add_button.clicked.connect(lambda: self.ask_add_sensor())
-        self.arm_button = QPushButton("Simulated arm (2 links)")
-        self.arm_button.clicked.connect(lambda: self.add_arm())
-        self.clear_button = QPushButton("Remove all")
-        self.clear_button.clicked.connect(self.clear)
-        for button in (self.add_button, self.arm_button, self.clear_button):
-            buttons.addWidget(button)
-        sensors.addLayout(buttons)
-        outer.addWidget(sensors_box)
-
-        joint_box = QGroupBox("Joint")
-        form = QFormLayout(joint_box)
-        links = QHBoxLayout()
-        self.first_combo = QComboBox()
-        self.second_combo = QComboBox()
-        links.addWidget(self.first_combo, 1)
-        links.addWidget(QLabel("→"))
-        links.addWidget(self.second_combo, 1)
-        form.addRow("Links", links)
-        axis_row = QHBoxLayout()
-        self.axis_combo = QComboBox()
-        self.axis_combo.addItem("estimated from the motion", "auto")
-        self.axis_combo.addItem("entered", "entered")
-        self.axis_edit = QLineEdit()
-        self.axis_edit.setPlaceholderText("AX,AY,AZ:BX,BY,BZ")
-        self.axis_edit.setEnabled(False)
-        self.axis_combo.currentIndexChanged.connect(
-            lambda: self.axis_edit.setEnabled(self.axis_combo.currentData() == "entered"))
-        axis_row.addWidget(self.axis_combo)
-        axis_row.addWidget(self.axis_edit, 1)
-        form.addRow("Axis", axis_row)
-        self.apply_button = QPushButton("Start joint")
-        self.apply_button.clicked.connect(lambda: self.start_joint())
-        form.addRow("", self.apply_button)
-        outer.addWidget(joint_box)
+        # Three columns, for a wide dock under the level view: the readout, the sensors and
+        # the joint's configuration, the plot.
+        row = QHBoxLayout(self)
+        row.setContentsMargins(6, 6, 6, 6)
+        outer = QVBoxLayout()
+        config = QVBoxLayout()
+        row.addLayout(outer, 3)
+        row.addLayout(config, 4)
 
         self.caption = QLabel("joint angle")
         self.caption.setObjectName("dimLabel")
@@ -157,17 +116,70 @@ class JointPanel(QWidget):
         outer.addLayout(controls)
 
         self.plot = pg.PlotWidget()
-        self.plot.setMinimumHeight(160)
+        self.plot.setMinimumSize(320, 200)
         self.plot.showGrid(x=True, y=True, alpha=0.3)
         self.plot.setLabel("left", "joint", units="°")
         self.plot.setLabel("bottom", "time", units="s")
         self.plot.getPlotItem().setDownsampling(auto=True, mode="peak")
         self.curve = self.plot.plot(pen=pg.mkPen(theme.TRACE_ROLL, width=1.5))
-        outer.addWidget(self.plot, 1)
+        row.addWidget(self.plot, 6)
         self.quality = QLabel("Add two sensors, then start the joint.")
         self.quality.setWordWrap(True)
         self.quality.setObjectName("dimLabel")
         outer.addWidget(self.quality)
+        outer.addStretch(1)
+
+        sensors_box = QGroupBox("Sensors")
+        sensors = QVBoxLayout(sensors_box)
+        self.table = QTableWidget(0, 2)
+        self.table.setHorizontalHeaderLabels(["sensor", "clock → common time"])
+        self.table.verticalHeader().hide()
+        header = self.table.horizontalHeader()
+        header.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+        header.setSectionResizeMode(1, QHeaderView.ResizeMode.Stretch)
+        self.table.setWordWrap(False)
+        self.table.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
+        self.table.setMaximumHeight(96)
+        sensors.addWidget(self.table)
+        buttons = QHBoxLayout()
+        self.add_button = QPushButton("Add sensor…")
+        self.add_button.clicked.connect(lambda: self.ask_add_sensor())
+        self.arm_button = QPushButton("Simulated arm (2 links)")
+        self.arm_button.clicked.connect(lambda: self.add_arm())
+        self.clear_button = QPushButton("Remove all")
+        self.clear_button.clicked.connect(self.clear)
+        for button in (self.add_button, self.arm_button, self.clear_button):
+            buttons.addWidget(button)
+        sensors.addLayout(buttons)
+        config.addWidget(sensors_box)
+
+        joint_box = QGroupBox("Joint")
+        form = QFormLayout(joint_box)
+        links = QHBoxLayout()
+        self.first_combo = QComboBox()
+        self.second_combo = QComboBox()
+        links.addWidget(self.first_combo, 1)
+        links.addWidget(QLabel("→"))
+        links.addWidget(self.second_combo, 1)
+        form.addRow("Links", links)
+        axis_row = QHBoxLayout()
+        self.axis_combo = QComboBox()
+        self.axis_combo.addItem("estimated from the motion", "auto")
+        self.axis_combo.addItem("entered", "entered")
+        self.axis_edit = QLineEdit()
+        self.axis_edit.setPlaceholderText("AX,AY,AZ:BX,BY,BZ")
+        self.axis_edit.setEnabled(False)
+        self.axis_combo.currentIndexChanged.connect(
+            lambda: self.axis_edit.setEnabled(self.axis_combo.currentData() == "entered"))
+        axis_row.addWidget(self.axis_combo)
+        axis_row.addWidget(self.axis_edit, 1)
+        form.addRow("Axis", axis_row)
+        self.apply_button = QPushButton("Start joint")
+        self.apply_button.clicked.connect(lambda: self.start_joint())
+        form.addRow("", self.apply_button)
+        config.addWidget(joint_box)
+        config.addStretch(1)
+
 
         self.group.membersChanged.connect(self._refresh_members)
         self.group.memberConnected.connect(lambda *_: self._refresh_members())
@@ -209,11 +221,9 @@ class JointPanel(QWidget):
         members = self.group.members
         self.table.setRowCount(len(members))
         for row, member in enumerate(members):
-            name = member.url if member.info is None else member.info.name
-            self.table.setItem(row, 0, QTableWidgetItem(member.role))
-            item = QTableWidgetItem(name)
+            item = QTableWidgetItem(member.role)
             item.setToolTip(member.url)
-            self.table.setItem(row, 1, item)
+            self.table.setItem(row, 0, item)
         for combo, default in ((self.first_combo, 0), (self.second_combo, 1)):
             keep = combo.currentIndex()
             combo.blockSignals(True)
@@ -233,10 +243,15 @@ class JointPanel(QWidget):
             if align is None:
                 text = "waiting for data"
             else:
-                shared = "shared clock, " if align.shared_clock else ""
-                text = (f"{shared}{align.offset_s:+.3f} s, {align.drift_ppm:+.0f} ppm, "
-                        f"spread {align.spread_ms:.1f} ms")
-            self.table.setItem(row, 2, QTableWidgetItem(text))
+                shared = "shared clock · " if align.shared_clock else ""
+                # A time-lapse simulator's clock runs several times the host's: say so.
+                rate = (f"{align.drift_ppm:+.0f} ppm" if abs(align.drift_ppm) < 1e4 else
+                        f"runs ×{1.0 / align.scale:.3f}")
+                text = f"{shared}{align.offset_s:+.3f} s · {rate} · ±{align.spread_ms:.1f} ms"
+            item = QTableWidgetItem(text)
+            item.setToolTip("device clock → common time: offset, drift (ppm), spread of the "
+                            "receive latency above the fitted line (90 %)")
+            self.table.setItem(row, 1, item)
 
     def _show_error(self, text: str) -> None:
         self.quality.setText(f"⚠ {text}")

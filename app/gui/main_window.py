@@ -851,7 +851,8 @@ class MainWindow(QMainWindow):
     # -- several sensors and the joint angle (app/gui/joint_panel.py) ---------------------------
     def _build_joint_dock(self) -> None:
         self.joint_panel = JointPanel(parent=self)
-        self._add_dock("joint", "Joint", self.joint_panel, Qt.DockWidgetArea.RightDockWidgetArea)
+        self._add_dock("joint", "Joint", self.joint_panel, Qt.DockWidgetArea.BottomDockWidgetArea)
+        self.tabifyDockWidget(self.docks["plots"], self.docks["joint"])
         self.docks["joint"].hide()
 
     def _build_sensors_menu(self) -> None:
