@@ -107,3 +107,34 @@ def test_entered_axes_and_bad_input(qtbot) -> None:
         assert "axis: entered" in panel.quality.text()
     finally:
         panel.shutdown()
+
+
+def test_a_session_recorded_in_the_dock_replays_in_sync(qtbot, tmp_path, artifacts_dir) -> None:
+    panel = JointPanel()
+    qtbot.addWidget(panel)
+    panel.resize(1300, 380)
+    try:
+        panel.add_arm(ARM)
+        qtbot.waitUntil(lambda: panel.group.connected_count() == 2, timeout=TIMEOUT_MS)
+        manifest = panel.start_session_recording(tmp_path, "arm")
+        assert manifest is not None
+        first = panel.group.pipeline(0).samples
+        start = first.total_written
+        qtbot.waitUntil(lambda: first.total_written - start > 1500, timeout=TIMEOUT_MS)
+        with qtbot.waitSignal(panel.group.sessionRecorded, timeout=TIMEOUT_MS):
+            panel.group.stop_recording()
+        assert panel.open_session(manifest, speed=50.0)
+        assert panel.group.connected_count() == 0 and panel.replay is not None
+        assert panel.table.rowCount() == 2
+        replay = panel.replay
+        qtbot.waitUntil(lambda: replay.finished, timeout=TIMEOUT_MS)
+        qtbot.waitUntil(lambda: panel.value_deg is not None, timeout=TIMEOUT_MS)
+        # Both files went through their pipelines to the end, on one clock.
+        for k, recording in enumerate(replay.recordings):
+            assert replay.pipeline(k).samples.latest(1)["t"][0] == recording.t_s[-1]
+        assert "replay" in panel.quality.text()
+        assert panel.grab().save(os.path.join(artifacts_dir, "joint_panel_replay.png"))
+        assert not panel.open_session(tmp_path / "missing.session.json")
+        assert "cannot read" in panel.quality.text()
+    finally:
+        panel.shutdown()

@@ -20,6 +20,7 @@ from PySide6.QtCore import Qt, QTimer
 from PySide6.QtGui import QFont
 from PySide6.QtWidgets import (
     QComboBox,
+    QFileDialog,
     QFormLayout,
     QGroupBox,
     QHBoxLayout,
@@ -38,6 +39,7 @@ from app.core.readout import averaged_angle_deg
 from app.gui import theme
 from app.services.joint_stream import JointStream
 from app.services.sensor_group import SensorGroup
+from app.services.session_replay import SessionReplay
 
 ARM_URL = "sim://arm?seed=1&odr=104"
 """The "Simulated arm (2 links)" shortcut: its two sensors (``&sensor=1`` for the second)."""
@@ -46,6 +48,11 @@ AVERAGING_S = (0.0, 0.25, 0.5, 1.0, 2.0)
 UNITS = {"deg": ("°", 1.0), "rad": (" rad", math.pi / 180.0)}
 REFRESH_MS = 33
 READOUT_INTERVAL_S = 0.1
+
+
+def _rate_text(drift_ppm: float, scale: float) -> str:
+    """A clock's drift; a time-lapse simulator's clock runs several times the host's: a factor."""
+    return f"{drift_ppm:+.0f} ppm" if abs(drift_ppm) < 1e4 else f"runs ×{1.0 / scale:.3f}"
 
 
 def parse_axes_text(text: str) -> tuple[np.ndarray, np.ndarray]:
@@ -72,6 +79,8 @@ class JointPanel(QWidget):
         super().__init__(parent)
         self.group = group if group is not None else SensorGroup(self)
         self.stream: JointStream | None = None
+        self.replay: SessionReplay | None = None
+        """A session manifest being replayed (instead of the live sensors)."""
         self.hold = False
         self._held_text = ""
         self._last_readout = 0.0
@@ -151,6 +160,17 @@ class JointPanel(QWidget):
         for button in (self.add_button, self.arm_button, self.clear_button):
             buttons.addWidget(button)
         sensors.addLayout(buttons)
+        session_buttons = QHBoxLayout()
+        self.record_button = QPushButton("Record session…")
+        self.record_button.setCheckable(True)
+        self.record_button.setToolTip("One v1 file per sensor and NAME.session.json")
+        self.record_button.clicked.connect(self._on_record_clicked)
+        self.open_button = QPushButton("Replay session…")
+        self.open_button.setToolTip("Play a session manifest's files in sync")
+        self.open_button.clicked.connect(lambda: self.ask_open_session())
+        session_buttons.addWidget(self.record_button)
+        session_buttons.addWidget(self.open_button)
+        sensors.addLayout(session_buttons)
         config.addWidget(sensors_box)
 
         joint_box = QGroupBox("Joint")
@@ -181,6 +201,7 @@ class JointPanel(QWidget):
         config.addStretch(1)
 
 
+        self.group.sessionRecorded.connect(self._on_session_recorded)
         self.group.membersChanged.connect(self._refresh_members)
         self.group.memberConnected.connect(lambda *_: self._refresh_members())
         self.group.error.connect(self._show_error)
@@ -197,6 +218,8 @@ class JointPanel(QWidget):
             self.add_sensor(url.strip())
 
     def add_sensor(self, url: str) -> None:
+        if self.replay is not None:  # back to live sensors
+            self.clear()
         self.group.add(url)
 
     def add_arm(self, url: str = ARM_URL, links: int = 2) -> None:
@@ -213,23 +236,31 @@ class JointPanel(QWidget):
 
     def clear(self) -> None:
         self.stream = None
+        self.replay = None
         self.group.clear()
         self.curve.setData([], [])
         self._show_value(None)
 
+    def _roles(self) -> list[tuple[str, str]]:
+        """(role, source) of every sensor: the live group's, or the replayed session's."""
+        if self.replay is not None:
+            return [(s.role, str(p)) for s, p in zip(self.replay.session.sensors,
+                                                      self.replay.session.paths, strict=True)]
+        return [(m.role, m.url) for m in self.group.members]
+
     def _refresh_members(self) -> None:
-        members = self.group.members
+        members = self._roles()
         self.table.setRowCount(len(members))
-        for row, member in enumerate(members):
-            item = QTableWidgetItem(member.role)
-            item.setToolTip(member.url)
+        for row, (role, source) in enumerate(members):
+            item = QTableWidgetItem(role)
+            item.setToolTip(source)
             self.table.setItem(row, 0, item)
         for combo, default in ((self.first_combo, 0), (self.second_combo, 1)):
             keep = combo.currentIndex()
             combo.blockSignals(True)
             combo.clear()
-            for member in members:
-                combo.addItem(member.role)
+            for role, _source in members:
+                combo.addItem(role)
             clash = combo is self.second_combo and keep == self.first_combo.currentIndex()
             combo.setCurrentIndex(keep if 0 <= keep < len(members) and not clash else
                                   min(default, len(members) - 1))
@@ -237,6 +268,12 @@ class JointPanel(QWidget):
         self._show_alignment()
 
     def _show_alignment(self) -> None:
+        if self.replay is not None:
+            for row, sensor in enumerate(self.replay.session.sensors):
+                self.table.setItem(row, 1, QTableWidgetItem(
+                    f"replay · {sensor.offset_s:+.3f} s · "
+                    f"{_rate_text(sensor.drift_ppm, sensor.scale)}"))
+            return
         for row, align in enumerate(self.group.alignment()):
             if row >= self.table.rowCount():
                 break
@@ -244,9 +281,7 @@ class JointPanel(QWidget):
                 text = "waiting for data"
             else:
                 shared = "shared clock · " if align.shared_clock else ""
-                # A time-lapse simulator's clock runs several times the host's: say so.
-                rate = (f"{align.drift_ppm:+.0f} ppm" if abs(align.drift_ppm) < 1e4 else
-                        f"runs ×{1.0 / align.scale:.3f}")
+                rate = _rate_text(align.drift_ppm, align.scale)
                 text = f"{shared}{align.offset_s:+.3f} s · {rate} · ±{align.spread_ms:.1f} ms"
             item = QTableWidgetItem(text)
             item.setToolTip("device clock → common time: offset, drift (ppm), spread of the "
@@ -270,9 +305,10 @@ class JointPanel(QWidget):
             except ValueError as exc:
                 self.quality.setText(f"Axis: {exc}")
                 return False
-        self.stream = JointStream(self.group, first, second, axes)
-        roles = self.group.members
-        self.caption.setText(f"joint angle, {roles[first].role} → {roles[second].role}")
+        source = self.replay if self.replay is not None else self.group
+        self.stream = JointStream(source, first, second, axes)
+        roles = [role for role, _ in self._roles()]
+        self.caption.setText(f"joint angle, {roles[first]} → {roles[second]}")
         self.curve.setData([], [])
         self._show_value(None)
         return True
@@ -286,8 +322,10 @@ class JointPanel(QWidget):
         if self.group.members and time.monotonic() - self._last_readout >= READOUT_INTERVAL_S:
             self._show_alignment()
         stream = self.stream
-        if stream is None or self.group.connected_count() < 2:
+        if stream is None or (self.replay is None and self.group.connected_count() < 2):
             return
+        if self.replay is not None:
+            self.replay.step()
         stream.step()
         if not len(stream.angles):
             self._show_quality(stream)
@@ -325,7 +363,10 @@ class JointPanel(QWidget):
             verdict = "well determined" if quality.well_determined else "POORLY determined"
             axis = f"axis: estimated, ±{quality.uncertainty_deg:.2f}° (1σ), {verdict}"
         alignment = [a for a in self.group.alignment() if a is not None]
-        if alignment and all(a.shared_clock for a in alignment):
+        if self.replay is not None:
+            clock = "replay: every file on one clock" + (
+                " (finished)" if self.replay.finished else "")
+        elif alignment and all(a.shared_clock for a in alignment):
             clock = "clocks: one shared clock (exact alignment)"
         elif alignment:
             clock = f"clocks: aligned within {max(a.spread_ms for a in alignment):.1f} ms"
@@ -334,6 +375,54 @@ class JointPanel(QWidget):
         self.quality.setText(f"{axis} · {clock}")
 
     # -- sessions -----------------------------------------------------------------------------
+    def _on_record_clicked(self, checked: bool) -> None:
+        if not checked:
+            self.group.stop_recording()
+            return
+        path, _ = QFileDialog.getSaveFileName(self, "Record session", "",
+                                              "Session manifest (*.session.json)")
+        started = None
+        if path:
+            target = Path(path)
+            name = target.name.removesuffix(".json").removesuffix(".session")
+            started = self.start_session_recording(target.parent, name)
+        self.record_button.setChecked(started is not None)
+
+    def _on_session_recorded(self, manifest: str) -> None:
+        self.record_button.setChecked(False)
+        self.quality.setText(f"Session recorded: {manifest}")
+
+    def ask_open_session(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Replay session", "",
+                                              "Session manifest (*.session.json)")
+        if path:
+            self.open_session(path)
+
+    def open_session(self, path: str | Path, speed: float = 1.0) -> bool:
+        """Replay a session manifest: every file on one clock, the joint it names."""
+        from app.core.recording.errors import RecordingError
+
+        try:
+            replay = SessionReplay(path, speed=speed)
+        except (RecordingError, OSError) as exc:
+            self._show_error(str(exc))
+            return False
+        self.clear()
+        self.replay = replay
+        self._refresh_members()
+        joints = replay.session.joints
+        first, second = (joints[0].first, joints[0].second) if joints else (0, 1)
+        if len(replay.session.sensors) < 2:
+            self.quality.setText("The session has one sensor: no joint to show.")
+            return True
+        self.first_combo.setCurrentIndex(first)
+        self.second_combo.setCurrentIndex(second)
+        axes = joints[0].axes if joints else None
+        self.axis_combo.setCurrentIndex(0 if axes is None else 1)
+        if axes is not None:
+            self.axis_edit.setText(":".join(",".join(f"{v:.6f}" for v in a) for a in axes))
+        return self.start_joint()
+
     def start_session_recording(self, directory: str | Path, name: str) -> Path | None:
         """Record every sensor (one v1 file each) and the session manifest."""
         joints = []
