@@ -26,6 +26,8 @@ from app.services.session_replay import SessionReplay
 
 COLUMNS = {"t": 1, "angle": 1, "orientation_angle": 1, "device_t": 1}
 CAPACITY = 200_000
+MAX_PENDING = 50_000
+"""Rows either side keeps while the other sensor delivers nothing (a stalled link)."""
 KEEP_SECOND_S = 2.0
 """Seconds of the second sensor kept for interpolation behind the newest pair."""
 _SAMPLE_NAMES = ["t", "accel", "gyro", "temp", "gap"]
@@ -81,6 +83,8 @@ class JointStream:
         """Process what both sensors delivered since the last call; returns the new angles."""
         self._pending_a = _append(self._pending_a, self._follow_a.next_rows())
         self._held_b = _append(self._held_b, self._follow_b.next_rows())
+        self._pending_a = _last(self._pending_a, MAX_PENDING)
+        self._held_b = _last(self._held_b, MAX_PENDING)
         a, b = self._pending_a, self._held_b
         if a is None or b is None or len(a["t"]) == 0 or len(b["t"]) < 2:
             return 0
@@ -119,6 +123,12 @@ class JointStream:
         keep_b = tb >= min(horizon, float(tb[-2]))
         self._held_b = {k: v[keep_b] for k, v in b.items()}
         return produced
+
+
+def _last(rows: dict[str, np.ndarray] | None, limit: int) -> dict[str, np.ndarray] | None:
+    if rows is None or len(rows["t"]) <= limit:
+        return rows
+    return {k: v[-limit:] for k, v in rows.items()}
 
 
 def _append(held: dict[str, np.ndarray] | None, new: dict[str, np.ndarray] | None
