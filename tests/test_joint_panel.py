@@ -15,7 +15,7 @@ from app.gui.main_window import MainWindow
 from app.services.session import DeviceSession
 from drivers.sim.device import SimulatedDevice
 
-ARM = "sim://arm?seed=3&odr=104&speed=8"
+ARM = "sim://arm?seed=3&odr=104&speed=16"
 TIMEOUT_MS = 30_000
 
 

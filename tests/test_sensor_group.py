@@ -13,6 +13,7 @@ from app.services.sensor_group import SensorGroup
 from drivers.sim.device import SimulatedDevice
 
 ARM = "sim://arm?seed=3&odr=104&speed=10"
+FAST_ARM = "sim://arm?seed=3&odr=104&speed=20"
 
 
 def joint_error_deg(estimate_deg: np.ndarray, truth_deg: np.ndarray) -> float:
@@ -34,12 +35,12 @@ def group(qtbot):
 
 
 def test_two_arm_sensors_share_a_clock_and_give_the_true_joint_angle(qtbot, group) -> None:
-    group.add(ARM)
-    group.add(ARM + "&sensor=1")
+    group.add(FAST_ARM)
+    group.add(FAST_ARM + "&sensor=1")
     qtbot.waitUntil(lambda: group.connected_count() == 2, timeout=15000)
     assert group.members[0].aligner is group.members[1].aligner  # one board, one clock
     stream = JointStream(group, 0, 1)
-    # 40 s of the arm at ten times real time.
+    # 40 s of the arm at twenty times real time.
     qtbot.waitUntil(lambda: stream.step() >= 0 and len(stream.angles) and
                     stream.angles.latest(1)["device_t"][0] > 40.0, timeout=20000)
     alignment = group.alignment()
@@ -47,7 +48,7 @@ def test_two_arm_sensors_share_a_clock_and_give_the_true_joint_angle(qtbot, grou
     rows = stream.angles.latest(len(stream.angles))
     late = rows["device_t"] > 20.0
     t = rows["device_t"][late]
-    truth_source = SimulatedDevice(ARM + "&sensor=1")
+    truth_source = SimulatedDevice(FAST_ARM + "&sensor=1")
     t_true = t * truth_source.odr_hz / truth_source.true_odr_hz
     truth = truth_source.scenario.joint_angles_deg(t_true)[:, 0]
     assert np.all(np.isfinite(rows["angle"][late]))
@@ -89,4 +90,5 @@ def test_the_joint_stream_pairs_samples_of_one_instant(qtbot, group) -> None:
     truth = np.degrees(hinge_angle(s0["ref_quat"][i0], s1["ref_quat"][i1], j1, j2))
     expected = scenario.joint_angles_deg(common * SimulatedDevice(ARM).odr_hz
                                          / SimulatedDevice(ARM).true_odr_hz)[:, 0]
-    assert joint_error_deg(truth, expected) < 0.01
+    # One sample apart (9.6 ms) would be about a degree off while the joint moves.
+    assert joint_error_deg(truth, expected) < 0.1
