@@ -61,6 +61,9 @@ def test_the_second_sensor_is_put_on_the_first_ones_clock_and_paired_causally() 
     assert stream.step() == 100  # A's rows 200..299 lie inside B's span now
     rows = stream.angles.latest(len(stream.angles))
     np.testing.assert_allclose(rows["device_t"], t[1:300])
+    # The readout averages over the first sensor's own clock: 0.1 s is 11 rows at 100 Hz.
+    np.testing.assert_array_equal(stream.recent_angles(0.1), rows["angle"][-11:])
+    np.testing.assert_array_equal(stream.recent_angles(0.0), rows["angle"][-1:])
     # The angle grows at link 1's rate about the hinge (0.5 rad/s) once the fusion settled.
     angle = np.unwrap(np.radians(rows["angle"]))
     rate = np.diff(angle[-100:]).mean() * RATE

@@ -143,12 +143,15 @@ class JointPanel(QWidget):
         self.table = QTableWidget(0, 2)
         self.table.setHorizontalHeaderLabels(["sensor", "clock → common time"])
         self.table.verticalHeader().hide()
+        self.table.verticalHeader().setDefaultSectionSize(max(20, self.fontMetrics().height() + 6))
         header = self.table.horizontalHeader()
         header.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
         header.setSectionResizeMode(1, QHeaderView.ResizeMode.Stretch)
         self.table.setWordWrap(False)
         self.table.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
-        self.table.setMaximumHeight(96)
+        rows_px = self.table.verticalHeader().defaultSectionSize()
+        self.table.setFixedHeight(self.table.horizontalHeader().sizeHint().height()
+                                  + 2 * rows_px + 6)  # two sensors without scrolling
         sensors.addWidget(self.table)
         buttons = QHBoxLayout()
         self.add_button = QPushButton("Add sensor…")
@@ -181,6 +184,9 @@ class JointPanel(QWidget):
         links.addWidget(self.first_combo, 1)
         links.addWidget(QLabel("→"))
         links.addWidget(self.second_combo, 1)
+        self.apply_button = QPushButton("Start joint")
+        self.apply_button.clicked.connect(lambda: self.start_joint())
+        links.addWidget(self.apply_button)
         form.addRow("Links", links)
         axis_row = QHBoxLayout()
         self.axis_combo = QComboBox()
@@ -194,9 +200,6 @@ class JointPanel(QWidget):
         axis_row.addWidget(self.axis_combo)
         axis_row.addWidget(self.axis_edit, 1)
         form.addRow("Axis", axis_row)
-        self.apply_button = QPushButton("Start joint")
-        self.apply_button.clicked.connect(lambda: self.start_joint())
-        form.addRow("", self.apply_button)
         config.addWidget(joint_box)
         config.addStretch(1)
 
@@ -339,9 +342,7 @@ class JointPanel(QWidget):
             return
         self._last_readout = now
         seconds = float(self.averaging_combo.currentData())
-        recent = stream.angles.window(seconds, ["angle"])["angle"] if seconds > 0 else \
-            stream.angles.latest(1, ["angle"])["angle"]
-        self._show_value(averaged_angle_deg(recent))
+        self._show_value(averaged_angle_deg(stream.recent_angles(seconds)))
         self._show_quality(stream)
 
     def _show_value(self, value_deg: float | None) -> None:

@@ -79,6 +79,17 @@ class JointStream:
         return AxisQuality("estimated", j1, j2, float(np.max(found.uncertainty_deg)),  # type: ignore[arg-type]
                            found.well_determined)
 
+    def recent_angles(self, seconds: float) -> np.ndarray:
+        """The angles (degrees) of the last ``seconds`` of the first sensor's own clock (as
+        the tilt readout averages over device time); the newest one alone for 0."""
+        if seconds <= 0:
+            return self.angles.latest(1, ["angle"])["angle"]
+        rows = self.angles.latest(min(len(self.angles), 1 + int(seconds * 20_000)),
+                                  ["device_t", "angle"])
+        if not len(rows["angle"]):
+            return rows["angle"]
+        return rows["angle"][rows["device_t"] >= rows["device_t"][-1] - seconds]
+
     def step(self) -> int:
         """Process what both sensors delivered since the last call; returns the new angles."""
         self._pending_a = _append(self._pending_a, self._follow_a.next_rows())
