@@ -37,8 +37,10 @@ def add_joint_parser(commands: argparse._SubParsersAction) -> None:
             "when their rows differ."
         ),
     )
-    joint.add_argument("first", metavar="A.csv", help="the recording of the sensor on link 1")
-    joint.add_argument("second", metavar="B.csv", help="the recording of the sensor on link 2")
+    joint.add_argument("first", metavar="A.csv", help="the recording of the sensor on link 1, "
+                       "or a session manifest (NAME.session.json) instead of A and B")
+    joint.add_argument("second", metavar="B.csv", nargs="?",
+                       help="the recording of the sensor on link 2")
     joint.add_argument("--out", required=True, metavar="J.csv", help="the file to write")
     joint.add_argument(
         "--axis", default="auto", metavar="auto|AX,AY,AZ:BX,BY,BZ",
@@ -121,6 +123,21 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     from app.core.recording.writer import format_table
 
     out = sys.stdout if out is None else out
+    time_map = None
+    if str(args.first).lower().endswith(".json"):  # a session manifest names A, B and the joint
+        from app.core.recording.session import load_session, session_joint_files
+
+        if args.second is not None:
+            return _fail("give a session manifest alone, or two recordings A.csv B.csv")
+        try:
+            first, second, config, time_map = session_joint_files(load_session(args.first))
+        except RecordingError as exc:
+            return _fail(str(exc))
+        args.first, args.second = str(first), str(second)
+        if config.axes is not None and args.axis.strip().lower() == "auto":
+            args.axis = ":".join(",".join(repr(v) for v in a) for a in config.axes)
+    elif args.second is None:
+        return _fail("give two recordings (A.csv B.csv) or a session manifest (.session.json)")
     try:
         axes = parse_axes(args.axis)
     except ValueError as exc:
@@ -142,6 +159,8 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             return _fail(f"{name}: fewer than two samples")
         calibration = recording.calibration
         blocks.append(recording.sample_block(calibration))
+    if time_map is not None:  # B's clock onto A's, as the manifest maps them
+        blocks[1].t_s = time_map(blocks[1].t_s)
     first, other = blocks
     second, covered, how = align_to(first, other)
     rows = np.flatnonzero(covered)

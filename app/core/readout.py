@@ -112,3 +112,14 @@ def reading_text(roll: float, pitch: float, tilt: float, unit: str) -> str:
         for name, value in (("Roll", roll), ("Pitch", pitch), ("Tilt", tilt))
     ]
     return " ".join(parts)
+def averaged_angle_deg(angles_deg: np.ndarray) -> float | None:
+    """Circular mean (degrees, -180 ... 180) of angles in degrees, NaNs left out; None if empty.
+
+    Averaged on the unit circle like the tilt readout's up vector, so exact across the wrap.
+    """
+    angles = np.asarray(angles_deg, dtype=np.float64).ravel()
+    angles = angles[np.isfinite(angles)]
+    if len(angles) == 0:
+        return None
+    rad = np.radians(angles)
+    return float(np.degrees(np.arctan2(np.sin(rad).mean(), np.cos(rad).mean())))

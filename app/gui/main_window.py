@@ -57,6 +57,7 @@ from app.gui.device_panel import DevicePanel
 from app.gui.elided_label import ElidedLabel
 from app.gui.filter_panel import FilterPanel
 from app.gui.health_lights import HealthLights
+from app.gui.joint_panel import JointPanel
 from app.gui.measure_panel import MeasurePanel
 from app.gui.measurement_log_panel import MeasurementLogPanel
 from app.gui.plots import LivePlots
@@ -218,6 +219,7 @@ class MainWindow(QMainWindow):
         self.docks["arm"].hide()
         self.tabifyDockWidget(self.docks["plots"], self.docks["messages"])
         self._build_alarms_and_log()
+        self._build_joint_dock()
         self.docks["plots"].raise_()
         self.docks["filter"].raise_()
         self._default_layout_pending = True
@@ -455,6 +457,7 @@ class MainWindow(QMainWindow):
         self.copy_action.setToolTip("Copy roll, pitch and tilt as text, in the chosen units")
         self.copy_action.triggered.connect(self.copy_reading)
         edit_menu.addAction(self.copy_action)
+        self._build_sensors_menu()
         view_menu = self.menuBar().addMenu("&View")
         for dock in self.docks.values():
             view_menu.addAction(dock.toggleViewAction())
@@ -1024,6 +1027,7 @@ class MainWindow(QMainWindow):
         self.resizeDocks([self.docks["plots"]], [height], Qt.Orientation.Vertical)
 
     def closeEvent(self, event: QCloseEvent) -> None:
+        self.joint_panel.shutdown()
         self.presenter.stop()
         self.measure_panel.stop()
         saved = self._layout_before_instrument  # full screen: remember the usual layout
@@ -1033,3 +1037,27 @@ class MainWindow(QMainWindow):
         self.settings.sync()
         self.session.shutdown()
         super().closeEvent(event)
+
+    # -- several sensors and the joint angle (app/gui/joint_panel.py) ---------------------------
+    def _build_joint_dock(self) -> None:
+        self.joint_panel = JointPanel(parent=self)
+        self._add_dock("joint", "Joint", self.joint_panel, Qt.DockWidgetArea.BottomDockWidgetArea)
+        self.tabifyDockWidget(self.docks["plots"], self.docks["joint"])
+        self.docks["joint"].hide()
+
+    def _build_sensors_menu(self) -> None:
+        menu = self.menuBar().addMenu("&Sensors")
+        self.add_sensor_action = QAction("&Add sensor…", self)
+        self.add_sensor_action.setToolTip("Open another device (URL) beside the others")
+        self.add_sensor_action.triggered.connect(lambda: self._show_joint(
+            self.joint_panel.ask_add_sensor))
+        self.arm_action = QAction("Simulated &arm (2 links)", self)
+        self.arm_action.triggered.connect(lambda: self._show_joint(self.joint_panel.add_arm))
+        menu.addAction(self.add_sensor_action)
+        menu.addAction(self.arm_action)
+
+    def _show_joint(self, then) -> None:
+        dock = self.docks["joint"]
+        dock.show()
+        dock.raise_()
+        then()

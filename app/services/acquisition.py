@@ -6,6 +6,7 @@ buffers the views read; samples never travel through signals.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 from app.core.alarms import AlarmEvent, AlarmMonitor
@@ -48,6 +49,9 @@ class Acquisition:
         self._checked_device: object | None = None
         self.alarms = alarms or AlarmMonitor()
         self._on_alarms = on_alarms
+        self.on_received: Callable[[float, float], None] | None = None
+        """Called with (session time of a block's newest sample, host ``time.monotonic()`` when
+        the block arrived), from the worker thread: what a clock alignment needs."""
 
     def step(self, timeout_s: float = READ_TIMEOUT_S) -> int:
         """Read at most one block (waiting up to ``timeout_s``); returns its samples.
@@ -59,6 +63,7 @@ class Acquisition:
         if device is None:
             return 0
         raw = device.read(timeout_s)
+        received_s = time.monotonic()
         for message in device.take_messages():
             self._on_message(message.level, message.text)
         for note in self.board.update(device.board_status):
@@ -66,6 +71,8 @@ class Acquisition:
         if raw is None or not len(raw):
             return 0
         self.connection.continue_time_axis(raw)
+        if self.on_received is not None:
+            self.on_received(float(raw.t_s[-1]), received_s)
         self.pipeline.process(raw)
         self._check_lookalike(device)
         self.recording.write(raw)

@@ -19,6 +19,8 @@ interactive. Options every scenario accepts:
   cable had been unplugged
 - ``warmup=RISE[:TAU]``: the die warms by RISE degC with time constant TAU s (default 300)
   after power-up instead of the unit's own 1.5-4 degC (a temperature-compensation run)
+- ``clock_offset`` s and ``clock_ppm``: the timestamps start at the offset and run that many
+  ppm fast (a device clock of its own, for tests of the time alignment of several devices)
 - ``fault=KIND:CHANNEL[:SIZE]@START[-END]``, repeatable: an injected sensor fault
   (:mod:`app.core.faults.injection`, :mod:`drivers.sim.faults`), e.g. ``fault=stuck:gx@10``
 
@@ -29,6 +31,12 @@ Time: the chip's oscillator runs at the nominal rate times its trim (``odr_hz`` 
 ``t_s`` counts samples in trimmed periods, as the device's own timestamps would; the scenario
 is evaluated at true time (sample index / ``true_odr_hz``), which in realtime mode is the wall
 clock since :meth:`open`.
+
+The sensors of one ``sim://arm`` (same seed and arm options, any ``sensor``) opened in realtime
+at the same time are one arm on one board: the second one opened joins the first one's clock
+(its first sample is the arm's current one, not sample 0), and :class:`DeviceInfo`'s
+``extra["clock_domain"]`` names that shared clock (including ``clock_offset``/``clock_ppm``, so
+a sensor with a clock of its own is in a domain of its own).
 """
 
 from __future__ import annotations
@@ -70,6 +78,9 @@ MIN_BLOCK_S = 0.020
 GENERATION_CHUNK = 1024
 """Samples computed at a time inside one block."""
 _GRAVITY_EARTH = np.array([0.0, 0.0, lsm6dsox.STANDARD_GRAVITY_M_S2])
+_SHARED_EPOCHS: dict[tuple[object, ...], list[float]] = {}
+"""Open arms' shared start: key -> [start wall time, open sensors]."""
+_SHARED_LOCK = threading.Lock()
 
 
 class SimulatedDevice(Device):
@@ -186,6 +197,7 @@ class SimulatedDevice(Device):
             self._next_index = 0
             self._stop.clear()
             self._start_wall_s = self._clock()
+            self._join_shared_epoch()
         opts = self.options
         return DeviceInfo(
             url=self.url,
@@ -204,6 +216,7 @@ class SimulatedDevice(Device):
                 "errors": opts.errors,
                 "noise": opts.noise,
                 "realtime": opts.realtime,
+                **({"clock_domain": self._clock_domain()} if self._epoch_key() else {}),
                 **({"faults": self.injected_faults} if opts.faults else {}),
             },
         )
@@ -229,6 +242,40 @@ class SimulatedDevice(Device):
 
     def _close(self) -> None:
         self._stop.set()
+        key = self._epoch_key()
+        with _SHARED_LOCK:
+            entry = _SHARED_EPOCHS.get(key) if key else None
+            if entry is not None:
+                entry[1] -= 1
+                if entry[1] <= 0:
+                    del _SHARED_EPOCHS[key]
+
+    def _epoch_key(self) -> tuple[object, ...] | None:
+        """What makes two realtime arm sensors one arm (None for other scenarios)."""
+        opts = self.options
+        if opts.scenario != "arm" or not opts.realtime:
+            return None
+        params = tuple(sorted((k, v) for k, v in opts.scenario_params.items() if k != "sensor"))
+        return (id(self._clock), opts.seed, opts.odr_nominal_hz, opts.speed, opts.errors, params)
+
+    def _clock_domain(self) -> str:
+        key = self._epoch_key()
+        return (f"sim-arm:{hash(key) & 0xFFFFFFFF:08x}:{self.options.clock_offset_s:g}:"
+                f"{self.options.clock_ppm:g}")
+
+    def _join_shared_epoch(self) -> None:
+        """Start on an open sibling's clock (one arm, one board); under the generation lock."""
+        key = self._epoch_key()
+        if key is None:
+            return
+        with _SHARED_LOCK:
+            entry = _SHARED_EPOCHS.get(key)
+            if entry is None:
+                _SHARED_EPOCHS[key] = [self._start_wall_s, 1]
+                return
+            entry[1] += 1
+            self._start_wall_s = entry[0]
+        self._next_index = max(0, self._due() - 1)
 
     # -- internals ---------------------------------------------------------------------------
     def _new_scenario(self) -> Scenario:
@@ -300,6 +347,8 @@ class SimulatedDevice(Device):
                 lsm6dsox.odr_code_for(self.options.odr_nominal_hz), self.options.gyro_fs_dps)
         temp_raw = np.rint((temp_degc - REFERENCE_TEMP_DEGC) * lsm6dsox.TEMP_LSB_PER_DEGC)
         t_s = np.arange(first, first + n) / self.odr_hz
+        if self.options.clock_ppm or self.options.clock_offset_s:
+            t_s = t_s * (1.0 + 1e-6 * self.options.clock_ppm) + self.options.clock_offset_s
         accel_raw, gyro_raw = self._faults.apply(t_s, accel_raw, gyro_raw)
         gap = np.zeros(n, dtype=bool)
         gap[0] = lost > 0

@@ -38,6 +38,9 @@ GENERAL_OPTIONS: dict[str, str] = {
     "fail_after": "seconds of device time after which reads fail like an unplugged cable",
     "warmup": "RISE[:TAU]: the die warms by RISE degC (0 ... 60) with time constant TAU s "
               "(1 ... 36000, default 300) after power-up, instead of the unit's own 1.5-4 degC",
+    "clock_offset": "seconds added to every timestamp (a device clock started elsewhere)",
+    "clock_ppm": "parts per million the timestamps run fast (-10000 ... 10000; a drifting "
+                 "device clock, on top of the unit's own)",
     "fault": "inject a fault, KIND:CHANNEL[:SIZE]@START[-END] (repeatable), KIND one of "
              "noise, stuck, dead, spike, bias, scale; SIZE in g (ax..az) or dps (gx..gz)",
 }
@@ -69,6 +72,10 @@ class SimOptions:
     """Injected faults (``fault=...``, repeatable), in URL order."""
     warmup: tuple[float, float] | None = None
     """``warmup=RISE[:TAU]``: self-heating rise (degC) and time constant (s), None: the unit's."""
+    clock_offset_s: float = 0.0
+    """Added to every timestamp (``clock_offset``)."""
+    clock_ppm: float = 0.0
+    """The timestamps run this many ppm fast (``clock_ppm``)."""
 
 
 def _fail(url: str, message: str) -> DeviceUrlError:
@@ -215,6 +222,13 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
         options["fail_after_s"] = seconds
     if "warmup" in raw:
         options["warmup"] = _warmup(url, raw["warmup"])
+    if "clock_offset" in raw:
+        options["clock_offset_s"] = _number(url, "clock_offset", raw["clock_offset"])
+    if "clock_ppm" in raw:
+        ppm = _number(url, "clock_ppm", raw["clock_ppm"])
+        if not -10000.0 <= ppm <= 10000.0:
+            raise _fail(url, f"clock_ppm={raw['clock_ppm']!r} is out of range [-10000, 10000]")
+        options["clock_ppm"] = ppm
     options["scenario_params"] = {
         key: _param(url, key, raw[key], spec[key]) for key in spec if key in raw
     }
