@@ -4,7 +4,8 @@ The arm's maths lives in :mod:`app.core.arm`; this panel edits the layout (a tab
 name, length, joint kind and the angle used when no sensor measures the joint), shows the end
 point and keeps the captured placements. It is fed by :meth:`ArmPanel.set_joint_angles`
 (joint angles from any source) or :meth:`ArmPanel.set_link_orientations` (each link's sensor
-quaternion, or None); today the main window feeds the one connected device through
+quaternion, or None): the main window feeds the Joint dock's sensors (one per link, with the
+joint filter's angle) when it has any, else the one connected device through
 :meth:`ArmPanel.set_device_orientation`, to the link chosen under the table.
 """
 
@@ -333,15 +334,18 @@ class ArmPanel(QWidget):
         self.sensor_links = tuple(observed)
         self._show_pose(pose)
 
-    def set_link_orientations(self, quaternions: Sequence[np.ndarray | None]) -> None:
+    def set_link_orientations(self, quaternions: Sequence[np.ndarray | None],
+                              measured_deg: Sequence[float | None] | None = None) -> None:
         """Each link's sensor orientation (sensor to earth; None: no sensor on that link).
 
-        Joints the sensors cannot see (a vertical axis, a link without a sensor) take the
-        angle entered in the table.
+        ``measured_deg`` gives joint angles measured otherwise (the joint filter between two
+        links' sensors; None where there is none): they win over gravity. Joints the sensors
+        cannot see (a vertical axis, a link without a sensor) take the angle in the table.
         """
         try:
             pose, observed = pose_from_link_quaternions(
-                self.arm, quaternions, known_deg=self.entered_angles()
+                self.arm, quaternions, known_deg=self.entered_angles(),
+                measured_deg=measured_deg,
             )
         except ArmLayoutError as exc:
             self.message.setText(f"Orientations not used: {exc}")

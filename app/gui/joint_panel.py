@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Qt, QTimer
+from PySide6.QtCore import Qt, QTimer, Signal
 from PySide6.QtGui import QFont
 from PySide6.QtWidgets import (
     QComboBox,
@@ -37,6 +37,7 @@ from PySide6.QtWidgets import (
 
 from app.core.readout import averaged_angle_deg
 from app.gui import theme
+from app.services.group_attitudes import GroupAttitudes
 from app.services.joint_stream import JointStream
 from app.services.sensor_group import SensorGroup
 from app.services.session_replay import SessionReplay
@@ -75,6 +76,11 @@ def parse_axes_text(text: str) -> tuple[np.ndarray, np.ndarray]:
 class JointPanel(QWidget):
     """Sensors, joint configuration, the joint-angle readout and its plot."""
 
+    attitudesChanged = Signal(object)
+    """A :class:`~app.services.group_attitudes.GroupFrame`, on a refresh when new data arrived
+    (every sensor's newest quaternion and the joint angle: the 3D view and the Arm dock);
+    None when the sensors were removed."""
+
     def __init__(self, group: SensorGroup | None = None, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.group = group if group is not None else SensorGroup(self)
@@ -86,6 +92,7 @@ class JointPanel(QWidget):
         self._last_readout = 0.0
         self.value_deg: float | None = None
         """The figure the readout shows (degrees), None when there is none."""
+        self.attitudes = GroupAttitudes()
 
         # Three columns, for a wide dock under the level view: the readout, the sensors and
         # the joint's configuration, the plot.
@@ -238,9 +245,13 @@ class JointPanel(QWidget):
         self.start_joint()
 
     def clear(self) -> None:
+        had_sensors = self.has_sensors
         self.stream = None
         self.replay = None
         self.group.clear()
+        self.attitudes.reset()
+        if had_sensors:
+            self.attitudesChanged.emit(None)  # back to the main device
         self.curve.setData([], [])
         self._show_value(None)
 
@@ -320,15 +331,28 @@ class JointPanel(QWidget):
         self.hold = bool(on)
         self.readout.setStyleSheet(f"color: {theme.WARN_AMBER};" if on else "")
 
+    @property
+    def has_sensors(self) -> bool:
+        """True while the dock has sensors (live or a replayed session)."""
+        return self.replay is not None or bool(self.group.members)
+
     def refresh(self) -> None:
-        """One frame: run the joint on what arrived, redraw the plot and the readout."""
+        """One frame: run the joint on what arrived, redraw the plot and the readout, and
+        publish the sensors' newest attitudes (only when new data arrived)."""
+        if self.replay is not None:
+            self.replay.step()
+        self._refresh_joint()
+        source = self.replay if self.replay is not None else self.group
+        frame = self.attitudes.poll(source, [role for role, _ in self._roles()], self.stream)
+        if frame is not None:
+            self.attitudesChanged.emit(frame)
+
+    def _refresh_joint(self) -> None:
         if self.group.members and time.monotonic() - self._last_readout >= READOUT_INTERVAL_S:
             self._show_alignment()
         stream = self.stream
         if stream is None or (self.replay is None and self.group.connected_count() < 2):
             return
-        if self.replay is not None:
-            self.replay.step()
         stream.step()
         if not len(stream.angles):
             self._show_quality(stream)

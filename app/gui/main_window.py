@@ -255,8 +255,9 @@ class MainWindow(QMainWindow):
             lambda fps: self.status_fps.setText(f"{fps:.0f} fps")
         )
         # The 3D view and the arm follow the current device (live and replay).
-        self.presenter.attitudeChanged.connect(self.attitude_view.set_attitude)
-        self.presenter.attitudeChanged.connect(self.arm_panel.set_device_orientation)
+        # While the Joint dock has sensors, they drive both instead (one body per sensor).
+        self.presenter.attitudeChanged.connect(self._on_device_attitude)
+        self.joint_panel.attitudesChanged.connect(self._on_group_attitudes)
         self.arm_panel.poseChanged.connect(
             lambda pose: self.attitude_view.set_arm(
                 pose.points, pose.rotations, self.arm_panel.sensor_links
@@ -1055,6 +1056,26 @@ class MainWindow(QMainWindow):
         self.arm_action.triggered.connect(lambda: self._show_joint(self.joint_panel.add_arm))
         menu.addAction(self.add_sensor_action)
         menu.addAction(self.arm_action)
+
+    def _on_device_attitude(self, q) -> None:
+        """The main device's attitude: the 3D view and the arm, unless the Joint dock has
+        sensors (then those are shown)."""
+        if self.joint_panel.has_sensors:
+            return
+        self.attitude_view.set_attitude(q)
+        self.arm_panel.set_device_orientation(q)
+
+    def _on_group_attitudes(self, frame) -> None:
+        """The Joint dock's sensors (a GroupFrame; None when they were removed): one body
+        each in the 3D view, and the arm's links posed from them."""
+        if frame is None:
+            self.attitude_view.set_attitudes([])
+            self.arm_panel.set_joint_angles(self.arm_panel.entered_angles(), observed=())
+            return
+        self.attitude_view.set_attitudes(frame.quaternions, frame.labels)
+        n_links = self.arm_panel.arm.n_joints
+        self.arm_panel.set_link_orientations(frame.link_quaternions(n_links),
+                                             frame.measured_deg(n_links))
 
     def _show_joint(self, then) -> None:
         dock = self.docks["joint"]

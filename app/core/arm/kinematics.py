@@ -111,12 +111,15 @@ def joint_angles_from_gravity(
     ups: Sequence[np.ndarray | None],
     known_deg: Sequence[float | None] | None = None,
     vertical_tolerance_deg: float = VERTICAL_AXIS_TOLERANCE_DEG,
+    measured_deg: Sequence[float | None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Joint angles (degrees) from the up direction seen on each link, and which were observed.
 
     ``ups[i]`` is the up direction in link ``i``'s frame (its accelerometer reading, turned
     into the link's frame), or None for a link without a sensor. A joint whose axis is
     (nearly) vertical, or whose link has no sensor, takes ``known_deg[i]`` (0 if that is None).
+    ``measured_deg[i]``, when given and finite, is joint ``i``'s angle measured by other means
+    (a joint filter on the two links' sensors): it wins over gravity and counts as observed.
     The base is taken as level. Returns ``(angles, observed)``.
     """
     n = layout.n_joints
@@ -125,6 +128,9 @@ def joint_angles_from_gravity(
     known = list(known_deg) if known_deg is not None else [None] * n
     if len(known) != n:
         raise ArmLayoutError(f"{len(known)} known angles for {n} links")
+    measured_angles = list(measured_deg) if measured_deg is not None else [None] * n
+    if len(measured_angles) != n:
+        raise ArmLayoutError(f"{len(measured_angles)} measured angles for {n} links")
     angles = np.zeros(n)
     observed = np.zeros(n, dtype=bool)
     cos_tolerance = np.cos(np.radians(vertical_tolerance_deg))
@@ -138,7 +144,12 @@ def joint_angles_from_gravity(
             and np.linalg.norm(measured) > 0
             and abs(float((frame @ axis) @ _UP)) < cos_tolerance
         )
-        if usable:
+        given = measured_angles[i]
+        if given is not None and np.isfinite(given):
+            angles[i] = _wrap_deg(float(given))
+            observed[i] = True
+            usable = False  # the next joint's reference is this link's modelled up
+        elif usable:
             # u_i = Rot(axis, -theta) u_{i-1}: theta is the angle from u_i to u_{i-1} about axis.
             cross = np.cross(measured, up_previous)
             along = measured - axis * (axis @ measured)
@@ -168,11 +179,13 @@ def pose_from_link_quaternions(
     quaternions: Sequence[np.ndarray | None],
     known_deg: Sequence[float | None] | None = None,
     mounts: Sequence[np.ndarray | None] | None = None,
+    measured_deg: Sequence[float | None] | None = None,
 ) -> tuple[ArmPose, np.ndarray]:
     """The pose from each link's sensor orientation (None for a link without one).
 
     Only gravity is used (heading is not observable without a magnetometer), so vertical
-    joints take ``known_deg``. Returns the pose and which joints the sensors observed.
+    joints take ``known_deg``; ``measured_deg`` overrides joints measured otherwise (see
+    :func:`joint_angles_from_gravity`). Returns the pose and which joints were observed.
     """
     if len(quaternions) != layout.n_joints:
         raise ArmLayoutError(f"{len(quaternions)} orientations for {layout.n_joints} links")
@@ -181,5 +194,6 @@ def pose_from_link_quaternions(
         None if q is None else up_in_link_frame(q, mount)
         for q, mount in zip(quaternions, mounts)
     ]
-    angles, observed = joint_angles_from_gravity(layout, ups, known_deg)
+    angles, observed = joint_angles_from_gravity(layout, ups, known_deg,
+                                                 measured_deg=measured_deg)
     return forward(layout, angles), observed
