@@ -11,6 +11,7 @@ from PySide6.QtCore import QSettings
 
 from app.core import quaternion as quat
 from app.core.arm import pose_from_link_quaternions
+from app.core.scene3d import Camera, Projection, render_list, sensors_scene
 from app.gui import theme
 from app.gui.attitude_view import REDRAW_THRESHOLD_DEG
 from app.gui.main_window import MainWindow
@@ -90,7 +91,9 @@ def test_two_sensors_drive_the_3d_view_and_the_arm(qtbot, window, artifacts_dir)
     assert arm.capture() and len(arm.placements) == 1
 
     # Screenshots: the Joint dock's readout and the 3D view's two bodies; then the arm.
-    qtbot.waitUntil(lambda: panel.value_deg is not None, timeout=TIMEOUT_MS)
+    stream = panel.stream
+    qtbot.waitUntil(lambda: panel.value_deg is not None and
+                    stream.angles.latest(1)["device_t"][0] > 30.0, timeout=TIMEOUT_MS)
     window.docks["attitude3d"].raise_()
     assert window.grab().save(os.path.join(artifacts_dir, "arm_two_sensors_3d.png"))
     view.arm_box.setChecked(True)
@@ -105,3 +108,31 @@ def test_two_sensors_drive_the_3d_view_and_the_arm(qtbot, window, artifacts_dir)
     window.presenter.attitudeChanged.emit(q)
     assert len(view._quaternions) == 1 and np.allclose(view._quaternions[0], q)
     assert arm.sensor_links == (arm.device_link.currentData(),)
+
+
+def test_a_group_frame_puts_the_sensors_on_the_last_links_and_the_joint_between_them():
+    q0, q1 = np.array([1.0, 0, 0, 0]), np.array([0.0, 1, 0, 0])
+    frame = GroupFrame((q0, q1), ("a", "b"), joint=(0, 1, 42.0))
+    links = frame.link_quaternions(3)
+    assert links[0] is None and links[1] is q0 and links[2] is q1
+    assert frame.measured_deg(3) == [None, None, 42.0]
+    assert frame.measured_deg(1) == [None]  # one link: the two sensors cannot both sit on it
+    assert GroupFrame((q0, q1), ("a", "b"), joint=(1, 0, 5.0)).measured_deg(3) == [None] * 3
+    assert GroupFrame((q0, q1), ("a", "b")).measured_deg(2) == [None, None]
+
+
+def test_each_sensor_is_named_under_its_board():
+    scene = sensors_scene([np.array([1.0, 0, 0, 0])] * 2, ["link 0 (base)", "link 1"])
+    items = render_list(scene, Camera(), 400, 300)
+    labels = [item for item in items if item.kind == "label"]
+    assert [item.text for item in labels] == ["link 0 (base)", "link 1"]
+    assert items[-2:] == labels  # drawn last, on top
+    center, radius = scene.bounds()
+    projection = Projection(Camera(), center, radius, 400, 300)
+    for label, body in zip(labels, scene.bodies, strict=True):  # centred under its board
+        corners, _depth = projection.project(body.corners())
+        assert label.points[0, 0] == pytest.approx(corners[:, 0].mean())
+        assert label.points[0, 1] > corners[:, 1].max()
+    assert labels[0].points[0, 0] != pytest.approx(labels[1].points[0, 0])
+    assert not [i for i in render_list(sensors_scene([np.array([1.0, 0, 0, 0])]), Camera(),
+                                       400, 300) if i.kind == "label"]

@@ -140,3 +140,15 @@ def test_repeatability_statistics_of_placements_with_known_spread():
     with pytest.raises(ValueError, match="no valid end point"):
         placements.capture(np.full((3, 3), np.nan))
     assert len(placements) == 3
+
+
+def test_a_joint_angle_measured_otherwise_wins_over_gravity():
+    layout = jamris_layout()
+    ups = [None, np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 1.0])]  # both links level
+    angles, observed = joint_angles_from_gravity(layout, ups, measured_deg=[None, None, 30.0])
+    assert observed.tolist() == [False, True, True]
+    assert angles[1] == pytest.approx(0.0, abs=1e-9) and angles[2] == pytest.approx(30.0)
+    angles, _ = joint_angles_from_gravity(layout, ups, measured_deg=[None, None, float("nan")])
+    assert angles[2] == pytest.approx(0.0, abs=1e-9)  # NaN: not measured, gravity decides
+    with pytest.raises(ArmLayoutError):
+        joint_angles_from_gravity(layout, ups, measured_deg=[1.0])

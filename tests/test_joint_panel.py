@@ -123,6 +123,8 @@ def test_a_session_recorded_in_the_dock_replays_in_sync(qtbot, tmp_path, artifac
         qtbot.waitUntil(lambda: first.total_written - start > 1500, timeout=TIMEOUT_MS)
         with qtbot.waitSignal(panel.group.sessionRecorded, timeout=TIMEOUT_MS):
             panel.group.stop_recording()
+        frames: list = []
+        panel.attitudesChanged.connect(frames.append)
         assert panel.open_session(manifest, speed=50.0)
         assert panel.group.connected_count() == 0 and panel.replay is not None
         assert panel.table.rowCount() == 2
@@ -133,6 +135,11 @@ def test_a_session_recorded_in_the_dock_replays_in_sync(qtbot, tmp_path, artifac
         for k, recording in enumerate(replay.recordings):
             assert replay.pipeline(k).samples.latest(1)["t"][0] == recording.t_s[-1]
         assert "replay" in panel.quality.text()
+        # The replayed sensors' newest attitudes are published (3D view and Arm dock).
+        final = [replay.pipeline(k).orientation.latest(1)["quat"][-1] for k in range(2)]
+        qtbot.waitUntil(lambda: frames and frames[-1] is not None and all(
+            np.array_equal(frames[-1].quaternions[k], final[k]) for k in range(2)),
+            timeout=TIMEOUT_MS)
         assert panel.grab().save(os.path.join(artifacts_dir, "joint_panel_replay.png"))
         assert not panel.open_session(tmp_path / "missing.session.json")
         assert "cannot read" in panel.quality.text()

@@ -12,6 +12,7 @@ Screen coordinates: x to the right, y downwards, in pixels.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
@@ -193,6 +194,8 @@ class DrawItem:
     color: str
     shade: float = 1.0
     width: float = 1.0
+    text: str = ""
+    """A 'label''s text (drawn at its one point, above everything)."""
 
 
 def render_list(
@@ -201,7 +204,8 @@ def render_list(
     """The scene as 2D primitives for a ``width`` x ``height`` viewport, sorted far to near.
 
     Colour keys: ``body``, ``body_top`` (the board's +z face), ``axis_x/y/z``, ``arm``,
-    ``joint`` (a one-point line: a dot) and ``grid``.
+    ``joint`` (a one-point line: a dot) and ``grid``; a labelled body's name comes last, a
+    'label' item (text centred under the board).
     """
     center, radius = scene.bounds()
     projection = Projection(camera, center, radius, max(width, 1), max(height, 1))
@@ -242,6 +246,11 @@ def render_list(
             items.append(DrawItem("line", pixels[i:i + 1], float(depth[i]) + 1e-6,
                                   "end" if i == len(scene.arm) - 1 else "joint", width=12.0))
     items.sort(key=lambda item: item.depth)
+    for body in scene.bodies:  # each sensor's name under its board, on top of the drawing
+        if body.label:
+            pixels, _depth = projection.project(body.corners())
+            anchor = np.array([[pixels[:, 0].mean(), pixels[:, 1].max() + 4.0]])
+            items.append(DrawItem("label", anchor, math.inf, "joint", text=body.label))
     return items
 
 

@@ -14,7 +14,7 @@ import os
 from collections.abc import Sequence
 
 import numpy as np
-from PySide6.QtCore import QPointF, QSize, Qt
+from PySide6.QtCore import QPointF, QRectF, QSize, Qt
 from PySide6.QtGui import (
     QColor,
     QGuiApplication,
@@ -115,7 +115,13 @@ class PainterCanvas(QWidget):
             return
         for item in render_list(self.scene, self.camera, self.width(), self.height()):
             color = COLORS[item.color]
-            if item.kind == "polygon":
+            if item.kind == "label":
+                painter.setPen(color)
+                x, y = item.points[0]
+                painter.drawText(QRectF(x - 80.0, y, 160.0, 20.0),
+                                 Qt.AlignmentFlag.AlignHCenter | Qt.AlignmentFlag.AlignTop,
+                                 item.text)
+            elif item.kind == "polygon":
                 fill = QColor.fromRgbF(*(min(1.0, c * item.shade) for c in color.getRgbF()[:3]))
                 painter.setPen(QPen(fill.darker(140), 1.0))
                 painter.setBrush(fill)
