@@ -254,7 +254,12 @@ class MainWindow(QMainWindow):
         )
         # The 3D view and the arm follow the current device (live and replay).
         self.presenter.attitudeChanged.connect(self.attitude_view.set_attitude)
-        self.presenter.attitudeChanged.connect(self.arm_panel.set_device_orientation)
+        self._device_q = None
+        self.presenter.attitudeChanged.connect(self._arm_follows_device)
+        self.docks["arm"].visibilityChanged.connect(
+            lambda shown: shown and self._device_q is not None
+            and self.arm_panel.set_device_orientation(self._device_q)
+        )
         self.arm_panel.poseChanged.connect(
             lambda pose: self.attitude_view.set_arm(
                 pose.points, pose.rotations, self.arm_panel.sensor_links
@@ -398,6 +403,13 @@ class MainWindow(QMainWindow):
         dock.setWidget(widget)
         self.addDockWidget(area, dock)
         self.docks[key] = dock
+
+    def _arm_follows_device(self, q) -> None:
+        """The arm's pose from the device, while someone can see it (the Arm dock, or the
+        arm in the 3D view): solving the arm for every block costs as much as the bubble."""
+        self._device_q = q
+        if self.docks["arm"].isVisible() or self.attitude_view.showing_arm:
+            self.arm_panel.set_device_orientation(q)
 
     def _build_menus(self) -> None:
         file_menu = self.menuBar().addMenu("&File")
