@@ -19,16 +19,14 @@ from html import escape
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QCoreApplication, QEvent, Qt, Signal
-from PySide6.QtGui import QRegion
 from PySide6.QtWidgets import QGraphicsItem, QGraphicsView, QVBoxLayout, QWidget
 
 from app.gui import theme
 
 SCROLL_THRESHOLD_PX = 0.5
 """The traces are moved sideways only once they would move at least this far on screen."""
-BLIT_MARGIN_PX = 7
-"""Left and bottom edge of a plot's data area that is repainted rather than moved when the
-traces scroll: the axes' tick marks reach this far (5 px) into it and stay where they are."""
+TICK_PX = 4
+"""Tick marks point this far out of the data area (pyqtgraph's default points inwards)."""
 RANGE_MARGIN = 0.1
 """Space above and below the data when a value range is set, as a fraction of its span."""
 RANGE_SHRINK = 0.4
@@ -61,6 +59,9 @@ def _make_plot() -> pg.PlotItem:
     plot.hideButtons()
     for name in ("left", "bottom"):  # redrawn only when their range or size changes
         plot.getAxis(name).setCacheMode(QGraphicsItem.CacheMode.DeviceCoordinateCache)
+        # Ticks outside the data area: inside it everything moves with the traces, so a
+        # scroll can be a copy of its pixels (LivePlots.scroll_to).
+        plot.getAxis(name).setStyle(tickLength=TICK_PX)
     return plot
 
 
@@ -469,7 +470,8 @@ class LivePlots(QWidget):
         """Scroll by whole pixels as a copy of what is on screen: the traces are moved in the
         scene without the view repainting them (updates are off while the scene takes the
         move in), then each data area's pixels are shifted (QWidget.scroll) and only the
-        strip that comes into view, and the edges the axes' ticks reach into, are drawn."""
+        strip that comes into view is drawn. (The outermost pixel of the area, where the
+        axis lines may reach, is left alone; the next rebuild draws it anew.)"""
         old_px = round(self._scroll_s * pixels_per_s)
         new_px = round(seconds * pixels_per_s)
         if new_px == old_px:
@@ -492,9 +494,7 @@ class LivePlots(QWidget):
         for plot in plots:
             box = plot.getViewBox()
             outer = view.mapFromScene(box.mapRectToScene(box.boundingRect())).boundingRect()
-            inner = outer.adjusted(BLIT_MARGIN_PX, 1, -1, -BLIT_MARGIN_PX)
-            viewport.scroll(old_px - new_px, 0, inner)
-            viewport.update(QRegion(outer).subtracted(QRegion(inner)))
+            viewport.scroll(old_px - new_px, 0, outer.adjusted(1, 1, -1, -2))
         return True
 
     @property
