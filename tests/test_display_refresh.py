@@ -287,3 +287,31 @@ def test_scrolling_moves_the_traces_by_whole_pixels(live):
     live.plots.set_range_selection(True)
     assert live.plots.scroll_to(3.3 / pixels_per_s)
     assert -live.plots.accel_curves[0].pos().x() * pixels_per_s == pytest.approx(3.3)
+
+
+def test_an_over_range_bubble_repaints_only_around_itself_and_its_arrow(qtbot, host):
+    level = BubbleLevel()
+    level.setMinimumSize(400, 400)
+    host.layout().addWidget(level)
+    host.show()
+    qtbot.waitExposed(host)
+    level.setRange(1.0)
+    level.setValid(True)
+    level.setTilt(3.0, 0.0)  # over range: pinned to the rim, an arrow on the bezel
+    flush_paints(qtbot, host.sentinel)
+    rects = []
+
+    class Rects(QObject):
+        def eventFilter(self, watched, event) -> bool:
+            if event.type() == QEvent.Type.Paint:
+                rects.append(event.rect())
+            return False
+
+    spy = Rects()
+    level.installEventFilter(spy)
+    level.setTilt(3.0, 0.6)  # the bubble and the arrow move round the rim
+    qtbot.waitUntil(lambda: len(rects) > 0, timeout=5000)
+    painted = rects[-1]
+    assert painted.width() * painted.height() < 0.5 * level.width() * level.height()
+    arrow = level._arrow_rect(level._geometry(), level.bubbleCenter()).toAlignedRect()
+    assert painted.contains(arrow.adjusted(1, 1, -1, -1))
