@@ -200,9 +200,13 @@ def test_main_window_3d_view_and_arm_follow_the_device(qtbot, window, artifacts_
         timeout=TIMEOUT_MS,
     )
     # The arm dock puts the device on the upper arm: its joint angle is the device's pitch.
+    # (The arm is solved while someone can see it: open its dock.)
+    window.docks["arm"].toggleViewAction().trigger()
+    window.docks["arm"].raise_()
     panel = window.arm_panel
     qtbot.waitUntil(lambda: panel.pose is not None
                     and abs(panel.pose.joint_angles_deg[1] - window.level.pitch()) < 1.0,
                     timeout=TIMEOUT_MS)
     assert window.docks["attitude3d"].toggleViewAction().text() == "3D view"
+    window.docks["attitude3d"].raise_()  # the screenshot shows the 3D view
     assert window.grab().save(os.path.join(artifacts_dir, "main_window_3d_view.png"))

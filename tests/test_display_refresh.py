@@ -23,7 +23,7 @@ from app.gui.bubble_level import REPAINT_THRESHOLD_PX, BubbleLevel
 from app.gui.filter_panel import FilterPanel
 from app.gui.frame_clock import FALLBACK_REFRESH_HZ, FrameClock, frame_interval_ms
 from app.gui.plots import LivePlots
-from app.gui.presenter import LivePresenter
+from app.gui.presenter import PLOT_DATA_INTERVAL_S, LivePresenter
 from app.gui.readouts import TiltReadouts
 
 G = 9.80665
@@ -188,6 +188,8 @@ def live(qtbot, host):
         host.layout().addWidget(widget)
     plots.setMinimumHeight(300)
     presenter = LivePresenter(session, level, readouts, plots, truth, panel, parent=host)
+    # Each refresh below takes what is new at once (coalescing has its own test).
+    presenter.level_interval_s = presenter.plot_data_interval_s = 0.0
     host.show()
     qtbot.waitExposed(host)
     handed = []
@@ -229,15 +231,15 @@ def test_hidden_plots_do_no_work_and_catch_up_when_shown(qtbot, live):
     assert len(live.handed) == 2  # shown again: the newest data at once
 
 
-def test_a_stream_that_stopped_lets_the_display_rest(live):
+def test_a_stream_that_stopped_lets_the_display_rest(qtbot, live):
     live.pipeline.process(raw_block(0, 208))
     assert live.presenter.refresh()
-    frames = live.presenter.frames
     live.presenter.settings.readout_rate_hz = 1e9  # no readout update pending
-    busy = [live.presenter.refresh() for _ in range(3)]
-    # Nothing new: at most the plots' scroll to where the lead limit stops it, then nothing.
-    assert busy[-1] is False
-    assert live.presenter.frames - frames <= 1
+    # Nothing new: the plots scroll on until the lead limit stops them, then nothing is drawn.
+    qtbot.waitUntil(lambda: not live.presenter.refresh(), timeout=2000)
+    frames = live.presenter.frames
+    assert [live.presenter.refresh() for _ in range(3)] == [False] * 3
+    assert live.presenter.frames == frames
     assert len(live.handed) == 1
 
 
@@ -255,3 +257,61 @@ def test_plots_scroll_between_blocks_without_rebuilding(live):
     live.pipeline.process(raw_block(208, 3))
     live.presenter.refresh()
     assert curve.pos().x() == 0.0  # new data: drawn where they belong
+
+
+def test_new_data_rebuild_the_traces_at_a_lower_rate_while_they_scroll(qtbot, live):
+    live.presenter.plot_data_interval_s = 60.0  # a long interval: no timing in the test
+    live.pipeline.process(raw_block(0, 208))
+    assert live.presenter.refresh()
+    live.pipeline.process(raw_block(208, 3))
+    # Within the interval the new samples wait (the frame is still busy: they are due) ...
+    assert live.presenter.refresh()
+    assert len(live.handed) == 1
+    # ... and are drawn once it is over.
+    live.presenter.plot_data_interval_s = PLOT_DATA_INTERVAL_S
+    qtbot.waitUntil(lambda: live.presenter.refresh() and len(live.handed) == 2, timeout=2000)
+    # The bubble took the new samples at once all the same (its own, shorter interval is 0).
+    assert live.presenter._level_key[0] == live.pipeline.orientation.total_written
+
+
+def test_scrolling_moves_the_traces_by_whole_pixels(live):
+    live.pipeline.process(raw_block(0, 208))
+    live.presenter.refresh()
+    box = live.plots.accel_plot.getViewBox()
+    pixels_per_s = box.width() / live.plots.window_s
+    assert live.plots.scroll_to(2.4 / pixels_per_s)
+    moved_px = -live.plots.accel_curves[0].pos().x() * pixels_per_s
+    assert moved_px == pytest.approx(2.0)  # the screen's pixels are copied, so whole pixels
+    assert not live.plots.scroll_to(2.6 / pixels_per_s - 0.5 / pixels_per_s + 1e-9)
+    # With a range selected (it stays where it is) the data areas are drawn anew, exactly.
+    live.plots.set_range_selection(True)
+    assert live.plots.scroll_to(3.3 / pixels_per_s)
+    assert -live.plots.accel_curves[0].pos().x() * pixels_per_s == pytest.approx(3.3)
+
+
+def test_an_over_range_bubble_repaints_only_around_itself_and_its_arrow(qtbot, host):
+    level = BubbleLevel()
+    level.setMinimumSize(400, 400)
+    host.layout().addWidget(level)
+    host.show()
+    qtbot.waitExposed(host)
+    level.setRange(1.0)
+    level.setValid(True)
+    level.setTilt(3.0, 0.0)  # over range: pinned to the rim, an arrow on the bezel
+    flush_paints(qtbot, host.sentinel)
+    rects = []
+
+    class Rects(QObject):
+        def eventFilter(self, watched, event) -> bool:
+            if event.type() == QEvent.Type.Paint:
+                rects.append(event.rect())
+            return False
+
+    spy = Rects()
+    level.installEventFilter(spy)
+    level.setTilt(3.0, 0.6)  # the bubble and the arrow move round the rim
+    qtbot.waitUntil(lambda: len(rects) > 0, timeout=5000)
+    painted = rects[-1]
+    assert painted.width() * painted.height() < 0.5 * level.width() * level.height()
+    arrow = level._arrow_rect(level._geometry(), level.bubbleCenter()).toAlignedRect()
+    assert painted.contains(arrow.adjusted(1, 1, -1, -1))

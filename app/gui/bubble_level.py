@@ -284,9 +284,11 @@ class BubbleLevel(QWidget):
                         dirty = dirty.united(_spot_rect(spot, now.radius))
         if not dirty.isEmpty():
             if now.state is LevelState.OVER_RANGE:  # the arrow on the bezel moves too
-                self.update()
-            else:
-                self.update(dirty.toAlignedRect())
+                geo = self._geometry()
+                for spot in (painted.bubble, now.bubble):
+                    if spot is not None:
+                        dirty = dirty.united(self._arrow_rect(geo, spot))
+            self.update(dirty.toAlignedRect())
 
     # ---- Qt size handling ----------------------------------------------------------------
 
@@ -625,6 +627,18 @@ class BubbleLevel(QWidget):
             -80 * 16,
             -70 * 16,
         )
+
+    def _arrow_rect(self, geo: _VialGeometry, bubble: QPointF) -> QRectF:
+        """The pixels the over-range arrow for a bubble at ``bubble`` covers (with its pen)."""
+        direction = bubble - geo.center
+        length = math.hypot(direction.x(), direction.y())
+        if length == 0.0:
+            return QRectF()
+        ux, uy = direction.x() / length, direction.y() / length
+        band = geo.outer_radius - geo.vial_radius
+        mid = geo.center + QPointF(ux, uy) * (geo.vial_radius + geo.outer_radius) / 2.0
+        reach = band + 3.0
+        return QRectF(mid.x() - reach, mid.y() - reach, 2 * reach, 2 * reach)
 
     def _paint_over_range_arrow(
         self, painter: QPainter, geo: _VialGeometry, bubble: QPointF

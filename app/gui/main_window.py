@@ -256,8 +256,15 @@ class MainWindow(QMainWindow):
         )
         # The 3D view and the arm follow the current device (live and replay).
         # While the Joint dock has sensors, they drive both instead (one body per sensor).
+        # The arm is solved only while someone can see it (see _on_device_attitude).
+        self._device_q = None
         self.presenter.attitudeChanged.connect(self._on_device_attitude)
         self.joint_panel.attitudesChanged.connect(self._on_group_attitudes)
+        self.docks["arm"].visibilityChanged.connect(
+            lambda shown: shown and self._device_q is not None
+            and not self.joint_panel.has_sensors
+            and self.arm_panel.set_device_orientation(self._device_q)
+        )
         self.arm_panel.poseChanged.connect(
             lambda pose: self.attitude_view.set_arm(
                 pose.points, pose.rotations, self.arm_panel.sensor_links
@@ -1063,7 +1070,11 @@ class MainWindow(QMainWindow):
         if self.joint_panel.has_sensors:
             return
         self.attitude_view.set_attitude(q)
-        self.arm_panel.set_device_orientation(q)
+        self._device_q = q
+        # The arm only while someone can see it (the Arm dock, or the arm in the 3D view):
+        # solving it for every block costs as much as the bubble.
+        if self.docks["arm"].isVisible() or self.attitude_view.showing_arm:
+            self.arm_panel.set_device_orientation(q)
 
     def _on_group_attitudes(self, frame) -> None:
         """The Joint dock's sensors (a GroupFrame; None when they were removed): one body

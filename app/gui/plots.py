@@ -18,13 +18,15 @@ from html import escape
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Qt, Signal
-from PySide6.QtWidgets import QGraphicsItem, QVBoxLayout, QWidget
+from PySide6.QtCore import QCoreApplication, QEvent, Qt, Signal
+from PySide6.QtWidgets import QGraphicsItem, QGraphicsView, QVBoxLayout, QWidget
 
 from app.gui import theme
 
 SCROLL_THRESHOLD_PX = 0.5
 """The traces are moved sideways only once they would move at least this far on screen."""
+TICK_PX = 4
+"""Tick marks point this far out of the data area (pyqtgraph's default points inwards)."""
 RANGE_MARGIN = 0.1
 """Space above and below the data when a value range is set, as a fraction of its span."""
 RANGE_SHRINK = 0.4
@@ -57,6 +59,9 @@ def _make_plot() -> pg.PlotItem:
     plot.hideButtons()
     for name in ("left", "bottom"):  # redrawn only when their range or size changes
         plot.getAxis(name).setCacheMode(QGraphicsItem.CacheMode.DeviceCoordinateCache)
+        # Ticks outside the data area: inside it everything moves with the traces, so a
+        # scroll can be a copy of its pixels (LivePlots.scroll_to).
+        plot.getAxis(name).setStyle(tickLength=TICK_PX)
     return plot
 
 
@@ -223,6 +228,10 @@ class LivePlots(QWidget):
         # decimated the data).
         curve = pg.PlotCurveItem(pen=pg.mkPen(colour(), width=1, style=style),
                                  skipFiniteCheck=True)
+        # Moving a trace sideways (scroll_to) changes nothing but its position: without this
+        # flag pyqtgraph would drop the trace's bounds on every move and compute them again
+        # (a pass over its data and the view's pixel size) for each frame.
+        curve.setFlag(QGraphicsItem.GraphicsItemFlag.ItemSendsGeometryChanges, False)
         plot.addItem(curve)
         self._pens[curve] = (colour, style)
         self._legends.setdefault(plot, []).append((label, curve))
@@ -451,8 +460,41 @@ class LivePlots(QWidget):
         pixels_per_s = self.accel_plot.getViewBox().width() / max(self._window_s, 1e-9)
         if abs(seconds - self._scroll_s) * pixels_per_s < SCROLL_THRESHOLD_PX:
             return False
-        self._scroll_s = float(seconds)
-        self._place_curves()
+        if self._region_shown:  # the selected range stays put: repaint the data areas
+            self._scroll_s = float(seconds)
+            self._place_curves()
+            return True
+        return self._blit_to(seconds, pixels_per_s)
+
+    def _blit_to(self, seconds: float, pixels_per_s: float) -> bool:
+        """Scroll by whole pixels as a copy of what is on screen: the traces are moved in the
+        scene without the view repainting them (updates are off while the scene takes the
+        move in), then each data area's pixels are shifted (QWidget.scroll) and only the
+        strip that comes into view is drawn. (The outermost pixel of the area, where the
+        axis lines may reach, is left alone; the next rebuild draws it anew.)"""
+        old_px = round(self._scroll_s * pixels_per_s)
+        new_px = round(seconds * pixels_per_s)
+        if new_px == old_px:
+            return False
+        self._scroll_s = new_px / pixels_per_s
+        view = self.graphics
+        # Other changes waiting in the scene are drawn as usual, before updates go off.
+        QCoreApplication.sendPostedEvents(view.scene(), QEvent.Type.MetaCall)
+        mode = view.viewportUpdateMode()
+        view.setViewportUpdateMode(QGraphicsView.ViewportUpdateMode.NoViewportUpdate)
+        try:
+            self._place_curves()
+            QCoreApplication.sendPostedEvents(view.scene(), QEvent.Type.MetaCall)
+        finally:
+            view.setViewportUpdateMode(mode)
+        plots = [self.accel_plot, self.gyro_plot, self.angle_plot]
+        if self._error_shown:
+            plots.append(self.error_plot)
+        viewport = view.viewport()
+        for plot in plots:
+            box = plot.getViewBox()
+            outer = view.mapFromScene(box.mapRectToScene(box.boundingRect())).boundingRect()
+            viewport.scroll(old_px - new_px, 0, outer.adjusted(1, 1, -1, -2))
         return True
 
     @property

@@ -38,6 +38,16 @@ MAX_SCROLL_LEAD_S = 0.25
 """Between blocks the plots scroll on with the clock, at most this long (and at most 1.5
 block intervals) past the newest sample: a stream that stopped leaves them still."""
 UNIT_LABELS = {key: unit.suffix or "1:n" for key, unit in SLOPE_UNITS.items()}
+PLOT_DATA_INTERVAL_S = 0.05
+"""New data rebuild the traces at most this often; the frames between only scroll them.
+At a 10 s window on 1270 px the newest 50 ms are 6 px: the trace's end stays that close to
+the right edge, while every frame still moves the traces on. Rebuilding is what costs."""
+LEVEL_INTERVAL_S = 0.04
+"""The bubble takes new averages at most this often (25 Hz): it shows a 0.5 s average by
+default, which moves less in 40 ms than the eye can follow as separate steps."""
+EXPOSURE_CHECK_S = 0.25
+"""How long a view found uncovered is taken as uncovered (hidden views are noticed at
+once: ``isVisible`` is checked every frame; only the costlier region test is kept)."""
 
 
 @dataclass(slots=True)
@@ -56,6 +66,26 @@ def on_screen(widget: QWidget) -> bool:
     """Whether any of ``widget`` can be seen: shown, not in a hidden dock or tab, not covered
     entirely, its window not minimised."""
     return widget.isVisible() and not widget.window().isMinimized() and _exposed(widget)
+
+
+class ScreenPresence:
+    """:func:`on_screen` for a view asked every frame: the region test (the costly part)
+    is redone at most every ``EXPOSURE_CHECK_S`` while the view stays visible."""
+
+    def __init__(self, widget: QWidget) -> None:
+        self.widget = widget
+        self._checked = -np.inf
+        self._exposed = False
+
+    def __call__(self, now: float) -> bool:
+        widget = self.widget
+        if not widget.isVisible() or widget.window().isMinimized():
+            self._checked = -np.inf
+            return False
+        if now - self._checked >= EXPOSURE_CHECK_S:
+            self._checked = now
+            self._exposed = _exposed(widget)
+        return self._exposed
 
 
 def _exposed(widget: QWidget) -> bool:
@@ -124,6 +154,13 @@ class LivePresenter(QObject):
         self._last_error_update = -np.inf
         self._shown_quat: np.ndarray | None = None
         """The quaternions behind the readouts' figures (what Hold keeps showing)."""
+        self._last_level_update = -np.inf
+        self.level_interval_s = LEVEL_INTERVAL_S
+        self.plot_data_interval_s = PLOT_DATA_INTERVAL_S
+        self._plots_were_shown = False
+        self._shown = {
+            view: ScreenPresence(view) for view in (level, readouts, plots, filter_panel)
+        }
 
     def start(self) -> None:
         self.clock.start()
@@ -156,12 +193,16 @@ class LivePresenter(QObject):
         level_key = (total, self.settings.unit, self.settings.averaging_s)
         if not self.settings.hold:
             averaged = None
-            if level_key != self._level_key and on_screen(self.level):
-                averaged = self._averaged(orientation)
-                self._show_level(averaged)
-                self._level_key = level_key
-                drew = True
-            if level_key != self._text_key and on_screen(self.readouts):
+            if level_key != self._level_key and self._shown[self.level](now):
+                if now - self._last_level_update >= self.level_interval_s:
+                    averaged = self._averaged(orientation)
+                    self._show_level(averaged)
+                    self._level_key = level_key
+                    self._last_level_update = now
+                    drew = True
+                else:
+                    pending = True
+            if level_key != self._text_key and self._shown[self.readouts](now):
                 if now - self._last_text_update >= 1.0 / self.settings.readout_rate_hz:
                     self._show_texts(averaged or self._averaged(orientation))
                     self._text_key = level_key
@@ -172,8 +213,13 @@ class LivePresenter(QObject):
         plot_key = (
             total, self.plots.window_s, self.plots.width(), tuple(pipeline.comparison_buffers)
         )
-        if self.plots_enabled and on_screen(self.plots):
-            if plot_key != self._plot_key:
+        plots_shown = self.plots_enabled and self._shown[self.plots](now)
+        just_shown, self._plots_were_shown = plots_shown and not self._plots_were_shown, plots_shown
+        if plots_shown:
+            due = just_shown or now - self._plot_wall >= self.plot_data_interval_s
+            if plot_key != self._plot_key and (
+                due or self._plot_key is None or plot_key[1:] != self._plot_key[1:]
+            ):
                 self._update_plots(pipeline.samples, orientation)
                 self._plot_key = plot_key
                 self.plot_updates += 1
@@ -186,11 +232,13 @@ class LivePresenter(QObject):
                 if self.plots.scroll_to(lead):
                     self.plot_scrolls += 1
                     drew = True
+                elif plot_key != self._plot_key:
+                    pending = True  # new data, drawn once the interval is over
         error_key = (total, self.plots.window_s, tuple(pipeline.comparison_buffers))
         if (
             error_key != self._error_key
             and now - self._last_error_update >= ERROR_TABLE_INTERVAL_S
-            and on_screen(self.filter_panel)
+            and self._shown[self.filter_panel](now)
         ):
             self._last_error_update = now
             self._error_key = error_key
