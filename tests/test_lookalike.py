@@ -60,3 +60,16 @@ def test_the_message_bands() -> None:
     assert lookalike_message(0.1) is None  # free fall or a dead axis is another story
     assert "LSM6DSO32" in (lookalike_message(0.52) or "")
     assert "half" in (lookalike_message(1.95) or "")
+
+
+def test_a_link_delivering_one_sample_a_block_is_judged_after_half_a_second() -> None:
+    check = LookAlikeCheck()
+    rate = 104.17
+    found = []
+    for k in range(80):  # 0.77 s of one-sample blocks, as a slow link may deliver them
+        message = check.update(block(0.5, n=1, t0=k / rate))
+        if message:
+            found.append(k)
+    # Judged once the stretch covers 0.5 s (53 samples at 104.17 Hz), not before, only once.
+    assert found == [52]
+    assert check.accel_g == pytest.approx(0.5, abs=0.01)

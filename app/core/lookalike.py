@@ -52,6 +52,8 @@ class LookAlikeCheck:
         self.accel_g: float | None = None
         """Mean |a| at rest in g, once judged."""
         self._norms: list[np.ndarray] = []
+        self._stretch_start_s: float | None = None
+        """Time of the first sample of the stretch at rest (None: no stretch)."""
         self._start_s: float | None = None
 
     def update(self, block: SampleBlock) -> str | None:
@@ -65,6 +67,8 @@ class LookAlikeCheck:
         if not np.all(still) or np.any(block.gap):
             self._norms = []  # moved (or data lost): start the stretch again
         else:
+            if not self._norms:
+                self._stretch_start_s = float(block.t_s[0])
             self._norms.append(norms)
         if float(block.t_s[-1]) - self._start_s > GIVE_UP_SECONDS:
             self.done = True
@@ -75,6 +79,7 @@ class LookAlikeCheck:
         mean = float(np.mean(stretch))
         if mean <= 0.0 or np.ptp(stretch) > 2 * REST_ACCEL_SPREAD * mean:
             self._norms = [norms]  # not steady: the stretch starts again with this block
+            self._stretch_start_s = float(block.t_s[0])
             return None
         if len(stretch) < MIN_SAMPLES or not self._long_enough(stretch, block):
             return None
@@ -83,7 +88,9 @@ class LookAlikeCheck:
         return lookalike_message(mean)
 
     def _long_enough(self, stretch: np.ndarray, block: SampleBlock) -> bool:
-        if len(block) < 2:
+        """The stretch covers :data:`REST_SECONDS` (its time span plus one sample period),
+        whatever the size of the blocks it came in (a link may deliver one sample a block)."""
+        if self._stretch_start_s is None or len(stretch) < 2:
             return False
-        period = float(np.median(np.diff(block.t_s)))
-        return len(stretch) * period >= REST_SECONDS
+        span = float(block.t_s[-1]) - self._stretch_start_s
+        return span * len(stretch) / (len(stretch) - 1) >= REST_SECONDS
