@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import sys
+import threading
 import time
 
 import numpy as np
@@ -194,10 +195,10 @@ def test_recordings_keep_the_counters_at_start_and_end(tmp_path):
         health.begin_recording()
         health.end_recording(status.path, errors.append, also=acquisition.board.end_metadata())
         end = acquisition.board.latest
-        deadline = time.monotonic() + DEADLINE_S
-        while KEY_STATUS_END not in read_recording(path).metadata:  # stored in a thread
-            assert time.monotonic() < deadline and not errors, errors
-            time.sleep(0.01)
+        for thread in threading.enumerate():  # the closing metadata is stored in a thread
+            if thread.name == "save-fault-events":
+                thread.join(DEADLINE_S)
+        assert not errors, errors
         metadata = read_recording(path).metadata
         assert metadata[KEY_STATUS_START] == first.as_dict()
         assert metadata[KEY_STATUS_END] == end.as_dict()
@@ -254,7 +255,9 @@ def test_the_emulated_board_counts_the_bytes_it_drops_when_the_host_stops_readin
         connection, _pipeline, _rec, acquisition, messages = parts(board.port)
         stream(acquisition, 500)
         deadline = time.monotonic() + DEADLINE_S
-        while board.stats.tx_dropped_bytes == 0:  # the host does not read meanwhile
+        # The host does not read meanwhile: the wait is the behaviour under test (the board's
+        # transmit buffer fills with wall time), so it is polled, not signalled.
+        while board.stats.tx_dropped_bytes == 0:
             assert time.monotonic() < deadline, "the board never had to drop"
             time.sleep(0.01)
         device = connection.device
@@ -289,14 +292,12 @@ def test_simulate_pty_injects_fifo_overruns_that_the_host_sees_explained(capsys)
     assert "--fifo-overrun wants sequence numbers" in capsys.readouterr().err
     args = build_parser().parse_args(["simulate", "--pty", "--scenario", "static",
                                       "--odr", "833", "--fifo-overrun", "20"])
-    out, stop = io.StringIO(), threading.Event()
+    out, stop = _Written(), threading.Event()
     server = threading.Thread(target=simulate_command, args=(args, out, stop), daemon=True)
     server.start()
     try:
+        assert out.written.wait(DEADLINE_S), "simulate printed no port"
         deadline = time.monotonic() + DEADLINE_S
-        while not out.getvalue():
-            assert time.monotonic() < deadline
-            time.sleep(0.01)
         port = out.getvalue().splitlines()[0]
         device = SerialLinkDevice(f"serial://{port}")
         device.open()
@@ -310,3 +311,17 @@ def test_simulate_pty_injects_fifo_overruns_that_the_host_sees_explained(capsys)
         stop.set()
         server.join(timeout=10)
     assert "1 FIFO overruns" in out.getvalue().splitlines()[-1]
+
+
+class _Written(io.StringIO):
+    """A text stream that says when something was first written to it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.written = threading.Event()
+
+    def write(self, text: str) -> int:
+        count = super().write(text)
+        if "\n" in self.getvalue():  # a whole first line (the port)
+            self.written.set()
+        return count
