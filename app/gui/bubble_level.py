@@ -395,6 +395,12 @@ class BubbleLevel(QWidget):
         cached = self._layers.get(key)
         if cached is not None and cached[0] == base:
             return cached[1]
+        pixmap = self._painted_pixmap(paint)
+        self._layers[key] = (base, pixmap)
+        return pixmap
+
+    def _painted_pixmap(self, paint) -> QPixmap:
+        """A transparent widget-sized pixmap (at the screen's pixel ratio) ``paint`` draws on."""
         ratio = self.devicePixelRatioF()
         pixmap = QPixmap(round(self.width() * ratio), round(self.height() * ratio))
         pixmap.setDevicePixelRatio(ratio)
@@ -404,26 +410,21 @@ class BubbleLevel(QWidget):
         painter.setRenderHint(QPainter.RenderHint.TextAntialiasing)
         paint(painter)
         painter.end()
-        self._layers[key] = (base, pixmap)
         return pixmap
 
     def _static_pixmap(self, geo: _VialGeometry) -> QPixmap:
         """Bezel, glass, graduations and crosshair, cached until size or range change."""
         ratio = self.devicePixelRatioF()
         if self._static_layer is None or self._static_layer.devicePixelRatio() != ratio:
-            pixmap = QPixmap(round(self.width() * ratio), round(self.height() * ratio))
-            pixmap.setDevicePixelRatio(ratio)
-            pixmap.fill(Qt.GlobalColor.transparent)
-            painter = QPainter(pixmap)
-            painter.setRenderHint(QPainter.RenderHint.Antialiasing)
-            painter.setRenderHint(QPainter.RenderHint.TextAntialiasing)
-            self._paint_bezel(painter, geo)
-            self._paint_glass(painter, geo)
-            self._paint_graduations(painter, geo)
-            self._paint_crosshair(painter, geo)
-            self._paint_axis_labels(painter, geo)
-            painter.end()
-            self._static_layer = pixmap
+
+            def paint(painter: QPainter) -> None:
+                self._paint_bezel(painter, geo)
+                self._paint_glass(painter, geo)
+                self._paint_graduations(painter, geo)
+                self._paint_crosshair(painter, geo)
+                self._paint_axis_labels(painter, geo)
+
+            self._static_layer = self._painted_pixmap(paint)
         return self._static_layer
 
     def _paint_bezel(self, painter: QPainter, geo: _VialGeometry) -> None:
