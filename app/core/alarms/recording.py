@@ -35,13 +35,6 @@ def save_alarm_events(path: str | os.PathLike[str], events: Iterable[AlarmEvent]
 
 def recorded_alarm_events(metadata: Mapping[str, Any]) -> list[AlarmEvent]:
     """The crossings a recording's metadata holds (none when absent; malformed ones skipped)."""
-    entries = metadata.get(KEY_ALARM_EVENTS)
-    if not isinstance(entries, list):
-        return []
-    events = []
-    for entry in entries:
-        try:
-            events.append(AlarmEvent.from_dict(entry))
-        except (KeyError, TypeError, ValueError):
-            continue
-    return events
+    from app.core.recording.format import metadata_entries
+
+    return metadata_entries(metadata, KEY_ALARM_EVENTS, AlarmEvent.from_dict)

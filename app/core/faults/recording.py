@@ -31,13 +31,6 @@ def save_fault_events(path: str | os.PathLike[str], events: Iterable[FaultEvent]
 
 def recorded_fault_events(metadata: Mapping[str, Any]) -> list[FaultEvent]:
     """The events a recording's metadata holds (none when the key is absent or malformed)."""
-    entries = metadata.get(KEY_FAULT_EVENTS)
-    if not isinstance(entries, list):
-        return []
-    events = []
-    for entry in entries:
-        try:
-            events.append(FaultEvent.from_dict(entry))
-        except (KeyError, TypeError, ValueError):
-            continue
-    return events
+    from app.core.recording.format import metadata_entries
+
+    return metadata_entries(metadata, KEY_FAULT_EVENTS, FaultEvent.from_dict)

@@ -16,14 +16,16 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from datetime import UTC, datetime
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from app.core.calibration import SensorCalibration, temperature_from_json, temperature_to_json
 from app.core.version import __version__
+
+T = TypeVar("T")
 
 MAGIC = "inclinometer-recording"
 FORMAT_VERSION = 1
@@ -122,6 +124,22 @@ def metadata_text(metadata: Mapping[str, Any]) -> str:
 
 
 # -- values ----------------------------------------------------------------------------------
+def metadata_entries(metadata: Mapping[str, Any], key: str, parse: Callable[[Any], T]) -> list[T]:
+    """The list under ``key`` parsed entry by entry (events a recording stores, say): none when
+    the key is absent or not a list; an entry ``parse`` rejects (KeyError, TypeError,
+    ValueError) is skipped, so one damaged entry does not hide the others."""
+    entries = metadata.get(key)
+    if not isinstance(entries, list):
+        return []
+    parsed = []
+    for entry in entries:
+        try:
+            parsed.append(parse(entry))
+        except (KeyError, TypeError, ValueError):
+            continue
+    return parsed
+
+
 def calibration_to_json(calibration: SensorCalibration) -> dict[str, Any]:
     """The calibration's parameters, as a profile's ``parameters`` plus its name."""
     return {
