@@ -17,7 +17,9 @@ the pipeline, and the GUI) over wall time, in % of one core, so other processes 
 machine change it far less than a throughput figure; each of ``--repeat`` intervals is
 reported and their spread, with the load average. Frames are paint events of the plots' view
 and of the bubble level (what reached the window), and the presenter's own count of frames
-that drew something. The window is 1280 x 860 with all plots on a 10 s window unless told.
+that drew something; rebuilds are the plots' traces handed over anew, appends the new samples
+drawn onto the screen between rebuilds. The window is 1280 x 860 with all plots on a 10 s
+window unless told.
 """
 
 from __future__ import annotations
@@ -130,6 +132,7 @@ def main() -> int:
             "wall": time.monotonic(), "cpu": time.process_time(), "threads": thread_cpu_s(),
             "frames": window.presenter.frames,
             "updates": getattr(window.presenter, "plot_updates", 0),
+            "appends": getattr(window.presenter, "plot_appends", 0),
             "plot": plot_paints.paints, "bubble": bubble_paints.paints,
             "samples": session.pipeline.counters.samples, "load": load_average(),
         })
@@ -167,15 +170,17 @@ def main() -> int:
         rows.append({
             "cpu": 100 * (after["cpu"] - before["cpu"]) / wall, "gui": threads.get("GUI", 0.0),
             "worker": threads.get("device-worker", 0.0), "samples": rate("samples"),
-            "frames": rate("frames"), "updates": rate("updates"), "plot": rate("plot"),
+            "frames": rate("frames"), "updates": rate("updates"), "appends": rate("appends"),
+            "plot": rate("plot"),
             "bubble": rate("bubble"), "load": after["load"],
         })
     print("  whole-app CPU  (GUI thread, worker)  | plot repaints  bubble repaints  presenter"
-          " frames  plot data updates | samples/s | load average")
+          " frames  plot rebuilds / appends | samples/s | load average")
     for row in rows:
         print(f"  {row['cpu']:5.1f} % ({row['gui']:5.1f} %, {row['worker']:5.1f} %)   | "
               f"{row['plot']:6.1f} fps      {row['bubble']:6.1f} fps      {row['frames']:6.1f} fps"
-              f"        {row['updates']:6.1f} /s     | {row['samples']:8,.0f}  | {row['load']}")
+              f"        {row['updates']:5.1f} / {row['appends']:5.1f} /s  | {row['samples']:8,.0f}  "
+              f"| {row['load']}")
     cpu = [row["cpu"] for row in rows]
     spread = f"{min(cpu):.1f}..{max(cpu):.1f}" if len(cpu) > 1 else f"{cpu[0]:.1f}"
     print(f"whole-app CPU: median {statistics.median(cpu):.1f} % of one core (spread {spread} %)")

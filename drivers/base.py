@@ -18,7 +18,22 @@ from app.core.devices import BoardStatus, DeviceDescriptor, DeviceInfo, DeviceMe
 from app.core.samples import RawBlock
 from drivers.errors import DeviceClosedError, DeviceError, DeviceIOError
 
-__all__ = ["Device", "DeviceDescriptor", "DeviceInfo", "DeviceMessage"]
+__all__ = ["Device", "DeviceDescriptor", "DeviceInfo", "DeviceMessage", "read_block_s"]
+
+MIN_BLOCK_SAMPLES = 10
+"""A streaming read gathers at least this many samples ..."""
+MIN_BLOCK_S, MAX_BLOCK_S = 0.02, 0.1
+"""... but waits no less than MIN_BLOCK_S and no longer than MAX_BLOCK_S for them."""
+
+
+def read_block_s(odr_hz: float) -> float:
+    """How much data a streaming read waits for at ``odr_hz``: ten samples, within 20 to
+    100 ms. The host's cost is mostly per block (a board sends a packet every 2 ms, one or
+    two samples at low rates), while the display scrolls on between blocks and a tilt
+    meter's averages span half a second: 96 ms at 104 Hz, 24 ms at 417 Hz, 20 ms above."""
+    if not odr_hz > 0:
+        return MIN_BLOCK_S
+    return min(MAX_BLOCK_S, max(MIN_BLOCK_S, MIN_BLOCK_SAMPLES / odr_hz))
 
 
 class Device(ABC):

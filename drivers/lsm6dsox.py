@@ -7,6 +7,7 @@ choices where no datasheet confirmed the value.
 
 from __future__ import annotations
 
+import functools
 import math
 
 WHO_AM_I_VALUE = 0x6C
@@ -63,8 +64,11 @@ ACCEL_NOISE_G_PER_SQRT_HZ_16G = 110e-6
 STANDARD_GRAVITY_M_S2 = 9.80665
 
 
+@functools.lru_cache(maxsize=64)
 def odr_code_for(odr_hz: float) -> int:
-    """The ODR code whose label or real rate is closest to ``odr_hz`` (104 and 104.17 -> 4)."""
+    """The ODR code whose label or real rate is closest to ``odr_hz`` (104 and 104.17 -> 4).
+
+    Cached: the simulator asks for its rate several times a block."""
     def distance(code: int) -> float:
         return min(abs(ODR_LABELS_HZ[code] - odr_hz), abs(ODR_RATES_HZ[code] - odr_hz))
 

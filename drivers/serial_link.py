@@ -67,9 +67,9 @@ from urllib.parse import parse_qsl, urlencode
 import serial
 
 from app.core.devices import BoardStatus
-from app.core.samples import RawBlock
+from app.core.samples import RawBlock, merge_raw_blocks
 from drivers import lsm6dsox
-from drivers.base import Device, DeviceDescriptor, DeviceInfo, DeviceMessage
+from drivers.base import Device, DeviceDescriptor, DeviceInfo, DeviceMessage, read_block_s
 from drivers.errors import (
     DeviceError,
     DeviceIOError,
@@ -290,6 +290,7 @@ class SerialLinkDevice(Device):
         self._state = threading.Condition()
         self._command_lock = threading.RLock()
         self._blocks: deque[RawBlock] = deque()
+        self._last_read_s = -math.inf
         self._replies: deque[p.Packet] = deque(maxlen=64)
         self._logs: deque[p.Log] = deque(maxlen=200)
         self._unread_logs: deque[p.Log] = deque(maxlen=200)
@@ -450,11 +451,27 @@ class SerialLinkDevice(Device):
             raise
 
     def _read(self, timeout_s: float) -> RawBlock | None:
-        deadline = time.monotonic() + timeout_s
+        # Everything queued comes back as one block, once it holds read_block_s of samples or
+        # that long after the previous read (the board sends a packet per FIFO poll: one or
+        # two samples a packet at low rates, and the pipeline's cost is mostly per block).
+        now = time.monotonic()
+        deadline = now + timeout_s
+        info = self._info
+        span = read_block_s(info.odr_hz) if info is not None else 0.0
+        settle = min(deadline, self._last_read_s + span)
+        enough = max(1, math.ceil(span * info.odr_hz)) if info is not None else 1
         while True:
             with self._state:
                 if self._blocks:
-                    return self._blocks.popleft()
+                    queued = sum(len(block) for block in self._blocks)
+                    if queued >= enough or time.monotonic() >= settle:
+                        blocks = list(self._blocks)
+                        self._blocks.clear()
+                        self._last_read_s = time.monotonic()
+                        merged = merge_raw_blocks(blocks)
+                        if len(merged) > 1:  # a change of scale: the rest waits its turn
+                            self._blocks.extend(merged[1:])
+                        return merged[0] if merged else None
                 paused = self._paused_while_streaming
             if paused is not None:
                 raise DeviceError(self._paused_message(paused, self._pause_reason()))

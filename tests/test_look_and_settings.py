@@ -216,11 +216,12 @@ def test_theme_switch_is_live_for_plots_bubble_and_stylesheet(qtbot, tmp_path, q
         # A new stylesheet would put back the labels' first fonts: the digits keep their size.
         digits = window.readouts.valueLabel("roll").font().pixelSize()
         assert digits == window.readouts.valuePixelSize()
-        # Text coloured in the note follows too, also while the readouts are held.
+        # The raised side beside the direction's note follows too, also while held.
         window.hold_button.setChecked(True)
         window.set_theme("light")
-        note = window.readouts._tiles["direction"].note.text()
-        assert f"color:{theme.LIGHT.TEXT}" in note
+        side = window.readouts._tiles["direction"].side
+        side.ensurePolished()
+        assert side.palette().color(side.foregroundRole()).name() == theme.LIGHT.TEXT.lower()
     finally:
         window.close()
 

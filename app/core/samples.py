@@ -61,6 +61,54 @@ class RawBlock:
         return int(self.t_s.shape[0])
 
 
+def merge_raw_blocks(blocks: list[RawBlock]) -> list[RawBlock]:
+    """Join consecutive blocks that share their scale and reference columns into one block each
+    (a link that sends a packet per FIFO poll delivers one or two samples a packet; the
+    pipeline's cost is mostly per block). What was lost stays marked: a joined block's loss
+    before it becomes a ``gap`` on its first sample and adds to ``lost_samples``."""
+    merged: list[RawBlock] = []
+    run: list[RawBlock] = []
+
+    def flush() -> None:
+        if len(run) == 1:
+            merged.append(run[0])
+        elif run:
+            merged.append(_join(run))
+        run.clear()
+
+    for block in blocks:
+        if not len(block):
+            continue
+        if run and (block.scale != run[0].scale
+                    or (block.reference_quat is None) != (run[0].reference_quat is None)):
+            flush()
+        run.append(block)
+    flush()
+    return merged
+
+
+def _join(run: list[RawBlock]) -> RawBlock:
+    gaps = []
+    for index, block in enumerate(run):
+        gap = np.zeros(len(block), dtype=bool) if block.gap is None else np.array(
+            block.gap, dtype=bool)
+        if index and block.lost_samples:
+            gap[0] = True
+        gaps.append(gap)
+    gap = np.concatenate(gaps)
+    return RawBlock(
+        t_s=np.concatenate([b.t_s for b in run]),
+        accel_raw=np.concatenate([b.accel_raw for b in run]),
+        gyro_raw=np.concatenate([b.gyro_raw for b in run]),
+        temp_raw=np.concatenate([b.temp_raw for b in run]),
+        scale=run[0].scale,
+        gap=gap if gap.any() else (None if run[0].gap is None else gap),
+        lost_samples=sum(b.lost_samples for b in run),
+        reference_quat=None if run[0].reference_quat is None else np.concatenate(
+            [b.reference_quat for b in run]),
+    )
+
+
 @dataclass(slots=True)
 class SampleBlock:
     """A block of samples in SI units (see the module docstring for conventions).

@@ -25,6 +25,7 @@ from PySide6.QtGui import (
     QPaintEvent,
     QPen,
     QPolygonF,
+    QShowEvent,
     QWheelEvent,
 )
 from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
@@ -303,6 +304,7 @@ class AttitudeView(QWidget):
         self._labels: tuple[str, ...] = ()
         self._arm: tuple[np.ndarray, np.ndarray, tuple[int, ...] | None] | None = None
         self.redraws = 0
+        self._redraw_pending = False
 
     @property
     def backend(self) -> str:
@@ -362,7 +364,17 @@ class AttitudeView(QWidget):
     def showing_arm(self) -> bool:
         return self._arm is not None and self.arm_box.isChecked()
 
+    def showEvent(self, event: QShowEvent) -> None:
+        """Shown again: draw what changed while hidden."""
+        super().showEvent(event)
+        if self._redraw_pending:
+            self._redraw()
+
     def _redraw(self) -> None:
+        if not self.isVisible():  # a hidden view (a closed dock, another tab) draws nothing
+            self._redraw_pending = True
+            return
+        self._redraw_pending = False
         if self.showing_arm:
             scene = arm_scene(*self._arm)
         elif self._quaternions:

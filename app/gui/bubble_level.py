@@ -111,6 +111,7 @@ class BubbleLevel(QWidget):
         self.setSizePolicy(policy)
         self.setMinimumSize(160, 160)
         self._caption_below = False
+        self._caption_boxes: dict[tuple, QRectF] = {}
         theme.notifier().changed.connect(self._on_theme_changed)
 
     # ---- API -----------------------------------------------------------------------------
@@ -245,14 +246,22 @@ class BubbleLevel(QWidget):
         """Move the caption to the other side if the bubble now covers it (hysteresis: it
         stays where it is until the bubble reaches it)."""
         geo = self._geometry()
-        if geo.outer_radius < 20 or self.state() is LevelState.NO_DATA:
+        state = self.state()
+        if geo.outer_radius < 20 or state is LevelState.NO_DATA:
             return
-        text = self._caption_text(self.state())[0]
-        if self._caption_box(geo, text).intersects(self.bubbleRect()):
+        # The caption's plate depends on little that changes while the bubble moves: kept.
+        key = (state, self._full_scale_deg, self.width(), self.height(), self._caption_below)
+        box = self._caption_boxes.get(key)
+        if box is None:
+            if len(self._caption_boxes) > 16:
+                self._caption_boxes.clear()
+            box = self._caption_boxes[key] = self._caption_box(geo, self._caption_text(state)[0])
+        if box.intersects(self.bubbleRect()):
             self._caption_below = not self._caption_below
 
     def _on_theme_changed(self, _name: str) -> None:
         self._static_layer = None
+        self._caption_boxes.clear()
         self.update()
     def _marks(self) -> _Marks:
         """What the current values would paint: state, bubble and reference centres."""
@@ -318,6 +327,7 @@ class BubbleLevel(QWidget):
         """Redraw the cached engraving when the widget's font changes."""
         if event.type() == QEvent.Type.FontChange:
             self._static_layer = None
+            self._caption_boxes.clear()
         super().changeEvent(event)
 
     # ---- Geometry (pixels) ---------------------------------------------------------------

@@ -7,6 +7,7 @@ from PySide6.QtWidgets import QComboBox, QLabel, QSizePolicy, QToolBar, QToolBut
 
 from app.core.devices import DeviceDescriptor
 from app.gui import theme
+from app.gui.elided_label import ElidedLabel
 
 TOOLTIP_ROLE = Qt.ItemDataRole.ToolTipRole
 
@@ -58,7 +59,7 @@ class DeviceBar(QToolBar):
         self.addWidget(spacer)
 
         self.lamp = QLabel("●")
-        self.status_label = QLabel("Disconnected")
+        self.status_label = ElidedLabel("Disconnected")
         self.status_label.setObjectName("streamStatus")
         self.addWidget(self.lamp)
         self.addWidget(self.status_label)
@@ -100,10 +101,17 @@ class DeviceBar(QToolBar):
             "disconnected": theme.TEXT_DISABLED, "connecting": theme.WARN_AMBER,
             "streaming": theme.OK_GREEN, "stalled": theme.WARN_AMBER, "error": theme.ALARM_RED,
         }
-        self.lamp.setStyleSheet(f"color: {colours[state]}; font-size: 14pt;")
+        # Called with every status: only what changed is touched (a new stylesheet
+        # re-polishes the lamp, a new button text relayouts the bar).
+        style = f"color: {colours[state]}; font-size: 14pt;"
+        if self.lamp.styleSheet() != style:
+            self.lamp.setStyleSheet(style)
         live = state in ("connecting", "streaming", "stalled")
-        self.connect_button.setChecked(live)
-        self.connect_button.setText("Disconnect" if live else "Connect")
+        if self.connect_button.isChecked() != live:
+            self.connect_button.setChecked(live)
+        label = "Disconnect" if live else "Connect"
+        if self.connect_button.text() != label:
+            self.connect_button.setText(label)
         self.status_label.setText(text or state.capitalize())
 
     def _on_connect_clicked(self) -> None:

@@ -8,6 +8,7 @@ from PySide6.QtWidgets import QFormLayout, QGroupBox, QLabel, QPushButton, QVBox
 from app.core.devices import BoardStatus, DeviceInfo
 from app.core.self_test import SelfTestReport
 from app.gui import theme
+from app.gui.elided_label import ElidedLabel
 from app.services.stream_status import StreamStatus
 
 SELF_TEST_UNAVAILABLE = ("The sensor's self-test needs the NUCLEO firmware or a register-level "
@@ -24,6 +25,9 @@ _BOARD_FIELDS = (("reset_cause", "Started by"), ("uptime", "Uptime"),
 _PROBLEM_COUNTERS = ("uart_tx_dropped_bytes", "uart_rx_errors", "i2c_recoveries",
                      "fifo_overruns", "watchdog_resets")
 """Shown in red when not 0 (I2C errors are not: the probe of an empty address counts too)."""
+_LIVE_FIELDS = frozenset({"rate", "samples", "lost", "gaps", "load", "uptime",
+                          *BoardStatus.COUNTERS})
+"""Fields rewritten with every status (a few times a second)."""
 
 
 class DevicePanel(QWidget):
@@ -68,9 +72,13 @@ class DevicePanel(QWidget):
 
     @staticmethod
     def _value_label(into: dict[str, QLabel], key: str) -> QLabel:
-        label = QLabel("—")
-        label.setWordWrap(True)
-        label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        if key in _LIVE_FIELDS:
+            # Rewritten with every status: a label that repaints without a relayout.
+            label: QLabel = ElidedLabel("—")
+        else:
+            label = QLabel("—")
+            label.setWordWrap(True)
+            label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
         into[key] = label
         return label
 
@@ -130,4 +138,6 @@ class DevicePanel(QWidget):
             value = getattr(board, name)
             values[name].setText(f"{value:,}")
             bad = name in _PROBLEM_COUNTERS and value > 0
-            values[name].setStyleSheet(f"color: {theme.ALARM_RED};" if bad else "")
+            style = f"color: {theme.ALARM_RED};" if bad else ""
+            if values[name].styleSheet() != style:  # a new stylesheet re-polishes the label
+                values[name].setStyleSheet(style)

@@ -218,7 +218,16 @@ class JointPanel(QWidget):
         self.timer = QTimer(self)
         self.timer.setInterval(REFRESH_MS)
         self.timer.timeout.connect(self.refresh)
-        self.timer.start()
+        self._run_timer()
+
+    def _run_timer(self) -> None:
+        """Frames only while there is something to show: sensors, or a session replaying
+        (a tilt meter left running costs nothing here)."""
+        active = bool(self.group.members) or self.replay is not None
+        if active and not self.timer.isActive():
+            self.timer.start()
+        elif not active and self.timer.isActive():
+            self.timer.stop()
 
     # -- sensors ------------------------------------------------------------------------------
     def ask_add_sensor(self) -> None:
@@ -254,6 +263,7 @@ class JointPanel(QWidget):
             self.attitudesChanged.emit(None)  # back to the main device
         self.curve.setData([], [])
         self._show_value(None)
+        self._run_timer()
 
     def _roles(self) -> list[tuple[str, str]]:
         """(role, source) of every sensor: the live group's, or the replayed session's."""
@@ -263,6 +273,7 @@ class JointPanel(QWidget):
         return [(m.role, m.url) for m in self.group.members]
 
     def _refresh_members(self) -> None:
+        self._run_timer()
         members = self._roles()
         self.table.setRowCount(len(members))
         for row, (role, source) in enumerate(members):
@@ -466,5 +477,5 @@ class JointPanel(QWidget):
             return None
 
     def shutdown(self) -> None:
-        self.timer.stop()
         self.group.shutdown()
+        self.timer.stop()  # after: the group's last membersChanged may have started it

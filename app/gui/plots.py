@@ -7,8 +7,12 @@ a one-line header above its data (never on the traces); colours follow the theme
 Redrawing is kept cheap: the time axis is fixed (times are relative to the newest sample),
 the value axes follow the data with hysteresis (:class:`StickyRange`: a range changes only
 when the data leave it or shrink well inside it, so the axes are not re-laid out every
-frame), and between two blocks of data the traces are only moved sideways
-(:meth:`LivePlots.scroll_to`) instead of being rebuilt.
+frame), and between two rebuilds the traces are only moved sideways
+(:meth:`LivePlots.scroll_to`: the pixels on screen are shifted, the strip that comes into
+view is filled with the background) and new samples are drawn onto the screen as short lines
+(:meth:`LivePlots.append`), without pyqtgraph's scene. The scene's own items stay where the
+last rebuild put them; before the scene has to paint anything else (the window was covered,
+a menu closed), ``resync`` rebuilds them from the buffers first.
 """
 
 from __future__ import annotations
@@ -18,11 +22,14 @@ from html import escape
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import QCoreApplication, QEvent, Qt, Signal
-from PySide6.QtWidgets import QGraphicsItem, QGraphicsView, QVBoxLayout, QWidget
+from PySide6.QtCore import QPointF, QRect, Qt, Signal
+from PySide6.QtGui import QPainter, QPaintEvent, QPalette, QPen, QPolygonF, QRegion
+from PySide6.QtWidgets import QGraphicsItem, QVBoxLayout, QWidget
 
 from app.gui import theme
 
+TAIL_S = 1.0
+"""How much of each trace's newest end :meth:`LivePlots.append` keeps to repaint from."""
 SCROLL_THRESHOLD_PX = 0.5
 """The traces are moved sideways only once they would move at least this far on screen."""
 TICK_PX = 4
@@ -121,6 +128,39 @@ class StickyRange:
         return True
 
 
+class _PlotView(pg.GraphicsLayoutWidget):
+    """The plots' graphics view: what only a scroll or new samples changed is painted by
+    :meth:`LivePlots._paint_fast`; anything else by the scene, brought up to date first."""
+
+    def __init__(self, owner: LivePlots) -> None:
+        super().__init__()
+        self._owner = owner
+        # Qt fills every area to be painted with the background first (the viewport's
+        # palette follows the theme, LivePlots.apply_theme), in C++: a strip a scroll
+        # uncovers then needs nothing more from Python.
+        self.viewport().setAutoFillBackground(True)
+        self.viewport().setAttribute(Qt.WidgetAttribute.WA_OpaquePaintEvent, False)
+        # The palette's Base is the theme's plot background (theme.palette).
+        self.viewport().setBackgroundRole(QPalette.ColorRole.Base)
+
+    def paintEvent(self, event: QPaintEvent) -> None:
+        if self._owner._paint_fast(event):
+            return
+        self._owner._before_scene_paint()
+        super().paintEvent(event)
+
+
+def _runs(x: np.ndarray, y: np.ndarray, breaks: np.ndarray) -> list[np.ndarray]:
+    """Index runs of a line to draw: a new run starts where ``breaks`` is True; points that
+    are not finite are left out and end a run."""
+    finite = np.isfinite(x) & np.isfinite(y)
+    cut = np.array(breaks, dtype=bool, copy=True)
+    cut |= ~finite
+    cut[1:] |= ~finite[:-1]
+    runs = np.split(np.arange(len(x)), np.flatnonzero(cut))
+    return [run[finite[run]] for run in runs if np.count_nonzero(finite[run]) > 1]
+
+
 def _finite_bounds(arrays: list[np.ndarray]) -> tuple[float, float]:
     """Smallest and largest finite value over ``arrays`` (NaN, NaN when there is none)."""
     lows, highs = [], []
@@ -143,7 +183,20 @@ class LivePlots(QWidget):
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self._window_s = 10.0
-        self.graphics = pg.GraphicsLayoutWidget()
+        self.resync: Callable[[], None] | None = None
+        """Rebuilds every trace from the buffers (set by the presenter): called before the
+        scene paints while it is behind what the screen shows."""
+        self._stale = False  # the scene's traces are behind the screen (moved or extended)
+        self._fast = QRegion()  # what _paint_fast may paint: scrolled-in strips, new lines
+        # Each appended trace's newest points (x, y, breaks): a fast paint repaints its
+        # region as a whole (a backing store need not keep what was there), from these.
+        self._tails: dict[pg.PlotCurveItem, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._tail_ends: dict[pg.PlotItem, float] = {}  # newest x of each plot's tails
+        self._areas: dict[pg.PlotItem, QRect] = {}
+        self._pixels_per_s: float | None = None
+        self._maps: dict[pg.PlotItem, tuple[float, float, float, float]] = {}
+        self._plot_of: dict[pg.PlotCurveItem, pg.PlotItem] = {}
+        self.graphics = _PlotView(self)
         self.graphics.ci.setSpacing(2)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
@@ -213,6 +266,9 @@ class LivePlots(QWidget):
             for plot in (self.accel_plot, self.gyro_plot, self.angle_plot, self.error_plot)
         }
         self._scroll_s = 0.0
+        for plot in (self.accel_plot, self.gyro_plot, self.angle_plot, self.error_plot):
+            plot.getViewBox().sigResized.connect(self._layout_changed)
+            plot.getViewBox().sigRangeChanged.connect(self._layout_changed)
         self.set_window(self._window_s)
         self.apply_theme()
         theme.notifier().changed.connect(self.apply_theme)
@@ -233,12 +289,15 @@ class LivePlots(QWidget):
         # (a pass over its data and the view's pixel size) for each frame.
         curve.setFlag(QGraphicsItem.GraphicsItemFlag.ItemSendsGeometryChanges, False)
         plot.addItem(curve)
+        self._plot_of[curve] = plot
         self._pens[curve] = (colour, style)
         self._legends.setdefault(plot, []).append((label, curve))
         return curve
 
     def _drop_curve(self, plot: pg.PlotItem, curve: pg.PlotCurveItem) -> None:
         plot.removeItem(curve)
+        self._plot_of.pop(curve, None)
+        self._tails.pop(curve, None)
         self._pens.pop(curve, None)
         self._legends[plot] = [entry for entry in self._legends[plot] if entry[1] is not curve]
 
@@ -260,6 +319,7 @@ class LivePlots(QWidget):
         """Background, axes, curves and legends in the current theme's colours."""
         pg.setConfigOptions(background=theme.BASE_BG, foreground=theme.TEXT_DIM)
         self.graphics.setBackground(theme.BASE_BG)
+
         width = theme.current().LINE_WIDTH
         for curve, (colour, style) in self._pens.items():
             curve.setPen(pg.mkPen(colour(), width=width, style=style))
@@ -374,6 +434,8 @@ class LivePlots(QWidget):
         path data of current Qt releases.
         """
         suffix = path.lower().rsplit(".", 1)[-1]
+        if suffix in ("png", "svg"):
+            self._before_scene_paint()  # what the screen shows, in the scene
         if suffix == "png":
             from pyqtgraph import exporters
 
@@ -398,6 +460,7 @@ class LivePlots(QWidget):
     def set_window(self, seconds: float) -> None:
         """Show the last ``seconds`` of data."""
         self._window_s = float(seconds)
+        self._pixels_per_s = None
         self.accel_plot.setXRange(-self._window_s, 0.0, padding=0.0)
 
     @property
@@ -410,6 +473,7 @@ class LivePlots(QWidget):
             *self.accel_curves, *self.gyro_curves, *self.angle_curves.values(), *compared
         ):
             curve.setData([], [])
+        self._in_sync()
 
     def set_data(
         self,
@@ -446,6 +510,7 @@ class LivePlots(QWidget):
                 curve.setData([], [])
         self._scroll_s = 0.0
         self._place_curves()
+        self._in_sync()
         self.ranges[self.accel_plot].follow(*_finite_bounds([accel_g]))
         self.ranges[self.gyro_plot].follow(*_finite_bounds([gyro_dps]))
         compared = [
@@ -455,9 +520,13 @@ class LivePlots(QWidget):
         self.ranges[self.angle_plot].follow(*_finite_bounds(shown_angles + compared))
 
     def scroll_to(self, seconds: float) -> bool:
-        """Move every trace ``seconds`` to the left (the time since the newest sample arrived)
-        without rebuilding it; only when that moves it a visible amount. True if it moved."""
-        pixels_per_s = self.accel_plot.getViewBox().width() / max(self._window_s, 1e-9)
+        """Move every trace ``seconds`` to the left of where the last rebuild put it (the time
+        since its newest sample) without rebuilding it; only when that moves it a visible
+        amount. True if it moved."""
+        pixels_per_s = self._pixels_per_s
+        if pixels_per_s is None:
+            pixels_per_s = self._pixels_per_s = (
+                self.accel_plot.getViewBox().width() / max(self._window_s, 1e-9))
         if abs(seconds - self._scroll_s) * pixels_per_s < SCROLL_THRESHOLD_PX:
             return False
         if self._region_shown:  # the selected range stays put: repaint the data areas
@@ -466,36 +535,240 @@ class LivePlots(QWidget):
             return True
         return self._blit_to(seconds, pixels_per_s)
 
+    def place_at(self, seconds: float) -> None:
+        """Right after a rebuild: show the traces ``seconds`` left of where it put them (in
+        the scene: nothing on the screen is shifted)."""
+        self._scroll_s = float(seconds)
+        self._place_curves()
+
+    @property
+    def behind(self) -> bool:
+        """Whether the scene's traces are behind what the screen shows (samples appended,
+        or scrolled, since the last rebuild)."""
+        return self._stale
+
+    @property
+    def appends(self) -> bool:
+        """Whether new samples may be drawn with :meth:`append` (not while a range is
+        selected: the data areas are then repainted as a whole)."""
+        return not self._region_shown
+
     def _blit_to(self, seconds: float, pixels_per_s: float) -> bool:
-        """Scroll by whole pixels as a copy of what is on screen: the traces are moved in the
-        scene without the view repainting them (updates are off while the scene takes the
-        move in), then each data area's pixels are shifted (QWidget.scroll) and only the
-        strip that comes into view is drawn. (The outermost pixel of the area, where the
-        axis lines may reach, is left alone; the next rebuild draws it anew.)"""
+        """Scroll by whole pixels as a copy of what is on screen: each data area's pixels are
+        shifted (QWidget.scroll) and the strip that comes into view is filled with the
+        background (new data are not there yet). The traces in the scene are not moved: a
+        scene paint brings them up to date first (:meth:`_before_scene_paint`). The
+        outermost pixel of each area, where the axis lines may reach, is left alone."""
         old_px = round(self._scroll_s * pixels_per_s)
         new_px = round(seconds * pixels_per_s)
         if new_px == old_px:
             return False
         self._scroll_s = new_px / pixels_per_s
-        view = self.graphics
-        # Other changes waiting in the scene are drawn as usual, before updates go off.
-        QCoreApplication.sendPostedEvents(view.scene(), QEvent.Type.MetaCall)
-        mode = view.viewportUpdateMode()
-        view.setViewportUpdateMode(QGraphicsView.ViewportUpdateMode.NoViewportUpdate)
-        try:
-            self._place_curves()
-            QCoreApplication.sendPostedEvents(view.scene(), QEvent.Type.MetaCall)
-        finally:
-            view.setViewportUpdateMode(mode)
+        self._stale = True
+        shift = old_px - new_px
+        # What is still to be painted moves with the pixels (Qt moves its dirty areas too).
+        self._fast = self._fast.translated(shift, 0)
+        scroll = self.graphics.viewport().scroll
+        strips = QRegion()
+        for plot in self._shown_plots():
+            area = self._area(plot)
+            scroll(shift, 0, area)
+            if shift < 0:  # the newest end comes into view on the right
+                strip = QRect(area.right() + shift + 1, area.top(), -shift, area.height())
+            else:
+                strip = QRect(area.left(), area.top(), shift, area.height())
+            strips += strip & area
+        self._fast += strips
+        return True
+
+    def append(
+        self, segments: list[tuple[pg.PlotCurveItem, np.ndarray, np.ndarray, np.ndarray]],
+    ) -> bool:
+        """Draw new samples onto the screen as lines from each trace's previous end, without
+        rebuilding anything: (curve, x, y, breaks) with x in the last rebuild's time (seconds
+        relative to its newest sample), the previous end first, and ``breaks`` True where the
+        line must not join a point to the one before it (lost data, NaN). False, and nothing
+        drawn, when a value leaves its plot's range (the caller rebuilds: the range grows).
+        """
+        if self._region_shown:
+            return False
+        for curve, _x, y, _breaks in segments:
+            sticky = self.ranges.get(self._plot_of.get(curve))
+            if sticky is not None and sticky.following and sticky.range is not None and len(y):
+                finite = y[np.isfinite(y)]
+                if len(finite) and (finite.min() < sticky.range[0]
+                                    or finite.max() > sticky.range[1]):
+                    return False
+        spans: dict[pg.PlotItem, list[float]] = {}  # x0, x1, y0, y1 of what is new
+        for curve, x, y, breaks in segments:
+            plot = self._plot_of.get(curve)
+            if plot is None or not curve.isVisible() or len(x) < 2:
+                continue
+            self._extend_tail(curve, x, y, breaks)
+            finite = y[np.isfinite(y)]
+            if not len(finite):
+                continue
+            low, high = float(finite.min()), float(finite.max())
+            span = spans.get(plot)
+            if span is None:
+                spans[plot] = [float(x[0]), float(x[-1]), low, high]
+            else:
+                span[0], span[1] = min(span[0], float(x[0])), max(span[1], float(x[-1]))
+                span[2], span[3] = min(span[2], low), max(span[3], high)
+        viewport = self.graphics.viewport()
+        for plot, (x0, x1, y0, y1) in spans.items():
+            sx, ox, sy, oy = self._mapping(plot)
+            left, right = sorted((sx * x0 + ox, sx * x1 + ox))
+            top, bottom = sorted((sy * y0 + oy, sy * y1 + oy))
+            rect = QRect(int(np.floor(left)) - 2, int(np.floor(top)) - 2,
+                         int(right - left) + 5, int(bottom - top) + 5) & self._area(plot)
+            if not rect.isEmpty():
+                self._fast += rect
+                viewport.update(rect)
+        self._stale = True
+        return True
+
+    def _extend_tail(self, curve: pg.PlotCurveItem, x: np.ndarray, y: np.ndarray,
+                     breaks: np.ndarray) -> None:
+        """Add new points (the previous end first) to a trace's tail; the first time, the
+        tail starts from the end of the data the last rebuild gave the trace."""
+        tail = self._tails.get(curve)
+        if tail is None:
+            old_x, old_y = curve.xData, curve.yData
+            if old_x is not None and len(old_x):
+                keep = old_x >= old_x[-1] - TAIL_S
+                old_breaks = np.zeros(int(np.count_nonzero(keep)), dtype=bool)
+                connect = curve.opts.get("connect")
+                if isinstance(connect, np.ndarray) and len(connect) == len(old_x):
+                    # pyqtgraph: connect[i] False leaves i and i + 1 apart
+                    old_breaks[1:] = ~connect[keep][:-1].astype(bool)
+                tail = (old_x[keep], old_y[keep], old_breaks)
+            else:
+                tail = (x[:0], y[:0], breaks[:0])
+        tx, ty, tb = tail
+        if len(tx) and x[0] <= tx[-1]:  # the previous end is there already
+            newer = x > tx[-1]
+            x, y, breaks = x[newer], y[newer], breaks[newer]
+        tx, ty, tb = np.concatenate([tx, x]), np.concatenate([ty, y]), np.concatenate([tb, breaks])
+        keep = tx >= tx[-1] - TAIL_S
+        self._tails[curve] = (tx[keep], ty[keep], tb[keep])
+        plot = self._plot_of[curve]
+        self._tail_ends[plot] = max(self._tail_ends.get(plot, -np.inf), float(tx[-1]))
+
+    def _mapping(self, plot: pg.PlotItem) -> tuple[float, float, float, float]:
+        """x and y scale and offset from a trace's coordinates (as the last rebuild placed it,
+        moved by the current scroll) to viewport pixels."""
+        base = self._maps.get(plot)
+        if base is None:
+            box = plot.getViewBox()
+            transform = box.childGroup.deviceTransform(self.graphics.viewportTransform())
+            base = self._maps[plot] = (transform.m11(), transform.dx(), transform.m22(),
+                                       transform.dy())
+        sx, dx, sy, dy = base
+        return sx, dx - sx * self._scroll_s, sy, dy
+
+    def _area(self, plot: pg.PlotItem) -> QRect:
+        """A plot's data area in viewport pixels, without its outermost pixel."""
+        area = self._areas.get(plot)
+        if area is None:
+            box = plot.getViewBox()
+            view = self.graphics
+            outer = view.mapFromScene(box.mapRectToScene(box.boundingRect())).boundingRect()
+            area = self._areas[plot] = outer.adjusted(1, 1, -1, -2)
+        return area
+
+    def _shown_plots(self) -> list[pg.PlotItem]:
         plots = [self.accel_plot, self.gyro_plot, self.angle_plot]
         if self._error_shown:
             plots.append(self.error_plot)
-        viewport = view.viewport()
-        for plot in plots:
-            box = plot.getViewBox()
-            outer = view.mapFromScene(box.mapRectToScene(box.boundingRect())).boundingRect()
-            viewport.scroll(old_px - new_px, 0, outer.adjusted(1, 1, -1, -2))
+        return plots
+
+    def _paint_fast(self, event: QPaintEvent) -> bool:
+        """Paint a region that only scrolling and :meth:`append` touched (Qt has filled it
+        with the background): the traces' newest lines that reach into it. False (nothing
+        painted) for any other region."""
+        region = event.region()
+        fast = self._fast
+        if fast.isEmpty() or not region.subtracted(fast).isEmpty():
+            return False
+        self._fast = QRegion()
+        bounds = region.boundingRect()
+        left, right = bounds.left() - 2, bounds.right() + 2
+        if self._tail_end_px() < left:
+            return True  # a strip scrolled into view beyond every trace's end: background
+        viewport = self.graphics.viewport()
+        painter: QPainter | None = None
+        transforms: dict[pg.PlotItem, tuple[float, float, float, float, float, float]] = {}
+        for curve, (x, y, breaks) in self._tails.items():
+            plot = self._plot_of.get(curve)
+            if plot is None or len(x) < 2:
+                continue
+            mapping = transforms.get(plot)
+            if mapping is None:
+                sx, ox, sy, oy = self._mapping(plot)
+                # The region's x extent in the traces' own coordinates.
+                mapping = transforms[plot] = (sx, ox, sy, oy, (left - ox) / sx,
+                                              (right - ox) / sx)
+            sx, ox, sy, oy, x_left, x_right = mapping
+            if x[-1] < x_left or x[0] > x_right or not curve.isVisible():
+                continue  # the trace does not reach the region (the usual scroll strip)
+            # Only the points whose lines can reach the region (x grows along a trace).
+            first = max(int(x.searchsorted(x_left)) - 1, 0)
+            last = min(int(x.searchsorted(x_right)) + 1, len(x))
+            if last - first < 2:
+                continue
+            px, py = sx * x[first:last] + ox, sy * y[first:last] + oy
+            if painter is None:
+                painter = QPainter(viewport)
+            painter.setClipRect(self._area(plot))
+            pen = curve.opts["pen"]
+            if pen.style() != Qt.PenStyle.SolidLine:
+                # The dash pattern's phase follows the unscrolled x position, so that the
+                # pieces painted one after another line up (exact for level lines).
+                pen = QPen(pen)
+                pen.setDashOffset((px[0] + sx * self._scroll_s) / max(pen.widthF(), 1.0))
+            painter.setPen(pen)
+            cuts = breaks[first + 1:last]
+            if not cuts.any() and np.isfinite(py).all():
+                runs = [range(len(px))]
+            else:
+                runs = _runs(px, py, breaks[first:last])
+            xs, ys = px.tolist(), py.tolist()
+            for run in runs:
+                painter.drawPolyline(QPolygonF([QPointF(xs[i], ys[i]) for i in run]))
+        if painter is not None:
+            painter.end()
         return True
+
+    def _tail_end_px(self) -> float:
+        """The rightmost pixel any trace's newest point is at (-inf without tails)."""
+        ends = [self._mapping(plot)[:2] for plot in self._tail_ends]
+        return max((sx * self._tail_ends[plot] + ox for plot, (sx, ox) in
+                    zip(self._tail_ends, ends, strict=True)), default=-np.inf)
+
+    def _before_scene_paint(self) -> None:
+        """The scene paints: bring its traces up to what the screen shows first."""
+        self._fast = QRegion()
+        if not self._stale:
+            return
+        if self.resync is not None:
+            self.resync()  # a rebuild: set_data puts everything in place
+        if self._stale:  # no presenter (or it had nothing): at least where they scrolled to
+            self._place_curves()
+            self._stale = False
+
+    def _layout_changed(self, *_args: object) -> None:
+        """A plot's size or range changed: its pixels and their mapping are measured anew."""
+        self._areas.clear()
+        self._maps.clear()
+        self._pixels_per_s = None
+
+    def _in_sync(self) -> None:
+        self._stale = False
+        self._fast = QRegion()
+        self._tails.clear()
+        self._tail_ends.clear()
+        self._layout_changed()
 
     @property
     def scroll_s(self) -> float:
@@ -503,7 +776,7 @@ class LivePlots(QWidget):
         return self._scroll_s
 
     def _place_curves(self) -> None:
-        # A moved line keeps its path: nothing is rebuilt, the view only repaints.
+        # A moved line keeps its path: nothing is rebuilt.
         for line in self._all_curves():
             if line.pos().x() != -self._scroll_s:
                 line.setPos(-self._scroll_s, 0.0)

@@ -42,6 +42,19 @@ PLOT_DATA_INTERVAL_S = 0.05
 """New data rebuild the traces at most this often; the frames between only scroll them.
 At a 10 s window on 1270 px the newest 50 ms are 6 px: the trace's end stays that close to
 the right edge, while every frame still moves the traces on. Rebuilding is what costs."""
+INCREMENTAL_MAX_PER_PX = 8.0
+"""Up to this many samples per pixel column (a 10 s window at 833 Hz on 1270 px: 6.6) new
+samples are drawn onto the screen as they arrive (:meth:`LivePlots.append`), and the traces
+are rebuilt only every ``FULL_REBUILD_S``; at higher rates they are rebuilt every
+``PLOT_DATA_INTERVAL_S`` (min/max decimated) and only scroll in between."""
+FULL_REBUILD_S = 2.0
+"""While new samples are appended, the traces are still rebuilt this often (a value range
+shrinks only at a rebuild; a range that must grow rebuilds at once)."""
+SETTLE_REBUILD_S = 0.5
+"""Samples appended onto the screen reach the plots' scene (export, a repaint) by a rebuild
+once no new ones came for this long (a stream that stopped or paused)."""
+MAX_APPEND_ROWS = 2048
+"""More new rows than this in one frame are drawn by a rebuild instead."""
 LEVEL_INTERVAL_S = 0.04
 """The bubble takes new averages at most this often (25 Hz): it shows a 0.5 s average by
 default, which moves less in 40 ms than the eye can follow as separate steps."""
@@ -158,6 +171,19 @@ class LivePresenter(QObject):
         self.level_interval_s = LEVEL_INTERVAL_S
         self.plot_data_interval_s = PLOT_DATA_INTERVAL_S
         self._plots_were_shown = False
+        self._quiet: tuple[tuple | None, float, bool] = (None, 0.0, False)
+        """The last full frame's key, until when nothing falls due, and whether it had
+        something pending."""
+        self._incremental = False
+        self.incremental_max_per_px = INCREMENTAL_MAX_PER_PX
+        self._t0 = 0.0  # time of the newest sample at the last rebuild (x = 0 there)
+        self._drawn: dict[str, tuple[int, float]] = {}  # ring -> (rows seen, newest t drawn)
+        self._drawn_rel = 0.0  # newest sample drawn, seconds after _t0
+        self._drawn_wall = 0.0  # when it was drawn
+        self._event_wall = 0.0  # the last rebuild or append (block interval estimate)
+        self.plot_appends = 0
+        """How often new samples were drawn onto the plots without a rebuild."""
+        plots.resync = self._resync_plots
         self._shown = {
             view: ScreenPresence(view) for view in (level, readouts, plots, filter_panel)
         }
@@ -187,9 +213,16 @@ class LivePresenter(QObject):
             busy = self._show_no_data()
             self._count_frame(busy)
             return busy
+        now = time.monotonic()
+        quiet_key = self._quiet_key(total)
+        if quiet_key == self._quiet[0] and now < self._quiet[1]:
+            # Nothing new and nothing due (most frames between two blocks): only the plots
+            # move on with the clock.
+            drew = self._plots_were_shown and self._scroll_plots(now)
+            self._count_frame(drew)
+            return drew or self._quiet[2]
         self._no_data_shown = False
         drew = pending = False
-        now = time.monotonic()
         level_key = (total, self.settings.unit, self.settings.averaging_s)
         if not self.settings.hold:
             averaged = None
@@ -216,23 +249,32 @@ class LivePresenter(QObject):
         plots_shown = self.plots_enabled and self._shown[self.plots](now)
         just_shown, self._plots_were_shown = plots_shown and not self._plots_were_shown, plots_shown
         if plots_shown:
-            due = just_shown or now - self._plot_wall >= self.plot_data_interval_s
-            if plot_key != self._plot_key and (
-                due or self._plot_key is None or plot_key[1:] != self._plot_key[1:]
-            ):
-                self._update_plots(pipeline.samples, orientation)
-                self._plot_key = plot_key
-                self.plot_updates += 1
-                interval = min(now - self._plot_wall, MAX_SCROLL_LEAD_S)
-                self._block_interval_s += 0.2 * (interval - self._block_interval_s)
-                self._plot_wall = now
+            new_data = plot_key != self._plot_key
+            structural = (just_shown or self._plot_key is None
+                          or plot_key[1:] != self._plot_key[1:])
+            interval = FULL_REBUILD_S if self._incremental else self.plot_data_interval_s
+            rebuild = new_data and (structural or now - self._plot_wall >= interval)
+            settle_at = self._drawn_wall + SETTLE_REBUILD_S
+            if self.plots.behind and not new_data and now >= settle_at:
+                rebuild = True  # the stream stopped: the scene takes what the screen shows
+            segments = None
+            if not rebuild and new_data and self._incremental and self.plots.appends:
+                segments = self._new_segments(now)
+                rebuild = segments is None
+            if rebuild:
+                self._rebuild_plots(now, plot_key, arrived=new_data)
                 drew = True
             else:
-                lead = min(now - self._plot_wall, MAX_SCROLL_LEAD_S, 1.5 * self._block_interval_s)
-                if self.plots.scroll_to(lead):
-                    self.plot_scrolls += 1
+                drew = self._scroll_plots(now) or drew
+                if segments:
+                    if self.plots.append(segments):
+                        self.plot_appends += 1
+                    else:  # a value left its plot's range: the range grows at a rebuild
+                        self._rebuild_plots(now, plot_key)
                     drew = True
-                elif plot_key != self._plot_key:
+                if segments is not None:
+                    self._plot_key = plot_key
+                elif new_data:
                     pending = True  # new data, drawn once the interval is over
         error_key = (total, self.plots.window_s, tuple(pipeline.comparison_buffers))
         if (
@@ -244,7 +286,37 @@ class LivePresenter(QObject):
             self._error_key = error_key
             self.update_error_table()
         self._count_frame(drew)
+        # Until new data arrive (or a setting changes) the frames only scroll the plots, up
+        # to the moment a deferred update falls due.
+        due = [self._drawn_wall + SETTLE_REBUILD_S] if self.plots.behind else [np.inf]
+        if pending:
+            due += [self._last_level_update + self.level_interval_s,
+                    self._last_text_update + 1.0 / self.settings.readout_rate_hz,
+                    self._plot_wall + (FULL_REBUILD_S if self._incremental
+                                       else self.plot_data_interval_s)]
+        self._quiet = (quiet_key, max(min(due), now), pending)
         return drew or pending
+
+    def _quiet_key(self, total: int) -> tuple:
+        """What, unchanged, means a frame has nothing to draw but the plots' scrolling."""
+        settings = self.settings
+        return (total, settings.unit, settings.averaging_s, settings.hold,
+                self.plots.window_s, self.plots.width(), self.plots.isVisible(),
+                len(self.session.pipeline.comparison_buffers), self.plots_enabled)
+
+    def _lead(self, now: float) -> float:
+        """How far (s) the traces are moved left of where the last rebuild put them: the
+        newest sample's time after it, plus the time since it arrived (a stream that
+        stopped leaves them still)."""
+        return self._drawn_rel + min(now - self._drawn_wall, MAX_SCROLL_LEAD_S,
+                                     1.5 * self._block_interval_s)
+
+    def _scroll_plots(self, now: float) -> bool:
+        """Move the traces on with the clock."""
+        if self.plots.scroll_to(self._lead(now)):
+            self.plot_scrolls += 1
+            return True
+        return False
 
     def _show_no_data(self) -> bool:
         """Dashes and an empty vial, once per stretch without data; True when it drew."""
@@ -328,6 +400,108 @@ class LivePresenter(QObject):
                        filter_name=pipeline.filter.name, calibration=calibration,
                        device=device)
 
+    def _rebuild_plots(self, now: float, plot_key: tuple, arrived: bool = True) -> None:
+        """Hand the plots every trace anew (decimated to their width). ``arrived``: for new
+        data (they are shown at the right edge); otherwise the traces stay where the screen
+        shows them (their newest sample as far left of the edge as before)."""
+        self._update_plots(self.session.pipeline.samples, self.session.pipeline.orientation)
+        self._plot_key = plot_key
+        self.plot_updates += 1
+        self._plot_wall = now
+        self._drawn_rel = 0.0
+        if arrived:
+            self._note_block(now)
+            self._drawn_wall = now
+        else:
+            self.plots.place_at(self._lead(now))
+
+    def _resync_plots(self) -> None:
+        """The plots' scene must paint: rebuild its traces from the buffers first."""
+        pipeline = self.session.pipeline
+        total = pipeline.orientation.total_written
+        if total == 0 or pipeline.samples.total_written == 0:
+            return
+        plot_key = (total, self.plots.window_s, self.plots.width(),
+                    tuple(pipeline.comparison_buffers))
+        self._rebuild_plots(time.monotonic(), plot_key, arrived=False)
+
+    def _note_block(self, now: float) -> None:
+        interval = min(now - self._event_wall, MAX_SCROLL_LEAD_S)
+        self._block_interval_s += 0.2 * (interval - self._block_interval_s)
+        self._event_wall = now
+
+    def _new_segments(self, now: float) -> list | None:
+        """The samples that arrived since the traces were last drawn, as lines from each
+        trace's previous end (for :meth:`LivePlots.append`); [] when none arrived; None when
+        a rebuild should draw them (too many)."""
+        pipeline = self.session.pipeline
+        plots = self.plots
+        sensor = self._rows_since("samples", pipeline.samples, ["t", "accel", "gyro", "gap"])
+        angles = self._rows_since(
+            "orientation", pipeline.orientation, ["t", *ANGLE_TRACES, "gap", "incl_error"])
+        compared = {
+            name: self._rows_since(f"compare:{name}", ring, ["t", "roll", "pitch", "incl_error"])
+            for name, ring in pipeline.comparison_buffers.items()
+        }
+        if any(rows is None for rows in (sensor, angles, *compared.values())):
+            return None
+        segments: list = []
+        t0 = self._t0
+        if sensor is not None and len(sensor["t"]) > 1:
+            x = sensor["t"] - t0
+            breaks = sensor["gap"] > 0.5
+            breaks[0] = False  # the previous end: what was lost lies before it
+            accel = sensor["accel"] / STANDARD_GRAVITY_M_S2
+            gyro = np.degrees(sensor["gyro"])
+            for axis in range(3):
+                segments.append((plots.accel_curves[axis], x, accel[:, axis], breaks))
+                segments.append((plots.gyro_curves[axis], x, gyro[:, axis], breaks))
+            self._drawn_rel = float(x[-1])
+            self._drawn_wall = now
+        if angles is not None and len(angles["t"]) > 1:
+            x = angles["t"] - t0
+            breaks = angles["gap"] > 0.5
+            breaks[0] = False
+            for name, curve in plots.angle_curves.items():
+                segments.append((curve, x, angles[name], breaks))
+            if plots.error_visible:
+                segments.append((plots.error_curve, x, angles["incl_error"], breaks))
+        for name, rows in compared.items():
+            curves = plots.comparison_curves.get(name)
+            if curves is None or rows is None or len(rows["t"]) < 2:
+                continue
+            x = rows["t"] - t0
+            breaks = np.zeros(len(x), dtype=bool)
+            segments.append((curves[0], x, rows["roll"], breaks))
+            segments.append((curves[1], x, rows["pitch"], breaks))
+            error_curve = plots.comparison_error_curves.get(name)
+            if plots.error_visible and error_curve is not None:
+                segments.append((error_curve, x, rows["incl_error"], breaks))
+        if segments:
+            self._note_block(now)
+        return segments
+
+    def _rows_since(self, key: str, ring, names: list[str]) -> dict | None:
+        """The rows of ``ring`` from the newest one drawn on (it first); None when there are
+        too many, or the ring restarted."""
+        seen, last_t = self._drawn.get(key, (0, -np.inf))
+        first, rows = ring.since(max(seen - 1, 0), names)
+        if len(rows["t"]) > MAX_APPEND_ROWS or (len(rows["t"]) and rows["t"][-1] < last_t):
+            return None
+        self._drawn[key] = (first + len(rows["t"]), float(rows["t"][-1]) if len(rows["t"])
+                            else last_t)
+        keep = rows["t"] >= last_t
+        return {name: values[keep] for name, values in rows.items()}
+
+    def _mark_drawn(self, newest_t: float) -> None:
+        """After a rebuild: every ring is drawn up to now (up to ``newest_t``)."""
+        pipeline = self.session.pipeline
+        rings = {"samples": pipeline.samples, "orientation": pipeline.orientation,
+                 **{f"compare:{name}": ring
+                    for name, ring in pipeline.comparison_buffers.items()}}
+        self._drawn = {key: (totals, newest_t) for key, totals in self._totals.items()
+                       if key in rings}
+
     def _update_plots(self, samples, orientation) -> None:
         if self._sensor_trace is None or self._sensor_trace.ring is not samples:
             self._sensor_trace = IncrementalMinMax(samples, ["accel", "gyro", "gap"])
@@ -336,16 +510,29 @@ class LivePresenter(QObject):
                 orientation, [*ANGLE_TRACES, "gap", "incl_error"]
             )
         window = self.plots.window_s
+        # Rows seen before the fetch: rows written meanwhile are drawn twice, never missed.
+        self._totals = {"samples": samples.total_written,
+                        "orientation": orientation.total_written,
+                        **{f"compare:{name}": ring.total_written
+                           for name, ring in self.session.pipeline.comparison_buffers.items()}}
         # A min/max pair per two pixel columns: all a plot can show at 1 px line width.
         info = self.session.device_info
         rate = info.odr_hz if info is not None else self._rate_hint(samples)
         expected_rows = min(len(samples), window * rate)
-        factor = decimation_factor(int(expected_rows), max(self.plots.width(), 200))
+        width = max(self.plots.width(), 200)
+        self._incremental = window * rate / width <= self.incremental_max_per_px
+        factor = decimation_factor(int(expected_rows), width)
+        if self._incremental and expected_rows <= width:
+            # No more samples than pixel columns: drawn as they are, like the new samples
+            # appended between rebuilds (a min/max pair per two columns would look different).
+            factor = 1
         sensor_t, sensor = self._sensor_trace.window(window, factor)
         angle_t, angle_values = self._angle_trace.window(window, factor)
         if len(sensor_t) == 0:
             return
         newest = sensor_t[-1]
+        self._t0 = float(newest)
+        self._mark_drawn(float(newest))
         self._update_comparisons(window, factor, newest)
         self.plots.set_data(
             sensor_t - newest,

@@ -19,6 +19,7 @@ from PySide6.QtWidgets import (
 
 from app.core.readout import SLOPE_UNITS, format_slope, reading_text
 from app.gui import theme
+from app.gui.elided_label import ElidedLabel
 
 NO_VALUE = "—"
 """Shown in place of a number when there are no data."""
@@ -102,13 +103,18 @@ class _ReadoutTile(QFrame):
         self.value = QLabel(NO_VALUE)
         self.value.setObjectName("ReadoutValue")
         self.value.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignBaseline)
-        self.value.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        # Not selectable: a selectable label keeps a text document that it builds anew on
+        # every setText (Ctrl+C copies the reading as text).
         self.unit = QLabel("")
         self.unit.setObjectName("ReadoutUnit")
         self.unit.setAlignment(Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignBaseline)
         self.note = QLabel(note)
         self.note.setObjectName("ReadoutSide")
         self.note.setTextFormat(Qt.TextFormat.RichText)
+        # A figure beside the note (the raised side): it changes while streaming, so it is
+        # a label that repaints without re-laying out the window.
+        self.side = ElidedLabel("")
+        self.side.setObjectName("ReadoutSideValue")
 
         value_row = QHBoxLayout()
         self._value_row = value_row
@@ -125,7 +131,12 @@ class _ReadoutTile(QFrame):
         layout.addStretch(1)
         layout.addLayout(value_row)
         layout.addStretch(1)
-        layout.addWidget(self.note)
+        note_row = QHBoxLayout()
+        note_row.setSpacing(8)
+        note_row.addWidget(self.note)
+        note_row.addWidget(self.side)
+        note_row.addStretch(1)
+        layout.addLayout(note_row)
         self.setValuePixelSize(value_px)
 
     def setValuePixelSize(self, value_px: int) -> None:
@@ -139,7 +150,10 @@ class _ReadoutTile(QFrame):
         value_font = _readout_font(value_px)
         self.value.setFont(value_font)
         widest = QFontMetricsF(value_font).horizontalAdvance(_WIDEST_VALUE)
-        self.value.setMinimumWidth(math.ceil(widest) + 2)
+        # A fixed size: a QLabel whose size may change asks every layout up to the window to
+        # be redone on each setText, several times a second for a readout (and the main
+        # window's layout then re-places every dock). The widest text always fits.
+        self.value.setFixedSize(math.ceil(widest) + 2, self.value.sizeHint().height())
         self._value_font = value_font
         self._unit_font = _readout_font(max(12, round(value_px * 0.45)))
         unit_widest = QFontMetricsF(self._unit_font).horizontalAdvance(_WIDEST_UNIT)
@@ -148,6 +162,9 @@ class _ReadoutTile(QFrame):
         note_font = QFont(self.font())
         note_font.setPixelSize(max(10, round(value_px * 0.3)))
         self.note.setFont(note_font)
+        side_font = QFont(note_font)
+        side_font.setBold(True)
+        self.side.setFont(side_font)
         self._value_row.setSpacing(max(2, value_px // 16))
 
     def setUnit(self, unit_label: str) -> None:
@@ -380,11 +397,7 @@ class TiltReadouts(QWidget):
                 text = format_slope(value, self._unit, signed=name != "tilt")
                 tile.setUnit(suffix)
             _set_text(tile.value, text.replace("-", MINUS) if self._valid and text else NO_VALUE)
-        _set_text(
-            self._tiles["direction"].note,
-            f'{_NOTES["direction"]}&nbsp;&nbsp;<span style="color:{theme.TEXT};">'
-            f"<b>{self._side_text()}</b></span>",
-        )
+        self._tiles["direction"].side.setText(self._side_text())
 
     def _place_tiles(self) -> None:
         for index, name in enumerate(QUANTITIES):

@@ -18,7 +18,8 @@ from app.services.connection import Connection
 from app.services.health import HealthMonitor
 from app.services.recording_control import RecordingControl
 
-READ_TIMEOUT_S = 0.05
+READ_TIMEOUT_S = 0.15
+"""Longest a step waits for a block (a driver gathers up to 100 ms of data: drivers.base)."""
 
 
 class Acquisition:

@@ -55,7 +55,7 @@ from app.core.orientation import quaternion_from_roll_pitch
 from app.core.samples import RawBlock, ScaleFactors
 from app.core.version import __version__
 from drivers import lsm6dsox
-from drivers.base import Device, DeviceDescriptor, DeviceInfo
+from drivers.base import Device, DeviceDescriptor, DeviceInfo, read_block_s
 from drivers.errors import DeviceError, DeviceIOError, DeviceUrlError
 from drivers.sim.error_model import (
     REFERENCE_TEMP_DEGC,
@@ -73,8 +73,6 @@ __all__ = ["SCENARIOS", "SimulatedDevice"]
 
 FIFO_SPAN_S = 1.0
 """A reader more than this far behind loses the excess (the chip's FIFO would overflow)."""
-MIN_BLOCK_S = 0.020
-"""Realtime reads wait for at least this much data (and at least one sample)."""
 GENERATION_CHUNK = 1024
 """Samples computed at a time inside one block."""
 _GRAVITY_EARTH = np.array([0.0, 0.0, lsm6dsox.STANDARD_GRAVITY_M_S2])
@@ -308,7 +306,10 @@ class SimulatedDevice(Device):
 
     def _wait_for_samples(self, timeout_s: float) -> int:
         due = self._due()
-        wanted = max(1, math.ceil(MIN_BLOCK_S * self.true_odr_hz * self.options.speed))
+        # Realtime reads wait for drivers.base.read_block_s of data, like a host reading a
+        # board (and at least one sample).
+        wanted = max(1, math.ceil(read_block_s(self.true_odr_hz) * self.true_odr_hz
+                                  * self.options.speed))
         if due < wanted:
             ready_at = self._start_wall_s + (self._next_index + wanted - 1) / (
                 self.true_odr_hz * self.options.speed

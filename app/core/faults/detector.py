@@ -291,6 +291,7 @@ class FaultDetector:
         self._rho_white: deque[np.ndarray] = deque(maxlen=NOISE_SPAN_WINDOWS)
         self._rate: deque[float] = deque(maxlen=NOISE_SPAN_WINDOWS)
         self._activity = np.ones(6)
+        self._threshold_cache: tuple | None = None
         self._active_bits = np.zeros(6, dtype=np.uint8)
         self._gyro_ref: np.ndarray | None = None
         self._rest: _Rest | None = None
@@ -366,7 +367,19 @@ class FaultDetector:
             self._counts[key] = 0
 
     def _thresholds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Stuck-run lengths, spike and clip thresholds; recomputed only when what they
+        depend on changed (a block at a time, that is seldom)."""
         floor = self._floor_or_default()
+        key = (floor.tobytes(), np.asarray(self._lsb).tobytes(),
+               np.asarray(self._lsb_seen).tobytes(), np.asarray(self._activity).tobytes())
+        cached = self._threshold_cache
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        result = self._compute_thresholds(floor)
+        self._threshold_cache = (key, result)
+        return result
+
+    def _compute_thresholds(self, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         sigma = floor / D4_GAIN
         q = np.where(self._lsb > 0, self._lsb, self._lsb_seen)
         with np.errstate(divide="ignore", invalid="ignore"):
