@@ -179,8 +179,8 @@ def main() -> int:
     for row in rows:
         print(f"  {row['cpu']:5.1f} % ({row['gui']:5.1f} %, {row['worker']:5.1f} %)   | "
               f"{row['plot']:6.1f} fps      {row['bubble']:6.1f} fps      {row['frames']:6.1f} fps"
-              f"        {row['updates']:5.1f} / {row['appends']:5.1f} /s  | {row['samples']:8,.0f}  "
-              f"| {row['load']}")
+              f"        {row['updates']:5.1f} / {row['appends']:5.1f} /s  "
+              f"| {row['samples']:8,.0f}  | {row['load']}")
     cpu = [row["cpu"] for row in rows]
     spread = f"{min(cpu):.1f}..{max(cpu):.1f}" if len(cpu) > 1 else f"{cpu[0]:.1f}"
     print(f"whole-app CPU: median {statistics.median(cpu):.1f} % of one core (spread {spread} %)")

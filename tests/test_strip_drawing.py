@@ -121,7 +121,7 @@ def test_the_strip_a_scroll_uncovers_is_background(strip):
     append_and_scroll(strip, 12, every=100)  # scrolling only: nothing new arrives
     pixels = screen_pixels(plots.graphics.viewport())
     red = colour_mask(pixels, theme.AXIS_COLORS[0])
-    sx, ox, _, _ = plots._mapping(plots.accel_plot)
+    _, ox, _, _ = plots._mapping(plots.accel_plot)
     newest = int(np.round(ox))  # the rebuild's newest sample, moved left by the scroll
     area = plots._area(plots.accel_plot)
     assert newest < area.right() - 5  # it did move
@@ -213,7 +213,7 @@ def test_at_a_tilt_meter_rate_new_samples_are_appended_not_rebuilt(live):
     live.pipeline.process(raw_block(218, 10, roll=40.0))
     live.presenter.refresh()
     assert len(live.handed) == 2
-    low, high = live.plots.ranges[live.plots.angle_plot].range
+    _, high = live.plots.ranges[live.plots.angle_plot].range
     assert high > 35.0
 
 
