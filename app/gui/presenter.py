@@ -172,6 +172,7 @@ class LivePresenter(QObject):
         self.plot_data_interval_s = PLOT_DATA_INTERVAL_S
         self._plots_were_shown = False
         self._quiet: tuple[tuple | None, float, bool] = (None, 0.0, False)
+        self._averaged_cache: tuple[tuple, object] | None = None
         """The last full frame's key, until when nothing falls due, and whether it had
         something pending."""
         self._incremental = False
@@ -223,6 +224,7 @@ class LivePresenter(QObject):
             return drew or self._quiet[2]
         self._no_data_shown = False
         drew = pending = False
+        due = [np.inf]  # when something deferred falls due
         level_key = (total, self.settings.unit, self.settings.averaging_s)
         if not self.settings.hold:
             averaged = None
@@ -235,6 +237,7 @@ class LivePresenter(QObject):
                     drew = True
                 else:
                     pending = True
+                    due.append(self._last_level_update + self.level_interval_s)
             if level_key != self._text_key and self._shown[self.readouts](now):
                 if now - self._last_text_update >= 1.0 / self.settings.readout_rate_hz:
                     self._show_texts(averaged or self._averaged(orientation))
@@ -243,6 +246,7 @@ class LivePresenter(QObject):
                     drew = True
                 else:
                     pending = True  # due shortly: the clock keeps its pace until then
+                    due.append(self._last_text_update + 1.0 / self.settings.readout_rate_hz)
         plot_key = (
             total, self.plots.window_s, self.plots.width(), tuple(pipeline.comparison_buffers)
         )
@@ -276,32 +280,30 @@ class LivePresenter(QObject):
                     self._plot_key = plot_key
                 elif new_data:
                     pending = True  # new data, drawn once the interval is over
+                    due.append(self._plot_wall + interval)
         error_key = (total, self.plots.window_s, tuple(pipeline.comparison_buffers))
-        if (
-            error_key != self._error_key
-            and now - self._last_error_update >= ERROR_TABLE_INTERVAL_S
-            and self._shown[self.filter_panel](now)
-        ):
-            self._last_error_update = now
-            self._error_key = error_key
-            self.update_error_table()
+        if error_key != self._error_key and self._shown[self.filter_panel](now):
+            if now - self._last_error_update >= ERROR_TABLE_INTERVAL_S:
+                self._last_error_update = now
+                self._error_key = error_key
+                self.update_error_table()
+            else:
+                due.append(self._last_error_update + ERROR_TABLE_INTERVAL_S)
         self._count_frame(drew)
         # Until new data arrive (or a setting changes) the frames only scroll the plots, up
         # to the moment a deferred update falls due.
-        due = [self._drawn_wall + SETTLE_REBUILD_S] if self.plots.behind else [np.inf]
-        if pending:
-            due += [self._last_level_update + self.level_interval_s,
-                    self._last_text_update + 1.0 / self.settings.readout_rate_hz,
-                    self._plot_wall + (FULL_REBUILD_S if self._incremental
-                                       else self.plot_data_interval_s)]
+        if self.plots.behind:
+            due.append(self._drawn_wall + SETTLE_REBUILD_S)
         self._quiet = (quiet_key, max(min(due), now), pending)
         return drew or pending
 
     def _quiet_key(self, total: int) -> tuple:
         """What, unchanged, means a frame has nothing to draw but the plots' scrolling."""
         settings = self.settings
+        # Runs every frame: one Qt call (plots shown or not; a resize is taken care of by
+        # the next block's frame, and the plots repaint themselves meanwhile).
         return (total, settings.unit, settings.averaging_s, settings.hold,
-                self.plots.window_s, self.plots.width(), self.plots.isVisible(),
+                self.plots.window_s, self.plots.isVisible(),
                 len(self.session.pipeline.comparison_buffers), self.plots_enabled)
 
     def _lead(self, now: float) -> float:
@@ -331,7 +333,16 @@ class LivePresenter(QObject):
         return True
 
     def _averaged(self, orientation) -> tuple[dict, object] | None:
-        """The newest averaging window's rows and their mean angles (None: no attitude)."""
+        """The newest averaging window's rows and their mean angles (None: no attitude);
+        the bubble's and the readouts' frames share it while no new rows came."""
+        key = (orientation.total_written, self.settings.averaging_s, id(orientation))
+        if self._averaged_cache is not None and self._averaged_cache[0] == key:
+            return self._averaged_cache[1]
+        result = self._average(orientation)
+        self._averaged_cache = (key, result)
+        return result
+
+    def _average(self, orientation) -> tuple[dict, object] | None:
         recent = orientation.window(
             self.settings.averaging_s,
             names=["quat", "ref_roll", "ref_pitch", "incl_error"],
