@@ -307,9 +307,9 @@ class SimulatedDevice(Device):
     def _wait_for_samples(self, timeout_s: float) -> int:
         due = self._due()
         # Realtime reads wait for drivers.base.read_block_s of data, like a host reading a
-        # board (and at least one sample).
-        wanted = max(1, math.ceil(read_block_s(self.true_odr_hz) * self.true_odr_hz
-                                  * self.options.speed))
+        # board (and at least one sample); at the rate samples arrive on the host's clock.
+        arriving_hz = self.true_odr_hz * self.options.speed
+        wanted = max(1, math.ceil(read_block_s(arriving_hz) * arriving_hz))
         if due < wanted:
             ready_at = self._start_wall_s + (self._next_index + wanted - 1) / (
                 self.true_odr_hz * self.options.speed
