@@ -75,3 +75,62 @@ def _no_dangling_qthreads_or_timers(request, monkeypatch):
             pass
     if problems:
         pytest.fail("\n".join(problems))
+
+
+# -- the display: views in a shown window, a presenter over a pipeline fed by hand -------------
+LIVE_ODR_HZ = 104.0
+"""The pipeline's rate in ``live`` (test_display_refresh.raw_block makes blocks at it)."""
+
+
+@pytest.fixture
+def host(qtbot):
+    """A shown window holding the views, and a sentinel label to flush paints with."""
+    from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+
+    window = QWidget()
+    layout = QVBoxLayout(window)
+    window.sentinel = QLabel("sentinel")
+    layout.addWidget(window.sentinel)
+    qtbot.addWidget(window)
+    window.resize(900, 900)
+    return window
+
+
+@pytest.fixture
+def live(qtbot, host):
+    """A presenter over a real pipeline (fed by hand) and real views in a shown window;
+    ``handed`` lists the rows of every rebuild of the plots."""
+    from types import SimpleNamespace
+
+    from PySide6.QtWidgets import QLabel
+
+    from app.core.pipeline import Pipeline
+    from app.gui.bubble_level import BubbleLevel
+    from app.gui.filter_panel import FilterPanel
+    from app.gui.plots import LivePlots
+    from app.gui.presenter import LivePresenter
+    from app.gui.readouts import TiltReadouts
+
+    pipeline = Pipeline(odr_hz=LIVE_ODR_HZ)
+    session = SimpleNamespace(pipeline=pipeline, device_info=None)
+    level, readouts, plots = BubbleLevel(), TiltReadouts(), LivePlots()
+    truth, panel = QLabel(), FilterPanel()
+    for widget in (level, readouts, plots, truth, panel):
+        host.layout().addWidget(widget)
+    plots.setMinimumHeight(300)
+    presenter = LivePresenter(session, level, readouts, plots, truth, panel, parent=host)
+    # Each refresh takes what is new at once (coalescing has its own test).
+    presenter.level_interval_s = presenter.plot_data_interval_s = 0.0
+    host.show()
+    qtbot.waitExposed(host)
+    handed = []
+    original = plots.set_data
+
+    def spy(*args, **kwargs):
+        handed.append(len(args[0]))
+        return original(*args, **kwargs)
+
+    plots.set_data = spy
+    return SimpleNamespace(
+        pipeline=pipeline, presenter=presenter, plots=plots, level=level, handed=handed
+    )

@@ -9,21 +9,16 @@ after the window's pending paints went out.
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
 from PySide6.QtCore import QEvent, QObject
-from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QLabel, QWidget
 
 from app.core.orientation import quaternion_from_roll_pitch, up_in_sensor_frame
-from app.core.pipeline import Pipeline
 from app.core.samples import RawBlock, ScaleFactors
 from app.gui.bubble_level import REPAINT_THRESHOLD_PX, BubbleLevel
-from app.gui.filter_panel import FilterPanel
 from app.gui.frame_clock import FALLBACK_REFRESH_HZ, FrameClock, frame_interval_ms
-from app.gui.plots import LivePlots
-from app.gui.presenter import PLOT_DATA_INTERVAL_S, LivePresenter
+from app.gui.presenter import PLOT_DATA_INTERVAL_S
 from app.gui.readouts import TiltReadouts
 
 G = 9.80665
@@ -53,11 +48,12 @@ def flush_paints(qtbot, sentinel: QLabel) -> None:
     qtbot.waitUntil(lambda: painted.count > 0, timeout=5000)
 
 
-def raw_block(start: int, count: int, roll: float = 2.0, pitch: float = -1.0) -> RawBlock:
+def raw_block(start: int, count: int, roll: float = 2.0, pitch: float = -1.0,
+              odr: float = ODR) -> RawBlock:
     q = quaternion_from_roll_pitch(roll, pitch)
     accel = np.round(up_in_sensor_frame(q) * G / SCALE.accel_m_s2_per_lsb).astype(np.int16)
     return RawBlock(
-        t_s=(start + np.arange(count)) / ODR,
+        t_s=(start + np.arange(count)) / odr,
         accel_raw=np.tile(accel, (count, 1)),
         gyro_raw=np.zeros((count, 3), np.int16),
         temp_raw=np.full(count, 256, np.int16),
@@ -116,18 +112,6 @@ def test_frame_clock_rests_when_idle_and_wakes_on_work(qtbot):
 
 
 # -- widgets repaint only on a visible change -------------------------------------------------
-@pytest.fixture
-def host(qtbot):
-    """A shown window holding the views, and a sentinel label to flush paints with."""
-    window = QWidget()
-    layout = QVBoxLayout(window)
-    window.sentinel = QLabel("sentinel")
-    layout.addWidget(window.sentinel)
-    qtbot.addWidget(window)
-    window.resize(900, 900)
-    return window
-
-
 def test_readout_repaints_only_when_its_text_changes(qtbot, host):
     readouts = TiltReadouts()
     host.layout().addWidget(readouts)
@@ -177,34 +161,6 @@ def test_bubble_repaints_only_when_it_moves_a_visible_amount(qtbot, host):
 
 
 # -- the presenter: new data only, views on screen only -----------------------------------------
-@pytest.fixture
-def live(qtbot, host):
-    """A presenter over a real pipeline (fed by hand) and real views in a shown window."""
-    pipeline = Pipeline(odr_hz=ODR)
-    session = SimpleNamespace(pipeline=pipeline, device_info=None)
-    level, readouts, plots = BubbleLevel(), TiltReadouts(), LivePlots()
-    truth, panel = QLabel(), FilterPanel()
-    for widget in (level, readouts, plots, truth, panel):
-        host.layout().addWidget(widget)
-    plots.setMinimumHeight(300)
-    presenter = LivePresenter(session, level, readouts, plots, truth, panel, parent=host)
-    # Each refresh below takes what is new at once (coalescing has its own test).
-    presenter.level_interval_s = presenter.plot_data_interval_s = 0.0
-    host.show()
-    qtbot.waitExposed(host)
-    handed = []
-    original = plots.set_data
-
-    def spy(*args, **kwargs):
-        handed.append(len(args[0]))
-        return original(*args, **kwargs)
-
-    plots.set_data = spy
-    return SimpleNamespace(
-        pipeline=pipeline, presenter=presenter, plots=plots, level=level, handed=handed
-    )
-
-
 def test_plots_get_no_data_when_no_new_samples_arrived(live):
     live.presenter.incremental_max_per_px = 0.0  # rebuilds for new data, as at high rates
     live.pipeline.process(raw_block(0, 208))

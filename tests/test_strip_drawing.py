@@ -16,22 +16,13 @@ import numpy as np
 import pytest
 from PySide6.QtCore import QEvent, QObject, QPoint
 from PySide6.QtGui import QColor, QImage
-from PySide6.QtWidgets import QApplication, QHBoxLayout, QLabel, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QApplication, QHBoxLayout, QWidget
+from test_display_refresh import ODR, raw_block
 
-from app.core.orientation import quaternion_from_roll_pitch, up_in_sensor_frame
-from app.core.pipeline import Pipeline
-from app.core.samples import RawBlock, ScaleFactors
 from app.gui import theme
-from app.gui.bubble_level import BubbleLevel
 from app.gui.elided_label import ElidedLabel
-from app.gui.filter_panel import FilterPanel
 from app.gui.plots import LivePlots
-from app.gui.presenter import LivePresenter
 from app.gui.readouts import TiltReadouts
-
-G = 9.80665
-ODR = 104.0
-SCALE = ScaleFactors(0.122e-3 * G, np.radians(8.75e-3), 1 / 256, 25.0)
 
 
 def settle() -> None:
@@ -155,49 +146,7 @@ def test_dashed_traces_keep_their_pattern_across_appended_pieces(strip):
     assert runs.max() >= 3
 
 
-# -- the presenter -------------------------------------------------------------------------------
-def raw_block(start: int, count: int, roll: float = 2.0, odr: float = ODR) -> RawBlock:
-    q = quaternion_from_roll_pitch(roll, -1.0)
-    accel = np.round(up_in_sensor_frame(q) * G / SCALE.accel_m_s2_per_lsb).astype(np.int16)
-    return RawBlock(
-        t_s=(start + np.arange(count)) / odr,
-        accel_raw=np.tile(accel, (count, 1)),
-        gyro_raw=np.zeros((count, 3), np.int16),
-        temp_raw=np.full(count, 256, np.int16),
-        scale=SCALE,
-        reference_quat=np.tile(q, (count, 1)),
-    )
-
-
-@pytest.fixture
-def live(qtbot, qapp):
-    theme.apply_theme(qapp)
-    host = QWidget()
-    qtbot.addWidget(host)
-    layout = QVBoxLayout(host)
-    pipeline = Pipeline(odr_hz=ODR)
-    session = SimpleNamespace(pipeline=pipeline, device_info=None)
-    level, readouts, plots = BubbleLevel(), TiltReadouts(), LivePlots()
-    truth, panel = QLabel(), FilterPanel()
-    for widget in (level, readouts, plots, truth, panel):
-        layout.addWidget(widget)
-    plots.setMinimumHeight(300)
-    host.resize(900, 900)
-    presenter = LivePresenter(session, level, readouts, plots, truth, panel, parent=host)
-    presenter.level_interval_s = presenter.plot_data_interval_s = 0.0
-    host.show()
-    qtbot.waitExposed(host)
-    handed = []
-    original = plots.set_data
-
-    def spy(*args, **kwargs):
-        handed.append(len(args[0]))
-        return original(*args, **kwargs)
-
-    plots.set_data = spy
-    return SimpleNamespace(pipeline=pipeline, presenter=presenter, plots=plots, handed=handed,
-                           host=host)
-
+# -- the presenter (fixtures `live`, `host`: conftest; blocks: test_display_refresh) -------------
 
 def test_at_a_tilt_meter_rate_new_samples_are_appended_not_rebuilt(live):
     live.pipeline.process(raw_block(0, 208))

@@ -154,6 +154,8 @@ def _runs(x: np.ndarray, y: np.ndarray, breaks: np.ndarray) -> list[np.ndarray]:
     """Index runs of a line to draw: a new run starts where ``breaks`` is True; points that
     are not finite are left out and end a run."""
     finite = np.isfinite(x) & np.isfinite(y)
+    if finite.all() and not breaks[1:].any():
+        return [np.arange(len(x))] if len(x) > 1 else []
     cut = np.array(breaks, dtype=bool, copy=True)
     cut |= ~finite
     cut[1:] |= ~finite[:-1]
@@ -592,23 +594,24 @@ class LivePlots(QWidget):
         """
         if self._region_shown:
             return False
-        for curve, _x, y, _breaks in segments:
-            sticky = self.ranges.get(self._plot_of.get(curve))
-            if sticky is not None and sticky.following and sticky.range is not None and len(y):
-                finite = y[np.isfinite(y)]
-                if len(finite) and (finite.min() < sticky.range[0]
-                                    or finite.max() > sticky.range[1]):
-                    return False
-        spans: dict[pg.PlotItem, list[float]] = {}  # x0, x1, y0, y1 of what is new
+        drawn = []  # (curve, plot, x, y, breaks, low, high) of the traces on screen
         for curve, x, y, breaks in segments:
             plot = self._plot_of.get(curve)
             if plot is None or not curve.isVisible() or len(x) < 2:
                 continue
-            self._extend_tail(curve, x, y, breaks)
             finite = y[np.isfinite(y)]
-            if not len(finite):
+            low, high = (float(finite.min()), float(finite.max())) if len(finite) else (
+                np.nan, np.nan)
+            sticky = self.ranges.get(plot)
+            if sticky is not None and sticky.following and sticky.range is not None and (
+                    low < sticky.range[0] or high > sticky.range[1]):
+                return False
+            drawn.append((curve, plot, x, y, breaks, low, high))
+        spans: dict[pg.PlotItem, list[float]] = {}  # x0, x1, y0, y1 of what is new
+        for curve, plot, x, y, breaks, low, high in drawn:
+            self._extend_tail(curve, x, y, breaks)
+            if np.isnan(low):
                 continue
-            low, high = float(finite.min()), float(finite.max())
             span = spans.get(plot)
             if span is None:
                 spans[plot] = [float(x[0]), float(x[-1]), low, high]
@@ -728,13 +731,8 @@ class LivePlots(QWidget):
                 pen = QPen(pen)
                 pen.setDashOffset((px[0] + sx * self._scroll_s) / max(pen.widthF(), 1.0))
             painter.setPen(pen)
-            cuts = breaks[first + 1:last]
-            if not cuts.any() and np.isfinite(py).all():
-                runs = [range(len(px))]
-            else:
-                runs = _runs(px, py, breaks[first:last])
             xs, ys = px.tolist(), py.tolist()
-            for run in runs:
+            for run in _runs(px, py, breaks[first:last]):
                 painter.drawPolyline(QPolygonF([QPointF(xs[i], ys[i]) for i in run]))
         if painter is not None:
             painter.end()
@@ -742,9 +740,11 @@ class LivePlots(QWidget):
 
     def _tail_end_px(self) -> float:
         """The rightmost pixel any trace's newest point is at (-inf without tails)."""
-        ends = [self._mapping(plot)[:2] for plot in self._tail_ends]
-        return max((sx * self._tail_ends[plot] + ox for plot, (sx, ox) in
-                    zip(self._tail_ends, ends, strict=True)), default=-np.inf)
+        right = -np.inf
+        for plot, end in self._tail_ends.items():
+            sx, ox, _, _ = self._mapping(plot)
+            right = max(right, sx * end + ox)
+        return right
 
     def _before_scene_paint(self) -> None:
         """The scene paints: bring its traces up to what the screen shows first."""

@@ -110,6 +110,14 @@ def _exposed(widget: QWidget) -> bool:
     return any(child.isVisible() and _exposed(child) for child in children)
 
 
+def _breaks(gap: np.ndarray) -> np.ndarray:
+    """Where appended lines break: after lost data; never before the first row (the
+    previous end, whose loss lies before it)."""
+    breaks = gap > 0.5
+    breaks[0] = False
+    return breaks
+
+
 def gap_connect(gap: np.ndarray) -> np.ndarray | str:
     """pyqtgraph ``connect`` for a (decimated) gap column: ``"all"`` when nothing was lost,
     which lets pyqtgraph build the line in one pass."""
@@ -172,9 +180,9 @@ class LivePresenter(QObject):
         self.plot_data_interval_s = PLOT_DATA_INTERVAL_S
         self._plots_were_shown = False
         self._quiet: tuple[tuple | None, float, bool] = (None, 0.0, False)
-        self._averaged_cache: tuple[tuple, object] | None = None
         """The last full frame's key, until when nothing falls due, and whether it had
         something pending."""
+        self._averaged_cache: tuple[tuple, object] | None = None
         self._incremental = False
         self.incremental_max_per_px = INCREMENTAL_MAX_PER_PX
         self._t0 = 0.0  # time of the newest sample at the last rebuild (x = 0 there)
@@ -247,9 +255,7 @@ class LivePresenter(QObject):
                 else:
                     pending = True  # due shortly: the clock keeps its pace until then
                     due.append(self._last_text_update + 1.0 / self.settings.readout_rate_hz)
-        plot_key = (
-            total, self.plots.window_s, self.plots.width(), tuple(pipeline.comparison_buffers)
-        )
+        plot_key = self._plot_key_of(total)
         plots_shown = self.plots_enabled and self._shown[self.plots](now)
         just_shown, self._plots_were_shown = plots_shown and not self._plots_were_shown, plots_shown
         if plots_shown:
@@ -432,9 +438,12 @@ class LivePresenter(QObject):
         total = pipeline.orientation.total_written
         if total == 0 or pipeline.samples.total_written == 0:
             return
-        plot_key = (total, self.plots.window_s, self.plots.width(),
-                    tuple(pipeline.comparison_buffers))
-        self._rebuild_plots(time.monotonic(), plot_key, arrived=False)
+        self._rebuild_plots(time.monotonic(), self._plot_key_of(total), arrived=False)
+
+    def _plot_key_of(self, total: int) -> tuple:
+        """What the traces were built from: rows, window, width, compared filters."""
+        return (total, self.plots.window_s, self.plots.width(),
+                tuple(self.session.pipeline.comparison_buffers))
 
     def _note_block(self, now: float) -> None:
         interval = min(now - self._event_wall, MAX_SCROLL_LEAD_S)
@@ -460,8 +469,7 @@ class LivePresenter(QObject):
         t0 = self._t0
         if sensor is not None and len(sensor["t"]) > 1:
             x = sensor["t"] - t0
-            breaks = sensor["gap"] > 0.5
-            breaks[0] = False  # the previous end: what was lost lies before it
+            breaks = _breaks(sensor["gap"])
             accel = sensor["accel"] / STANDARD_GRAVITY_M_S2
             gyro = np.degrees(sensor["gyro"])
             for axis in range(3):
@@ -471,8 +479,7 @@ class LivePresenter(QObject):
             self._drawn_wall = now
         if angles is not None and len(angles["t"]) > 1:
             x = angles["t"] - t0
-            breaks = angles["gap"] > 0.5
-            breaks[0] = False
+            breaks = _breaks(angles["gap"])
             for name, curve in plots.angle_curves.items():
                 segments.append((curve, x, angles[name], breaks))
             if plots.error_visible:
@@ -504,15 +511,6 @@ class LivePresenter(QObject):
         keep = rows["t"] >= last_t
         return {name: values[keep] for name, values in rows.items()}
 
-    def _mark_drawn(self, newest_t: float) -> None:
-        """After a rebuild: every ring is drawn up to now (up to ``newest_t``)."""
-        pipeline = self.session.pipeline
-        rings = {"samples": pipeline.samples, "orientation": pipeline.orientation,
-                 **{f"compare:{name}": ring
-                    for name, ring in pipeline.comparison_buffers.items()}}
-        self._drawn = {key: (totals, newest_t) for key, totals in self._totals.items()
-                       if key in rings}
-
     def _update_plots(self, samples, orientation) -> None:
         if self._sensor_trace is None or self._sensor_trace.ring is not samples:
             self._sensor_trace = IncrementalMinMax(samples, ["accel", "gyro", "gap"])
@@ -522,10 +520,9 @@ class LivePresenter(QObject):
             )
         window = self.plots.window_s
         # Rows seen before the fetch: rows written meanwhile are drawn twice, never missed.
-        self._totals = {"samples": samples.total_written,
-                        "orientation": orientation.total_written,
-                        **{f"compare:{name}": ring.total_written
-                           for name, ring in self.session.pipeline.comparison_buffers.items()}}
+        totals = {"samples": samples.total_written, "orientation": orientation.total_written,
+                  **{f"compare:{name}": ring.total_written
+                     for name, ring in self.session.pipeline.comparison_buffers.items()}}
         # A min/max pair per two pixel columns: all a plot can show at 1 px line width.
         info = self.session.device_info
         rate = info.odr_hz if info is not None else self._rate_hint(samples)
@@ -543,7 +540,8 @@ class LivePresenter(QObject):
             return
         newest = sensor_t[-1]
         self._t0 = float(newest)
-        self._mark_drawn(float(newest))
+        # Every ring is drawn up to here: appends go on from these rows.
+        self._drawn = {key: (seen, self._t0) for key, seen in totals.items()}
         self._update_comparisons(window, factor, newest)
         self.plots.set_data(
             sensor_t - newest,
