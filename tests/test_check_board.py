@@ -13,7 +13,7 @@ import pytest
 from fwcore import FirmwareCore, PtyBoard
 
 from app.cli import build_parser
-from app.cli_check import check_board, check_command
+from app.cli_check import check_board, check_command, clock_ppm_of
 from drivers import lsm6dsox
 from drivers.emulated_nucleo import EmulatedNucleo, NucleoFaults
 from drivers.link import protocol as p
@@ -136,6 +136,16 @@ def test_the_emulated_board_runs_and_reports_the_real_rate() -> None:
     row = next(line for line in report.splitlines() if line.strip().startswith("104 "))
     assert passed and row.endswith("ok"), report
     assert abs(float(row.split()[7])) < 1_000  # rate ppm against 104.17 Hz x trim
+
+
+def test_the_clock_fit_sees_a_slow_board_through_uneven_blocks_and_latency() -> None:
+    # A board clock 2 % slow, read in blocks of 1 to 10 samples that arrive 1-40 ms after their
+    # last sample: the first and last reads alone would be off by the latency difference.
+    rng = np.random.default_rng(5)
+    ends = np.cumsum(rng.integers(1, 11, 40)) / 104.0
+    arrivals = [(float(t), float(t / 0.98 + rng.uniform(0.001, 0.040))) for t in ends]
+    assert clock_ppm_of(arrivals) == pytest.approx(-20_000, abs=4_000)
+    assert clock_ppm_of(arrivals[:2]) == 0.0  # too few reads to say
 
 
 def test_the_emulated_board_drops_the_turn_on_transient() -> None:
