@@ -805,7 +805,13 @@ class MainWindow(QMainWindow):
 
         page = getattr(self, "allan_page", None)
         if page is None:
-            page = AllanPage()
+            def current(name: str, keys: list[str]) -> dict[str, float] | None:
+                running = self.session.pipeline.filter
+                if running.name != name:
+                    return None
+                return {key: float(running.get_parameter(key)) for key in keys}
+
+            page = AllanPage(settings=self.settings, current_parameters=current)
             page.parametersApplied.connect(self.apply_noise_parameters)
             self.allan_page = page
         page.show()
