@@ -148,7 +148,7 @@ def test_a_face_tilted_when_its_offsets_are_known_is_rejected_at_once():
     capture = tour_with(3, {"+y": 3.3})
     rejected = [e for e in capture.events if not e.accepted]
     assert len(rejected) == 1 and rejected[0].reason.startswith("+y up is ")
-    assert "with the sensor's offsets taken out" in rejected[0].reason
+    assert "the sensor's offsets taken out" in rejected[0].reason
     assert capture.missing_faces == ["+y"]
 
 

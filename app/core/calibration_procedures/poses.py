@@ -153,13 +153,16 @@ def face_tilts(poses: list[CapturedPose]) -> list[FaceTilt]:
 
 
 def tilt_reason(tilt: FaceTilt, earlier: bool = False) -> str:
-    """The sentence for a pose rejected by :func:`face_tilts`."""
-    known = ("with the sensor's offsets taken out" if tilt.offsets_known
-             else "allowing for the offsets not known yet")
-    head = (f"The {tilt.face} up pose captured earlier is {tilt.tilt_deg:.1f} deg off its axis"
-            if earlier else f"{tilt.face} up is {tilt.tilt_deg:.1f} deg off its axis")
-    return (f"{head} (at most {tilt.limit_deg:.1f} deg {known}); it is removed. Place the board "
-            f"flat on a face of a box on a level table and capture {tilt.face} up again.")
+    """The sentence for a pose rejected by :func:`face_tilts`: which face, by how much."""
+    if tilt.offsets_known:
+        verb, limit = "is", f"at most {tilt.limit_deg:.1f} deg, the sensor's offsets taken out"
+    else:
+        verb, limit = "reads", (f"at most {tilt.limit_deg:.1f} deg while the sensor's offsets "
+                                "are not known")
+    head = (f"The {tilt.face} up pose captured earlier {verb} {tilt.tilt_deg:.1f} deg off its "
+            "axis" if earlier else f"{tilt.face} up {verb} {tilt.tilt_deg:.1f} deg off its axis")
+    return (f"{head} ({limit}); it is removed. Place the board flat on a face of a box on a "
+            f"level table and capture {tilt.face} up again.")
 
 
 @dataclass(frozen=True)
