@@ -237,8 +237,9 @@ def test_run_uncalibrated_is_remembered_and_a_profile_can_be_enabled_or_deleted(
     assert "No calibration profile is stored" in restarted.enable()
 
 
-def test_run_uncalibrated_survives_a_reconnect_and_a_restart_of_the_window(qtbot, qapp,
-                                                                          tmp_path):
+def test_run_uncalibrated_and_allan_noise_figures_survive_a_reconnect_and_a_restart(
+        qtbot, qapp, tmp_path, still_csv):
+    """One window, then a second on the same settings and profiles: a restart."""
     from app.gui.main_window import MainWindow
     from app.services.session import DeviceSession
     from drivers.sim.device import SimulatedDevice
@@ -247,31 +248,52 @@ def test_run_uncalibrated_survives_a_reconnect_and_a_restart_of_the_window(qtbot
     url = "sim://static?seed=5&odr=52"
     store = ProfileStore(tmp_path / "profiles")
     stored_profile(store, SimulatedDevice(url).unique_id)
-    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+    path = str(tmp_path / "settings.ini")
 
     def open_window() -> tuple[MainWindow, DeviceSession]:
         session = DeviceSession(profile_store=store)
-        window = MainWindow(session, settings, url)
+        window = MainWindow(session, QSettings(path, QSettings.Format.IniFormat), url)
         qtbot.addWidget(window)
         window.show()
         qtbot.waitUntil(lambda: session.device_info is not None, timeout=TIMEOUT_MS)
         return window, session
 
+    def gyro_noise_is(session: DeviceSession, value: float) -> bool:
+        return math.isclose(session.pipeline.filter.get_parameter("gyro_noise"), value)
+
     window, session = open_window()
     qtbot.waitUntil(lambda: window.status_calibration.text().startswith("Calibrated"),
                     timeout=TIMEOUT_MS)
+    # The Allan page's figures go into the running EKF (after the question).
+    page = window.open_allan_page()
+    qtbot.addWidget(page)
+    assert page.load_recording(still_csv) is not None
+    default = session.pipeline.filter.get_parameter("gyro_noise")
+    proposed = page.request_apply(lambda text: True)["ekf"]["gyro_noise"]
+    assert not math.isclose(default, proposed)
+    qtbot.waitUntil(lambda: gyro_noise_is(session, proposed), timeout=TIMEOUT_MS)
+    page.close()
+    # Run uncalibrated, then reconnect: still uncalibrated, and the Messages say why.
     window.no_calibration_action.trigger()
     qtbot.waitUntil(lambda: window.status_calibration.text() == "Uncalibrated",
                     timeout=TIMEOUT_MS)
     with qtbot.waitSignal(session.connected, timeout=TIMEOUT_MS):
         window.connect_device(url)
-    qtbot.waitUntil(lambda: "disabled" in window.messages.toPlainText(), timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: "profile of" in window.messages.toPlainText()
+                    and "is disabled" in window.messages.toPlainText(), timeout=TIMEOUT_MS)
     assert window.status_calibration.text() == "Uncalibrated"
     assert session.pipeline.calibration.is_identity
     window.close()
+    # Restart: uncalibrated, and the EKF has the Allan figures and knows where they came from.
     window, session = open_window()
-    qtbot.waitUntil(lambda: "disabled" in window.messages.toPlainText(), timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: "is disabled" in window.messages.toPlainText(), timeout=TIMEOUT_MS)
     assert window.status_calibration.text() == "Uncalibrated"
+    qtbot.waitUntil(lambda: gyro_noise_is(session, proposed), timeout=TIMEOUT_MS)
+    page = window.open_allan_page()
+    qtbot.addWidget(page)
+    assert "still.csv" in page.applied_label.text()
+    page.close()
+    # Enabled again, then deleted.
     window.stored_profile_action.trigger()
     qtbot.waitUntil(lambda: window.status_calibration.text().startswith("Calibrated"),
                     timeout=TIMEOUT_MS)
@@ -420,3 +442,4 @@ def test_the_log_panel_says_a_stored_reading_was_not_steady(qtbot, qapp, tmp_pat
     assert panel.note.text().startswith("⚠ Stored, flagged: not steady")
     assert panel.table.item(0, 0).text().startswith("⚠")
     assert "not steady" in panel.table.item(0, 2).toolTip()
+
