@@ -200,10 +200,14 @@ class AllanPage(QWidget):
             f"{source}: {result.duration_s / 60:.1f} min at {result.rate_hz:.4g} Hz"
             f"{temperature}. Solid: measured; dashed: model (noise density and random walk "
             "from the time series' likelihood, bias instability from the curve); dotted: white "
-            "noise (slope −½) and random walk (slope +½) of x."
+            "noise (slope −½)"
+            + (" and random walk (slope +½)" if support.supported("gyro", "random_walk")[0]
+               else "") + " of x."
             + "".join(f"<br>— {note}." for note in support.notes))
-        self._plot(self.gyro_plot, result.gyro, DEG_H)
-        self._plot(self.accel_plot, result.accel, UG)
+        self._plot(self.gyro_plot, result.gyro, DEG_H,
+                   bool(support.supported("gyro", "random_walk")[0]))
+        self._plot(self.accel_plot, result.accel, UG,
+                   bool(support.supported("accel", "random_walk")[0]))
         rows = figure_rows(result)
         self.table.setRowCount(len(rows))
         for r, (label, unit, values) in enumerate(rows):
@@ -214,7 +218,8 @@ class AllanPage(QWidget):
                 self.table.setItem(r, c, QTableWidgetItem(text))
         self.apply_button.setEnabled(True)
 
-    def _plot(self, plot: pg.PlotWidget, figures: SensorNoiseFigures, factor: float) -> None:
+    def _plot(self, plot: pg.PlotWidget, figures: SensorNoiseFigures, factor: float,
+              walk_supported: bool = True) -> None:
         plot.clear()
         tau = figures.tau_s
         for axis, name, colour in zip(figures.axes, "xyz", AXIS_COLOURS, strict=True):
@@ -225,7 +230,7 @@ class AllanPage(QWidget):
         first = figures.axes[0]
         dotted = pg.mkPen("#aaaaaa", width=1, style=Qt.PenStyle.DotLine)
         plot.plot(tau, first.white_line(tau) * factor, pen=dotted)
-        if first.random_walk > 0:
+        if first.random_walk > 0 and walk_supported:
             plot.plot(tau, first.walk_line(tau) * factor, pen=dotted)
 
     # -- the button ----------------------------------------------------------------------------
