@@ -66,7 +66,10 @@ def add_calibration_parsers(commands: argparse._SubParsersAction) -> None:
                            help="six faces of a box (default) or >= 12 free orientations")
     calibrate.add_argument("--out", metavar="FILE.json", help="write the calibration JSON here")
     calibrate.add_argument("--save", action="store_true",
-                           help="store the result as the device's calibration profile")
+                           help="store the result as the device's calibration profile (refused "
+                           "when it makes the tilt error worse, unless --force)")
+    calibrate.add_argument("--force", action="store_true",
+                           help="with --save: store it even when the tilt error gets worse")
     calibrate.add_argument("--report", metavar="FILE.html|FILE.pdf",
                            help="write a calibration report (HTML, or PDF through Qt)")
     calibrate.add_argument("--device", metavar="URL",
@@ -328,6 +331,7 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
         make_profile,
         utc_now_iso,
     )
+    from app.core.calibration_procedures.tilt_comparison import worsening
 
     out = sys.stdout if out is None else out
     try:
@@ -359,7 +363,11 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
         residuals=result.residuals(), created_utc=created,
         notes=f"inclinometer calibrate {label}",
     )
-    if args.save:
+    worse = worsening(result.comparison)
+    refused = bool(args.save and worse and not args.force)
+    if worse:
+        print(f"warning: {worse}", file=out)
+    if args.save and not refused:
         store = ProfileStore(args.profile_dir)
         path = store.save(profile)
         print(f"saved as the profile of device {stream.unique_id}: {path}", file=out)
@@ -367,6 +375,10 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
         write_calibration_report(result, profile, stream, label, Path(args.report))
         print(f"wrote the report {args.report}", file=out)
     out.flush()
+    if refused:
+        print(f"inclinometer calibrate: not saved: {worse} Redo the poses, or --force to save "
+              "it all the same", file=sys.stderr)
+        return EXIT_FAILED
     return 0
 
 
