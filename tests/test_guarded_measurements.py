@@ -443,3 +443,10 @@ def test_the_log_panel_says_a_stored_reading_was_not_steady(qtbot, qapp, tmp_pat
     assert panel.table.item(0, 0).text().startswith("⚠")
     assert "not steady" in panel.table.item(0, 2).toolTip()
 
+
+
+def test_a_still_record_quantised_at_the_widest_range_is_at_rest():
+    # +-2000 dps: 70 mdps a bit, the white noise 0.03 dps: most windows scatter by 0 or 1 bit.
+    gyro, accel = synthetic_static(120.0, 104.0, math.radians(3.8e-3), 0.0)
+    lsb = math.radians(0.07)
+    assert check_still(np.round(gyro / lsb) * lsb, accel, 104.0).still

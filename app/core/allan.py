@@ -604,6 +604,9 @@ moves the gyro's bias by about 0.01 dps/degC; a 130 deg turn in 10 s is 13 dps).
 MOTION_SD_RATIO = 3.0
 """A window whose gyro scatter exceeds the record's typical (median) scatter this many times is
 shaken: at rest the scatter is the white noise, the same in every window (within ~20 %)."""
+MOTION_SD_FLOOR_DPS = 0.1
+"""The scatter test's threshold is never below this: a few LSB at the widest range (70 mdps
+at +-2000 dps), where a quantised record at rest scatters by 0 or 1 LSB from window to window."""
 MOTION_GYRO_SD_DPS = 1.0
 """Gyro scatter within a window above this is motion whatever the rest of the record does (a
 MEMS gyro at rest scatters by 0.03 dps at 104 Hz, 0.2 dps at 6.7 kHz; a hand's tremor by
@@ -640,7 +643,7 @@ def check_still(gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, rate_hz: float
 
     Checked per window of :data:`STILL_WINDOW_S`: the mean gravity direction against the
     record's, the mean rate against the record's median, and the gyro's scatter against the
-    record's median scatter and an absolute limit.
+    record's median scatter (never below :data:`MOTION_SD_FLOOR_DPS`) and an absolute limit.
     """
     gyro = np.asarray(gyro_rad_s, dtype=np.float64).reshape(-1, 3)
     accel = np.asarray(accel_m_s2, dtype=np.float64).reshape(-1, 3)
@@ -657,8 +660,8 @@ def check_still(gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, rate_hz: float
     tilt = np.degrees(np.arctan2(cross, a_mean @ direction))
     rate = np.degrees(np.linalg.norm(g_mean - np.median(g_mean, axis=0), axis=1))
     sd = np.degrees(g_sd)
-    shaken = np.any((sd > MOTION_SD_RATIO * np.median(sd, axis=0)) | (sd > MOTION_GYRO_SD_DPS),
-                    axis=1)
+    typical = np.maximum(MOTION_SD_RATIO * np.median(sd, axis=0), MOTION_SD_FLOOR_DPS)
+    shaken = np.any((sd > typical) | (sd > MOTION_GYRO_SD_DPS), axis=1)
     moved = (tilt > MOTION_TILT_DEG) | (rate > MOTION_RATE_DPS) | shaken
     largest_tilt, largest_rate = float(tilt.max()), float(rate.max())
     if not moved.any():
