@@ -446,7 +446,10 @@ def test_the_log_panel_says_a_stored_reading_was_not_steady(qtbot, qapp, tmp_pat
 
 
 def test_a_still_record_quantised_at_the_widest_range_is_at_rest():
-    # +-2000 dps: 70 mdps a bit, the white noise 0.03 dps: most windows scatter by 0 or 1 bit.
-    gyro, accel = synthetic_static(120.0, 104.0, math.radians(3.8e-3), 0.0)
+    # +-2000 dps at 13 Hz: a bit is 70 mdps, the white noise 0.01 dps: most windows read one
+    # value (no scatter at all), a few flip one bit.
+    gyro, accel = synthetic_static(300.0, 13.0, math.radians(3.8e-3), 0.0)
     lsb = math.radians(0.07)
-    assert check_still(np.round(gyro / lsb) * lsb, accel, 104.0).still
+    quantised = np.round(gyro / lsb) * lsb
+    assert np.median(np.std(quantised[:3900].reshape(300, 13, 3), axis=1)) == 0.0
+    assert check_still(quantised, accel, 13.0).still
