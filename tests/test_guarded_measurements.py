@@ -453,3 +453,28 @@ def test_a_still_record_quantised_at_the_widest_range_is_at_rest():
     quantised = np.round(gyro / lsb) * lsb
     assert np.median(np.std(quantised[:3900].reshape(300, 13, 3), axis=1)) == 0.0
     assert check_still(quantised, accel, 13.0).still
+
+
+def test_the_poses_page_shows_which_face_was_rejected_and_by_how_much(qtbot, qapp):
+    from app.gui.calibration_wizard import CalibrationWizard
+    from app.services.session import DeviceSession
+
+    theme.apply_theme(qapp)
+    session = DeviceSession()
+    wizard = CalibrationWizard(session)
+    qtbot.addWidget(wizard)
+    page = wizard.poses_page
+    page.initializePage()
+    for index, face in enumerate(FACES[:5]):
+        roll, pitch = TOUR_ROLL_PITCH[face]
+        block, _ = still_block(roll + (3.3 if face == "+y" else 0.0), pitch, 3, 10.0 * index)
+        page.feed(block)
+        assert page.capture is not None
+        page.capture.request_capture()
+    assert not page.rejection.isHidden()
+    text = page.rejection.text()
+    assert text.startswith("✗ +y up is ") and "off its axis" in text
+    assert "+y up" in page.instruction.text()  # asked for again
+    assert page.events.item(0).text() == text
+    wizard.reject()
+    session.shutdown()
