@@ -66,7 +66,10 @@ def add_calibration_parsers(commands: argparse._SubParsersAction) -> None:
                            help="six faces of a box (default) or >= 12 free orientations")
     calibrate.add_argument("--out", metavar="FILE.json", help="write the calibration JSON here")
     calibrate.add_argument("--save", action="store_true",
-                           help="store the result as the device's calibration profile")
+                           help="store the result as the device's calibration profile (refused "
+                           "when it makes the tilt error worse, unless --force)")
+    calibrate.add_argument("--force", action="store_true",
+                           help="with --save: store it even when the tilt error gets worse")
     calibrate.add_argument("--report", metavar="FILE.html|FILE.pdf",
                            help="write a calibration report (HTML, or PDF through Qt)")
     calibrate.add_argument("--device", metavar="URL",
@@ -328,6 +331,7 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
         make_profile,
         utc_now_iso,
     )
+    from app.core.calibration_procedures.tilt_comparison import worsening
 
     out = sys.stdout if out is None else out
     try:
@@ -359,7 +363,11 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
         residuals=result.residuals(), created_utc=created,
         notes=f"inclinometer calibrate {label}",
     )
-    if args.save:
+    worse = worsening(result.comparison)
+    refused = bool(args.save and worse and not args.force)
+    if worse:
+        print(f"warning: {worse}", file=out)
+    if args.save and not refused:
         store = ProfileStore(args.profile_dir)
         path = store.save(profile)
         print(f"saved as the profile of device {stream.unique_id}: {path}", file=out)
@@ -367,6 +375,10 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
         write_calibration_report(result, profile, stream, label, Path(args.report))
         print(f"wrote the report {args.report}", file=out)
     out.flush()
+    if refused:
+        print(f"inclinometer calibrate: not saved: {worse} Redo the poses, or --force to save "
+              "it all the same", file=sys.stderr)
+        return EXIT_FAILED
     return 0
 
 
@@ -428,6 +440,11 @@ def allan_truth(unit_errors: dict[str, Any], accel_fs_g: int) -> dict[str, dict[
 
 
 def print_allan(result, label: str, stream: CapturedStream, out: TextIO) -> None:
+    from app.core.allan import figure_support
+
+    support = figure_support(result)
+    keys = {"noise density": "noise_density", "bias instability": "bias_instability",
+            "random walk": "random_walk"}
     print(f"{label}: {result.duration_s / 60:.1f} min at rest, {result.samples} samples at "
           f"{result.rate_hz:.4g} Hz", file=out)
     span = result.temperature_span_degc
@@ -440,7 +457,9 @@ def print_allan(result, label: str, stream: CapturedStream, out: TextIO) -> None
     head = f"  {'':<6}{'figure':<18}{'unit':<10}{'x':>11}{'y':>11}{'z':>11}"
     print(head + ("  truth (simulator)" if truth else ""), file=out)
     for sensor, figure, unit, values, factor in _allan_rows(result):
-        cells = "".join(f"{v * factor:11.4g}" for v in values)
+        shown = support.supported(sensor, keys[figure])
+        cells = "".join(f"{v * factor:11.4g}" if ok else f"{'-':>11}"
+                        for v, ok in zip(values, shown, strict=True))
         extra = f"  {truth[sensor][figure] * factor:11.4g}" if truth else ""
         print(f"  {sensor:<6}{figure:<18}{unit:<10}{cells}{extra}", file=out)
     if result.method == "likelihood":
@@ -449,14 +468,13 @@ def print_allan(result, label: str, stream: CapturedStream, out: TextIO) -> None
                   for sensor, figures in (("gyro", result.gyro), ("accel", result.accel))]
         print(f"random walk uncertainty (1 sigma, x/y/z, %): {', '.join(spread)}; noise "
               "density and random walk by likelihood (white noise + random walk)", file=out)
-    if result.duration_s < 1800:
-        print("note: under 30 minutes of data; the random walk and the bias instability are "
-              "rough", file=out)
+    for note in support.notes:
+        print(f"note: {note}", file=out)
 
 
 def allan_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
-    """The ``allan`` sub-command."""
-    from app.core.allan import analyse_static
+    """The ``allan`` sub-command: refuses a record that is too short or not at rest."""
+    from app.core.allan import analyse_static, figure_support, static_record_problem
 
     out = sys.stdout if out is None else out
     try:
@@ -466,6 +484,10 @@ def allan_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             out = sys.stderr
         stream, label = load_stream(args, out)
         block = stream.block
+        problem = static_record_problem(block.gyro_rad_s, block.accel_m_s2,
+                                        stream.settings.odr_hz)
+        if problem:
+            raise _Failed(f"{label}: {problem}")
         try:
             result = analyse_static(block.gyro_rad_s, block.accel_m_s2, stream.settings.odr_hz,
                                     block.temp_degc,
@@ -482,7 +504,8 @@ def allan_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     print_allan(result, label, stream, out)
     if args.json is not None:
         document = {**result.to_json(), "source": label,
-                    "device_unique_id": stream.unique_id}
+                    "device_unique_id": stream.unique_id,
+                    "supported": figure_support(result).to_json()}
         text = json.dumps(document, indent=1, allow_nan=False) + "\n"
         if args.json == "-":
             sys.stdout.write(text)

@@ -589,3 +589,164 @@ def filter_noise_parameters(result: AllanResult, filters: dict[str, Any]
                 continue
             out.setdefault(name, {})[spec.name] = min(max(value, spec.minimum), spec.maximum)
     return out
+
+
+# -- is the record still, and what does it support ----------------------------------------------
+STILL_WINDOW_S = 1.0
+"""Windows in which the record is checked for motion."""
+MOTION_TILT_DEG = 0.25
+"""A window whose mean gravity direction is this far from the record's is moved. A warm-up
+shifts the accelerometer's offset by about 0.1 mg/degC (0.06 deg over 10 degC), while a change
+of attitude of 0.25 deg is a 4 mg step: a hundred times the bias instability the curve reads."""
+MOTION_RATE_DPS = 0.5
+"""A window whose mean rate departs this far from the record's median is turning (a warm-up
+moves the gyro's bias by about 0.01 dps/degC; a 130 deg turn in 10 s is 13 dps)."""
+MOTION_SD_RATIO = 3.0
+"""A window whose gyro scatter exceeds the record's typical (median) scatter this many times is
+shaken: at rest the scatter is the white noise, the same in every window (within ~20 %)."""
+MOTION_SD_FLOOR_DPS = 0.1
+"""The scatter test's threshold is never below this: a few LSB at the widest range (70 mdps
+at +-2000 dps), where a quantised record at rest scatters by 0 or 1 LSB from window to window."""
+MOTION_GYRO_SD_DPS = 1.0
+"""Gyro scatter within a window above this is motion whatever the rest of the record does (a
+MEMS gyro at rest scatters by 0.03 dps at 104 Hz, 0.2 dps at 6.7 kHz; a hand's tremor by
+several)."""
+MIN_STATIC_RECORD_S = 30.0
+"""The noise density comes from the short taus: 30 s gives it within a few percent."""
+MIN_FLOOR_CLUSTERS = 9
+"""The bias instability is read at the curve's minimum; the minimum must have at least this many
+clusters (T / tau, the deviation then within about 25 %), else the curve has not reached its
+floor in the record (it still falls at the longest taus) and the figure is not reported."""
+
+
+@dataclass(frozen=True)
+class StillnessCheck:
+    """Whether a record was at rest throughout (:func:`check_still`)."""
+
+    moving_s: float
+    """Seconds of windows in which the sensor moved."""
+    first_motion_s: float
+    """Start of the first such window, seconds from the record's start (NaN: none)."""
+    largest_tilt_deg: float
+    largest_rate_dps: float
+    reason: str
+    """A sentence for the user ("" when still)."""
+
+    @property
+    def still(self) -> bool:
+        return not self.reason
+
+
+def check_still(gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, rate_hz: float
+                ) -> StillnessCheck:
+    """Find motion in a record meant to be at rest (see the ``MOTION_...`` constants).
+
+    Checked per window of :data:`STILL_WINDOW_S`: the mean gravity direction against the
+    record's, the mean rate against the record's median, and the gyro's scatter against the
+    record's median scatter (never below :data:`MOTION_SD_FLOOR_DPS`) and an absolute limit.
+    """
+    gyro = np.asarray(gyro_rad_s, dtype=np.float64).reshape(-1, 3)
+    accel = np.asarray(accel_m_s2, dtype=np.float64).reshape(-1, 3)
+    size = max(4, round(STILL_WINDOW_S * rate_hz))
+    count = len(gyro) // size
+    if count == 0:
+        return StillnessCheck(0.0, math.nan, 0.0, 0.0, "")
+    g = gyro[: count * size].reshape(count, size, 3)
+    a = accel[: count * size].reshape(count, size, 3)
+    g_mean, g_sd = g.mean(axis=1), g.std(axis=1, ddof=1)
+    a_mean = a.mean(axis=1)
+    direction = np.median(a_mean, axis=0)
+    cross = np.linalg.norm(np.cross(a_mean, direction), axis=1)
+    tilt = np.degrees(np.arctan2(cross, a_mean @ direction))
+    rate = np.degrees(np.linalg.norm(g_mean - np.median(g_mean, axis=0), axis=1))
+    sd = np.degrees(g_sd)
+    typical = np.maximum(MOTION_SD_RATIO * np.median(sd, axis=0), MOTION_SD_FLOOR_DPS)
+    shaken = np.any((sd > typical) | (sd > MOTION_GYRO_SD_DPS), axis=1)
+    moved = (tilt > MOTION_TILT_DEG) | (rate > MOTION_RATE_DPS) | shaken
+    largest_tilt, largest_rate = float(tilt.max()), float(rate.max())
+    if not moved.any():
+        return StillnessCheck(0.0, math.nan, largest_tilt, largest_rate, "")
+    window_s = size / rate_hz
+    first = float(np.flatnonzero(moved)[0] * window_s)
+    moving = float(moved.sum() * window_s)
+    what = []
+    if largest_tilt > MOTION_TILT_DEG:
+        what.append(f"the gravity direction moved by up to {largest_tilt:.1f}°")
+    if largest_rate > MOTION_RATE_DPS:
+        what.append(f"it turned at up to {largest_rate:.1f} °/s")
+    if shaken.any():
+        what.append(f"it shook (gyro scatter up to {float(sd.max()):.2f} °/s)")
+    reason = (f"not at rest: the sensor moved for {moving:.0f} s of {count * window_s:.0f} s, "
+              f"first at {first:.0f} s ({'; '.join(what)}). The Allan analysis needs a "
+              "recording of the sensor lying still throughout")
+    return StillnessCheck(moving, first, largest_tilt, largest_rate, reason)
+
+
+@dataclass(frozen=True)
+class FigureSupport:
+    """Which figures of an :class:`AllanResult` its record supports, per sensor and axis."""
+
+    bias_instability: dict[str, np.ndarray]
+    """{"gyro" | "accel": (3,) bool}"""
+    random_walk: dict[str, np.ndarray]
+    notes: tuple[str, ...]
+    """One sentence per figure left out, saying what it would need."""
+
+    def supported(self, sensor: str, figure: str) -> np.ndarray:
+        """(3,) bool for "noise_density" (always), "bias_instability" or "random_walk"."""
+        if figure == "noise_density":
+            return np.ones(3, dtype=bool)
+        return getattr(self, figure)[sensor]
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "bias_instability": {k: v.tolist() for k, v in self.bias_instability.items()},
+            "random_walk": {k: v.tolist() for k, v in self.random_walk.items()},
+            "notes": list(self.notes),
+        }
+
+
+def figure_support(result: AllanResult) -> FigureSupport:
+    """What the record can tell: the bias instability only where the curve's minimum lies at a
+    tau with :data:`MIN_FLOOR_CLUSTERS` clusters, the random walk only from
+    :data:`MIN_WALK_RECORD_S` of data (the gyro's walk crosses its white noise after 200-500 s)."""
+    duration = result.duration_s
+    floors: dict[str, np.ndarray] = {}
+    walks: dict[str, np.ndarray] = {}
+    notes: list[str] = []
+    for sensor in ("gyro", "accel"):
+        figures: SensorNoiseFigures = getattr(result, sensor)
+        ok = []
+        for axis in figures.axes:
+            finite = np.isfinite(axis.adev)
+            if not finite.any():
+                ok.append(False)
+                continue
+            best = int(np.nanargmin(np.where(finite, axis.adev, np.nan)))
+            ok.append(duration / float(axis.tau_s[best]) >= MIN_FLOOR_CLUSTERS)
+        floors[sensor] = np.array(ok)
+        if not all(ok):
+            missing = "/".join(a for a, good in zip(AXES, ok, strict=True) if not good)
+            notes.append(
+                f"{sensor} bias instability ({missing}) not reported: the Allan curve has not "
+                f"reached its floor with {MIN_FLOOR_CLUSTERS} clusters in {duration / 60:.1f} "
+                "min; record longer")
+        walks[sensor] = np.full(3, duration >= MIN_WALK_RECORD_S)
+        if duration < MIN_WALK_RECORD_S:
+            notes.append(f"{sensor} random walk not reported: it needs "
+                         f"{MIN_WALK_RECORD_S / 60:.0f} min of data or more, this record has "
+                         f"{duration / 60:.1f} min")
+    return FigureSupport(floors, walks, tuple(notes))
+
+
+def static_record_problem(gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, rate_hz: float) -> str:
+    """Why a record cannot give noise figures ("" when it can): too short, or not at rest."""
+    n = len(np.asarray(gyro_rad_s).reshape(-1, 3))
+    duration = n / rate_hz if rate_hz > 0 else 0.0
+    motion = check_still(gyro_rad_s, accel_m_s2, rate_hz).reason if duration > 0 else ""
+    if motion:
+        return motion
+    if duration < MIN_STATIC_RECORD_S:
+        return (f"{duration:.1f} s of data: record at least a few minutes at rest "
+                f"({MIN_STATIC_RECORD_S:.0f} s for the noise density alone)")
+    return ""

@@ -16,6 +16,7 @@ from PySide6.QtCore import QPointF, QRectF, Qt, QTimer, Signal
 from PySide6.QtGui import QColor, QFont, QPainter, QPainterPath, QPen, QPolygonF
 from PySide6.QtWidgets import (
     QButtonGroup,
+    QCheckBox,
     QDoubleSpinBox,
     QFormLayout,
     QGridLayout,
@@ -53,6 +54,7 @@ from app.core.calibration_procedures import (
     fit_free_poses,
     fit_six_position,
     make_profile,
+    worsening,
 )
 from app.core.devices import DeviceInfo
 from app.core.raw_feed import RawSampleFeed
@@ -297,14 +299,20 @@ class PosesPage(_Page):
         buttons.addWidget(self.undo_button)
         buttons.addStretch(1)
         layout.addLayout(buttons, 3, 0, 1, 2)
+        self.rejection = QLabel()
+        self.rejection.setWordWrap(True)
+        self.rejection.setStyleSheet(f"color: {theme.WARN_AMBER}; font-weight: bold;")
+        self.rejection.hide()
+        layout.addWidget(self.rejection, 4, 0, 1, 2)
         self.events = QListWidget()
-        layout.addWidget(self.events, 4, 0, 1, 2)
+        layout.addWidget(self.events, 5, 0, 1, 2)
         self.capture: PoseCapture | None = None
 
     def initializePage(self) -> None:
         mode = self._wizard.intro.method
         self.capture = PoseCapture(self._wizard.new_detector(), mode=mode)
         self.events.clear()
+        self.rejection.hide()
         self.setSubTitle(
             "Place the board as shown and let go: each pose is captured automatically after "
             "about 3 s of stillness." if mode == SIX_POSITION else
@@ -326,8 +334,11 @@ class PosesPage(_Page):
         for event in capture.update(block):
             if event.accepted and event.pose is not None:
                 text = f"✓ Captured {event.pose.face} up"
+                self.rejection.hide()
             else:
                 text = f"✗ {event.reason}"
+                self.rejection.setText(f"✗ {event.reason}")
+                self.rejection.show()
             self.events.insertItem(0, text)
             self.completeChanged.emit()
         detector = capture.detector
@@ -387,16 +398,25 @@ class ResultsPage(_Page):
         self.name_edit = QLineEdit()
         form.addRow("Profile name", self.name_edit)
         layout.addLayout(form)
+        self.insist = QCheckBox("Apply it anyway (the tilt error gets worse)")
+        self.insist.setToolTip("Finish applies a calibration that reads worse than before only "
+                               "when this is ticked; redoing the poses is better")
+        self.insist.toggled.connect(lambda _checked: self.completeChanged.emit())
+        self.insist.hide()
+        layout.addWidget(self.insist)
         self.report_button = QPushButton("Save report (HTML or PDF)…")
         self.report_button.clicked.connect(lambda: self.save_report())
         layout.addWidget(self.report_button, 0, Qt.AlignmentFlag.AlignLeft)
         self.fit: AccelFit | None = None
         self.tilt_comparison = None
         self.error: str = ""
+        self.worse: str = ""
 
     def initializePage(self) -> None:
         wizard = self._wizard
         self.fit, self.error, self.tilt_comparison = None, "", None
+        self.worse = ""
+        self.insist.setChecked(False)
         gyro = wizard.gyro_page.procedure.result if wizard.gyro_page.procedure else None
         rows: list[tuple[str, list[str]]] = []
         if gyro is not None:
@@ -419,6 +439,7 @@ class ResultsPage(_Page):
                 calibration = fit.to_calibration(gyro)
                 comparison = compare_poses(capture.poses, calibration)
                 self.tilt_comparison = comparison
+                self.worse = worsening(comparison)
                 for row in comparison.rows():
                     comparison_rows.append(
                         (str(row["pose"]), f"{float(row['error_before_deg']):.3f}°",
@@ -434,6 +455,14 @@ class ResultsPage(_Page):
                 self.comparison.setItem(r, c, QTableWidgetItem(text))
         if self.error:
             self.summary.setText(f"<b>The fit failed:</b> {self.error} Go back and redo poses.")
+        elif self.fit is not None and self.worse:
+            fit = self.fit
+            self.summary.setText(
+                f"<b style='color:{theme.WARN_AMBER}'>Not applied: {self.worse}</b> Go back and "
+                "redo the poses (each flat on a face of a box on a level table). Finish applies "
+                f"it only if you tick the box below. Accelerometer fit ({fit.method}, "
+                f"{fit.n_poses} poses): residual {fit.residual_norm_rms_mg:.3f} mg RMS."
+            )
         elif self.fit is not None:
             fit = self.fit
             self.summary.setText(
@@ -445,10 +474,12 @@ class ResultsPage(_Page):
             self.summary.setText("Gyroscope bias measured. Press Finish to save and apply it.")
         info = wizard.info
         self.name_edit.setText(f"{info.name if info else 'sensor'} calibration")
+        self.insist.setVisible(bool(self.worse))
         self.completeChanged.emit()
 
     def isComplete(self) -> bool:
-        return not self.error
+        """Finish needs a result, and the user's insistence when it makes the tilt worse."""
+        return not self.error and (not self.worse or self.insist.isChecked())
 
     def save_report(self, path: str | None = None) -> str | None:
         """Write the calibration report (app.gui.calibration_report) for this result."""
@@ -564,6 +595,8 @@ class CalibrationWizard(QWizard):
             )
 
     def accept(self) -> None:
+        if not self.results_page.isComplete():
+            return  # a worse result is applied only when the user insists
         profile = self.results_page.profile()
         if profile is not None:
             self.profileAccepted.emit(profile)

@@ -445,7 +445,15 @@ class MainWindow(QMainWindow):
         self.clear_tare_action = QAction("&Clear tare", self)
         self.clear_tare_action.triggered.connect(self.session.requestClearTare)
         self.no_calibration_action = QAction("Run &uncalibrated", self)
+        self.no_calibration_action.setToolTip(
+            "Disable the device's profile; remembered across reconnects and restarts")
         self.no_calibration_action.triggered.connect(self.session.requestNoCalibration)
+        self.stored_profile_action = QAction("Use the &stored profile", self)
+        self.stored_profile_action.triggered.connect(self.session.requestStoredProfile)
+        self.delete_profile_action = QAction("&Delete profile", self)
+        self.delete_profile_action.setToolTip(
+            "The profile moves to the profiles' history folder; Import profile brings it back")
+        self.delete_profile_action.triggered.connect(self.session.requestDeleteProfile)
         self.import_action = QAction("&Import profile…", self)
         self.import_action.triggered.connect(self.import_profile)
         self.export_action = QAction("&Export profile…", self)
@@ -453,7 +461,8 @@ class MainWindow(QMainWindow):
         for action in (
             self.wizard_action, self.allan_action, None, self.tare_action,
             self.clear_tare_action, None,
-            self.no_calibration_action, self.import_action, self.export_action,
+            self.no_calibration_action, self.stored_profile_action,
+            self.delete_profile_action, self.import_action, self.export_action,
         ):
             if action is None:
                 calibration_menu.addSeparator()
@@ -796,7 +805,13 @@ class MainWindow(QMainWindow):
 
         page = getattr(self, "allan_page", None)
         if page is None:
-            page = AllanPage()
+            def current(name: str, keys: list[str]) -> dict[str, float] | None:
+                running = self.session.pipeline.filter
+                if running.name != name:
+                    return None
+                return {key: float(running.get_parameter(key)) for key in keys}
+
+            page = AllanPage(settings=self.settings, current_parameters=current)
             page.parametersApplied.connect(self.apply_noise_parameters)
             self.allan_page = page
         page.show()

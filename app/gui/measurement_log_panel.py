@@ -1,7 +1,9 @@
 """The Measurement log panel: stored readings in an editable table (app/core/measurement_log.py).
 
 *Store* (or Space anywhere in the window) asks ``reading_source`` for the current reading and
-appends it with the label typed beside the button; labels are edited in the table, rows
+appends it with the label typed beside the button (a reading that was not steady is stored
+flagged: the panel says so, and its row carries a warning sign, an amber text and the reason
+as a tooltip); labels are edited in the table, rows
 deleted with Delete, copied with Ctrl+C (tab-separated, for a spreadsheet) and the whole log
 exported as CSV.
 """
@@ -12,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from PySide6.QtCore import QEvent, Qt, Signal
-from PySide6.QtGui import QGuiApplication, QKeyEvent, QKeySequence
+from PySide6.QtGui import QBrush, QColor, QGuiApplication, QKeyEvent, QKeySequence
 from PySide6.QtWidgets import (
     QAbstractItemView,
     QFileDialog,
@@ -29,6 +31,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.core.measurement_log import Measurement, MeasurementLog
+from app.gui import theme
 
 UNIT_SUFFIX = {"deg": "°", "percent": " %", "mm/m": " mm/m"}
 HEADERS = ("Time", "Label", "Roll", "Pitch", "Tilt", "Direction", "Window", "Filter",
@@ -146,6 +149,9 @@ class MeasurementLogPanel(QWidget):
         self.label_edit.clear()
         self._refill()
         self.table.scrollToBottom()
+        if reading.warning:
+            self.note.setText(f"⚠ Stored, flagged: {reading.warning}.")
+            self.note.setStyleSheet(f"color: {theme.WARN_AMBER}; font-weight: bold;")
         return reading
 
     def delete_selected(self) -> None:
@@ -200,8 +206,9 @@ class MeasurementLogPanel(QWidget):
         try:
             self.table.setRowCount(len(self.log))
             for r, entry in enumerate(self.log.entries):
+                mark = "⚠ " if entry.flagged else ""
                 texts = (
-                    entry.time.replace("T", " ")[:19], entry.label,
+                    mark + entry.time.replace("T", " ")[:19], entry.label,
                     _angle(entry.roll, entry.roll_std, entry.unit),
                     _angle(entry.pitch, entry.pitch_std, entry.unit),
                     _angle(entry.tilt, entry.tilt_std, entry.unit),
@@ -214,12 +221,17 @@ class MeasurementLogPanel(QWidget):
                         item.setFlags(item.flags() & ~Qt.ItemFlag.ItemIsEditable)
                     if c == len(texts) - 1:
                         item.setToolTip(entry.device)
+                    if entry.flagged:
+                        item.setForeground(QBrush(QColor(theme.WARN_AMBER)))
+                        if c != len(texts) - 1:
+                            item.setToolTip(entry.warning)
                     if 2 <= c <= 6:
                         item.setTextAlignment(Qt.AlignmentFlag.AlignRight
                                               | Qt.AlignmentFlag.AlignVCenter)
                     self.table.setItem(r, c, item)
         finally:
             self.table.blockSignals(False)
+        self.note.setStyleSheet("")
         where = f" · saved in {self.log.path}" if self.log.path else " · not saved"
         self.note.setText(f"{len(self.log)} reading(s){where}. Mean ± standard deviation "
                           "over the averaging time.")

@@ -44,7 +44,9 @@ class DeviceSession(QObject):
     requestSimulatorTarget = Signal(float, float)
     requestComparisons = Signal(list)
     requestProfile = Signal(object)  # CalibrationProfile to apply and store
-    requestNoCalibration = Signal()
+    requestNoCalibration = Signal()  # run uncalibrated, remembered for the device
+    requestStoredProfile = Signal()  # apply the device's stored profile again
+    requestDeleteProfile = Signal()  # delete the device's stored profile (to history)
     requestTare = Signal()
     requestClearTare = Signal()
     requestTareReference = Signal(object)  # TareReference
@@ -77,6 +79,8 @@ class DeviceSession(QObject):
         self.requestComparisons.connect(self.worker.set_comparisons)
         self.requestProfile.connect(self.worker.use_profile)
         self.requestNoCalibration.connect(self.worker.use_no_calibration)
+        self.requestStoredProfile.connect(self.worker.use_stored_profile)
+        self.requestDeleteProfile.connect(self.worker.delete_profile)
         self.requestTare.connect(self.worker.tare)
         self.requestClearTare.connect(self.worker.clear_tare)
         self.requestTareReference.connect(self.worker.set_tare)

@@ -139,6 +139,8 @@ class DeviceWorker(QObject):
         self.pipeline.configure(info.odr_hz)
         for problem in self.calibration.load_for(info, device):
             self.error.emit(problem)
+        for note in self.calibration.notes:
+            self.deviceMessage.emit(1, note)
         self.calibrationChanged.emit(self.calibration.profile)
         self.tareChanged.emit(None)
         self.meter.reset(self.pipeline.counters.filter_cpu_s)
@@ -320,8 +322,22 @@ class DeviceWorker(QObject):
 
     @Slot()
     def use_no_calibration(self) -> None:
-        """Run uncalibrated for now (the stored profile is kept)."""
-        self.calibration.apply(None)
+        """Run uncalibrated; the stored profile is kept, disabled until enabled again."""
+        self.deviceMessage.emit(1, self.calibration.disable())
+        self.calibrationChanged.emit(None)
+
+    @Slot()
+    def use_stored_profile(self) -> None:
+        """Apply the device's stored profile again (undoes "Run uncalibrated")."""
+        problem = self.calibration.enable()
+        if problem:
+            self.error.emit(problem)
+        self.calibrationChanged.emit(self.calibration.profile)
+
+    @Slot()
+    def delete_profile(self) -> None:
+        """Delete the device's stored profile (to history) and run uncalibrated."""
+        self.deviceMessage.emit(1, self.calibration.delete())
         self.calibrationChanged.emit(None)
 
     @Slot()

@@ -42,11 +42,14 @@ from app.core.calibration_procedures.poses import (
     FACE_HINTS,
     FACES,
     FREE,
+    MAX_FACE_TILT_DEG,
     SIX_POSITION,
     CapturedPose,
     CaptureEvent,
     CaptureState,
+    FaceTilt,
     PoseCapture,
+    face_tilts,
     identify_face,
 )
 from app.core.calibration_procedures.profiles import (
@@ -72,6 +75,7 @@ from app.core.calibration_procedures.tilt_comparison import (
     calibrate_accel,
     compare_poses,
     compare_tilt,
+    worsening,
 )
 
 __all__ = [
@@ -79,6 +83,7 @@ __all__ = [
     "FACE_DIRECTIONS",
     "FACE_HINTS",
     "FREE",
+    "MAX_FACE_TILT_DEG",
     "SIX_POSITION",
     "AccelFit",
     "AngleStats",
@@ -87,6 +92,7 @@ __all__ = [
     "CaptureEvent",
     "CaptureState",
     "CapturedPose",
+    "FaceTilt",
     "GyroBiasCalibration",
     "GyroBiasResult",
     "GyroBiasState",
@@ -109,6 +115,7 @@ __all__ = [
     "calibrate_accel",
     "compare_poses",
     "compare_tilt",
+    "face_tilts",
     "fit_ellipsoid",
     "fit_free_poses",
     "fit_known_orientations",
@@ -119,4 +126,5 @@ __all__ = [
     "reversal",
     "reversal_first_order",
     "reversal_from_angles",
+    "worsening",
 ]

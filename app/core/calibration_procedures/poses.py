@@ -9,6 +9,9 @@ and checks the result; every attempt ends in a :class:`CaptureEvent` that is eit
   second halves of the capture point more than ``max_drift_deg`` apart);
 - the reading is not 1 g within ``norm_tolerance`` (accelerated, or the wrong range);
 - six-position mode: more than ``max_face_error_deg`` away from every axis-aligned pose;
+- six-position mode: off its axis by more than :data:`MAX_FACE_TILT_DEG` once the chip's own
+  offsets are taken out (:func:`face_tilts`); a pose captured earlier is checked again, and
+  removed with a reason, as soon as its opposite faces make its offsets known;
 - an orientation already captured: less than ``min_separation_deg`` from an earlier pose.
 
 After each attempt, capture waits for the board to move before it tries again (so an
@@ -59,6 +62,21 @@ FACE_HINTS: dict[str, str] = {
 SIX_POSITION = "six-position"
 FREE = "free"
 
+MAX_FACE_TILT_DEG = 2.0
+"""Largest accepted angle (deg) between a six-face pose and its axis, offsets taken out.
+
+A face of a box on a table is within about 1 deg of level (the table, the box's squareness),
+and the raw chip's cross-axis coupling (about 1 %, two components) adds up to 0.8 deg; 2 deg
+admits both. Beyond that the pose was misplaced: the six-face fit takes every pose as exactly
+on its axis and turns a tilted face into about half its tilt of misalignment, so the tilt
+errors after the calibration get worse (a 3.3 deg pose: 0.9 deg before, 2.2 deg after)."""
+
+RAW_OFFSET_G = 0.02
+"""The LSM6DSOX's zero-g offset, typical +-20 mg per axis, before a calibration."""
+
+RAW_OFFSET_ALLOWANCE_DEG = math.degrees(math.atan(RAW_OFFSET_G))
+"""What one unknown off-axis offset can add to a pose's angle to its axis (1.1 deg)."""
+
 
 def identify_face(direction: np.ndarray) -> tuple[str, float]:
     """The face whose up direction is nearest to ``direction``, and the angle to it (deg)."""
@@ -75,6 +93,76 @@ def angle_between_deg(a: np.ndarray, b: np.ndarray) -> float:
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     return math.degrees(math.atan2(np.linalg.norm(np.cross(a, b)), float(np.dot(a, b))))
+
+
+@dataclass(frozen=True)
+class FaceTilt:
+    """How far one six-face pose is off its axis (see :func:`face_tilts`).
+
+    ``tilt_deg`` is the angle between the reading, less the offsets known so far, and the
+    face's axis; ``limit_deg`` is :data:`MAX_FACE_TILT_DEG` plus what the off-axis offsets
+    not known yet may add (:data:`RAW_OFFSET_ALLOWANCE_DEG` each, root-sum-square).
+    """
+
+    face: str
+    tilt_deg: float
+    limit_deg: float
+    offsets_known: bool
+
+    @property
+    def too_tilted(self) -> bool:
+        return self.tilt_deg > self.limit_deg
+
+
+def face_offsets(poses: list[CapturedPose]) -> np.ndarray:
+    """(3,) accelerometer offset per axis (m/s^2) from opposite faces; NaN where one is missing.
+
+    Opposite faces read ``+(1 + s) g + b`` and ``-(1 + s) g + b`` along their axis, so half
+    their sum is the offset ``b``, whatever the scale error ``s``; a face tilted by ``t``
+    changes it by only ``g (1 - cos t)`` (1.7 mg at 3.3 deg).
+    """
+    by_face = {pose.face: pose for pose in poses}
+    offsets = np.full(3, np.nan)
+    for k, axis in enumerate("xyz"):
+        plus, minus = by_face.get("+" + axis), by_face.get("-" + axis)
+        if plus is not None and minus is not None:
+            offsets[k] = 0.5 * (plus.accel_mean_m_s2[k] + minus.accel_mean_m_s2[k])
+    return offsets
+
+
+def face_tilts(poses: list[CapturedPose]) -> list[FaceTilt]:
+    """Each six-face pose's angle to its axis, with the offsets known from opposite faces.
+
+    The raw reading of a perfectly placed face is off its axis by the chip's off-axis offsets
+    (up to about 1.6 deg): those are subtracted where both faces of their axis are captured,
+    and allowed for where not, so a pose is judged exactly once its four neighbours are in.
+    """
+    offsets = face_offsets(poses)
+    out: list[FaceTilt] = []
+    for pose in poses:
+        k = "xyz".index(pose.face[1])
+        others = [j for j in range(3) if j != k]
+        known = np.where(np.isfinite(offsets), offsets, 0.0)
+        v = pose.accel_mean_m_s2 - known
+        off_axis = math.hypot(*(float(v[j]) for j in others))
+        tilt = math.degrees(math.atan2(off_axis, abs(float(v[k]))))
+        unknown = sum(1 for j in others if not math.isfinite(offsets[j]))
+        allowance = math.degrees(math.atan(RAW_OFFSET_G * math.sqrt(unknown)))
+        out.append(FaceTilt(pose.face, tilt, MAX_FACE_TILT_DEG + allowance, unknown == 0))
+    return out
+
+
+def tilt_reason(tilt: FaceTilt, earlier: bool = False) -> str:
+    """The sentence for a pose rejected by :func:`face_tilts`: which face, by how much."""
+    if tilt.offsets_known:
+        verb, limit = "is", f"at most {tilt.limit_deg:.1f} deg, the sensor's offsets taken out"
+    else:
+        verb, limit = "reads", (f"at most {tilt.limit_deg:.1f} deg while the sensor's offsets "
+                                "are not known")
+    head = (f"The {tilt.face} up pose captured earlier {verb} {tilt.tilt_deg:.1f} deg off its "
+            "axis" if earlier else f"{tilt.face} up {verb} {tilt.tilt_deg:.1f} deg off its axis")
+    return (f"{head} ({limit}); it is removed. Place the board flat on a face of a box on a "
+            f"level table and capture {tilt.face} up again.")
 
 
 @dataclass(frozen=True)
@@ -275,7 +363,7 @@ class PoseCapture:
                 )
                 self._count += take
                 if self._count >= self.samples_needed:
-                    new_events.append(self._finish())
+                    new_events.extend(self._finish())
                     if self.state is CaptureState.COMPLETE:
                         break
         self.events.extend(new_events)
@@ -287,7 +375,7 @@ class PoseCapture:
         self.state = CaptureState.WAITING_FOR_MOTION
         return CaptureEvent(False, reason, time_s, pose)
 
-    def _finish(self) -> CaptureEvent:
+    def _finish(self) -> list[CaptureEvent]:
         t = np.concatenate([p[0] for p in self._parts])
         accel = np.vstack([p[1] for p in self._parts])
         gyro = np.vstack([p[2] for p in self._parts])
@@ -315,40 +403,50 @@ class PoseCapture:
         half = len(accel) // 2
         drift = angle_between_deg(accel[:half].mean(axis=0), accel[half:].mean(axis=0))
         if drift > self.max_drift_deg:
-            return self._reject(
+            return [self._reject(
                 end_s,
                 f"Moved slowly during capture ({drift:.2f} deg of drift, at most "
                 f"{self.max_drift_deg:g} deg allowed); let the board rest and capture again.",
                 pose,
-            )
+            )]
         norm_g = float(np.linalg.norm(mean)) / self.gravity_m_s2
         if abs(norm_g - 1.0) > self.norm_tolerance:
-            return self._reject(
+            return [self._reject(
                 end_s,
                 f"The reading is {norm_g:.3f} g, not 1 g: is the board being accelerated, "
                 "or is the sensor range wrong?",
                 pose,
-            )
+            )]
         if self.mode == SIX_POSITION and face_error > self.max_face_error_deg:
-            return self._reject(
+            return [self._reject(
                 end_s,
                 f"Not on a face: {face_error:.1f} deg from the nearest one ({face} up, at most "
                 f"{self.max_face_error_deg:g} deg). Place the board flat on a face of the box.",
                 pose,
-            )
+            )]
         for index, other in enumerate(self.poses):
             angle = angle_between_deg(mean, other.accel_mean_m_s2)
             if angle < self.min_separation_deg:
                 what = f"{other.face} up" if self.mode == SIX_POSITION else "orientation"
-                return self._reject(
+                return [self._reject(
                     end_s,
                     f"Orientation already captured: {angle:.1f} deg from pose {index + 1} "
                     f"({what}); at least {self.min_separation_deg:g} deg apart needed. "
                     "Turn the board to a new orientation.",
                     pose,
-                )
+                )]
+        if self.mode == SIX_POSITION:
+            tilt = face_tilts([*self.poses, pose])[-1]
+            if tilt.too_tilted:
+                return [self._reject(end_s, tilt_reason(tilt), pose)]
         self.poses.append(pose)
         self._parts, self._count = [], 0
+        events = [CaptureEvent(True, "", end_s, pose)]
+        if self.mode == SIX_POSITION:
+            events.extend(self._drop_tilted(end_s))
+            if not any(kept is pose for kept in self.poses):
+                self.state = CaptureState.WAITING_FOR_MOTION
+                return events[1:]
         count = len(self.poses)
         if self.mode == SIX_POSITION:
             reason = f"Captured {face} up (pose {count} of {len(FACES)})."
@@ -361,4 +459,18 @@ class PoseCapture:
             if self.mode == SIX_POSITION and self.enough
             else CaptureState.WAITING_FOR_MOTION
         )
-        return CaptureEvent(True, reason, end_s, pose)
+        events[0] = CaptureEvent(True, reason, end_s, pose)
+        return events
+
+    def _drop_tilted(self, time_s: float) -> list[CaptureEvent]:
+        """Remove earlier poses found too far off their axis now that more offsets are known."""
+        events = []
+        while True:
+            tilts = face_tilts(self.poses)
+            worst = max(range(len(tilts)), key=lambda i: tilts[i].tilt_deg - tilts[i].limit_deg,
+                        default=None)
+            if worst is None or not tilts[worst].too_tilted:
+                return events
+            pose = self.poses.pop(worst)
+            events.append(CaptureEvent(False, tilt_reason(tilts[worst], earlier=True),
+                                       time_s, pose))

@@ -429,12 +429,45 @@ class ProfileStore:
             return None
 
     def save(self, profile: CalibrationProfile) -> Path:
-        """Store ``profile`` as its device's current one; the replaced file goes to history."""
+        """Store ``profile`` as its device's current one; the replaced file goes to history.
+
+        A new profile is meant to be used: it clears the device's *disabled* mark.
+        """
         path = self.path_for(profile.device_unique_id)
         if path.exists():
             self._keep_in_history(path)
         write_profile_file(path, profile)
+        self.set_disabled(profile.device_unique_id, False)
         return path
+
+    def disabled_path(self, unique_id: str) -> Path:
+        """The mark that keeps the device's profile stored but unused (``STEM.disabled``)."""
+        return self.base_dir / f"{file_stem_for(unique_id)}.disabled"
+
+    def is_disabled(self, unique_id: str) -> bool:
+        """True when the user chose to run this device uncalibrated (kept across restarts)."""
+        return self.disabled_path(unique_id).is_file()
+
+    def set_disabled(self, unique_id: str, disabled: bool) -> None:
+        """Mark the device's profile as not to be applied on connect (or clear the mark)."""
+        path = self.disabled_path(unique_id)
+        if disabled:
+            write_bytes_atomic(path, f"disabled {utc_now_iso()}\n".encode())
+        else:
+            path.unlink(missing_ok=True)
+
+    def delete(self, unique_id: str) -> Path | None:
+        """Remove the device's profile; the file moves to history (recoverable by import).
+
+        Returns where it went, None when there was none; the disabled mark goes too.
+        """
+        path = self.path_for(unique_id)
+        kept = None
+        if path.exists():
+            kept = self._keep_in_history(path)
+            path.unlink()
+        self.set_disabled(unique_id, False)
+        return kept
 
     def history(self, unique_id: str) -> list[Path]:
         """Earlier profiles of the device, oldest first (by name)."""

@@ -25,6 +25,10 @@ from app.core.samples import STANDARD_GRAVITY_M_S2
 ROLL_UNDEFINED_ABOVE_PITCH_DEG = 80.0
 """Roll errors are reported as NaN where the reference pitch is steeper than this."""
 
+WORSE_MARGIN_DEG = 0.01
+"""A calibration is worse when its RMS tilt error exceeds the one before by more than this:
+the readouts' resolution, below which a difference cannot be seen (nor trusted)."""
+
 
 def calibrate_accel(calibration: SensorCalibration, accel_m_s2: np.ndarray) -> np.ndarray:
     """``A (a - b)`` for readings (..., 3): the pipeline's accelerometer correction."""
@@ -104,6 +108,22 @@ class TiltComparison:
             }
             for i, label in enumerate(self.labels)
         ]
+
+
+def worsening(comparison: TiltComparison, margin_deg: float = WORSE_MARGIN_DEG) -> str:
+    """A sentence when the calibration makes the RMS tilt error worse, else ``""``.
+
+    A result that makes the instrument read worse than before must not be applied silently;
+    the sentence names both figures and the worst pose.
+    """
+    before, after = comparison.before.rms_deg, comparison.after.rms_deg
+    if not after > before + margin_deg:
+        return ""
+    worst = int(np.argmax(comparison.after.inclination_deg - comparison.before.inclination_deg))
+    return (f"This calibration makes the tilt error worse: {before:.2f}° RMS before, "
+            f"{after:.2f}° after (worst: {comparison.labels[worst]}, "
+            f"{comparison.before.inclination_deg[worst]:.2f}° → "
+            f"{comparison.after.inclination_deg[worst]:.2f}°).")
 
 
 def tilt_errors(
