@@ -22,6 +22,8 @@ import warnings
 from pathlib import Path
 from typing import Any, TextIO
 
+from app.core.safe_output import OutputRefused, check_output, write_error_message
+
 EXIT_USAGE = 2
 EXIT_FAILED = 1
 TRUE_WORDS = ("true", "1", "yes", "on")
@@ -142,6 +144,8 @@ def add_recording_parsers(commands: argparse._SubParsersAction) -> None:
     replay.add_argument("--filter", dest="filters", metavar="NAME", nargs="+", action="extend",
                         help="filter(s) to run, or 'all' (default: the recorded filter)")
     replay.add_argument("--out", required=True, metavar="ANGLES.csv", help="the file to write")
+    replay.add_argument("--overwrite", action="store_true",
+                        help="replace ANGLES.csv if it exists (never the recording itself)")
     replay.add_argument("--raw", action="store_true",
                         help="do not apply the calibration recorded in the file")
     replay.add_argument("--block", type=int, metavar="N",
@@ -365,7 +369,12 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     parameters = _replay_parameters(recording, cli_parameters, names)
     outputs = run_filters(recording, names, calibration=calibration, parameters=parameters,
                           block=args.block)
-    write_angles_csv(target, recording, outputs, calibration=calibration)
+    try:
+        write_angles_csv(target, recording, outputs, calibration=calibration,
+                         overwrite=args.overwrite, option="--out")
+    except OSError as exc:  # OutputRefused (a file that came meanwhile), a full disk
+        _error(write_error_message(exc, target, "--out"))
+        return EXIT_FAILED
     reference = recording.reference_quat
     scored = None
     table = []
@@ -405,9 +414,12 @@ def _replay_streamed(args: argparse.Namespace, stream: Any, names: list[str],
         try:
             summary = replay_streamed(stream, names, target,
                                       calibration=None if args.raw else "recorded",
-                                      parameters=parameters, block=args.block)
+                                      parameters=parameters, block=args.block,
+                                      overwrite=args.overwrite, option="--out")
         except (RecordingError, ValueError) as exc:
             failure = str(exc)
+        except OSError as exc:  # a full disk: the temporary file is gone, the target untouched
+            failure = write_error_message(exc, target, "--out")
         else:
             failure = ""
     for warning in caught:
@@ -424,10 +436,14 @@ def _replay_streamed(args: argparse.Namespace, stream: Any, names: list[str],
 
 
 def _replay_target(args: argparse.Namespace, source_path: Path) -> Path | None:
-    """``--out``, or None (said why) when it would overwrite the recording itself."""
+    """``--out``, or None (said why) when it would overwrite the recording itself (the same
+    file, a hard link too) or, without ``--overwrite``, any existing file."""
     target = Path(args.out)
-    if target.exists() and target.resolve() == source_path.resolve():
-        _error("--out would overwrite the recording itself")
+    try:
+        check_output(target, inputs=[source_path], overwrite=args.overwrite, option="--out",
+                     input_name="recording")
+    except OutputRefused as exc:
+        _error(str(exc))
         return None
     return target
 
