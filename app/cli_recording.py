@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import shutil
 import signal
@@ -207,6 +208,12 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     if args.compress and target.suffix.lower() != ".gz":
         target = target.with_name(target.name + ".gz")
     try:
+        check_output(target, inputs=_record_inputs(args), overwrite=args.overwrite,
+                     input_name="recording being replayed")
+    except OutputRefused as exc:
+        _error(str(exc))
+        return EXIT_FAILED
+    try:
         device = create_device(args.record_device)
         info = device.open()
     except DeviceError as exc:
@@ -250,9 +257,24 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     }
     print(f"{status.path}: {status.rows_written} rows, {status.duration_s:.1f} s of device "
           f"time ({endings.get(outcome.reason, outcome.reason)})", file=out)
+    if outcome.held_signal:
+        _error("the signal came while the file was being closed: it was finished first")
     if outcome.message:
         _error(outcome.message)
-    return EXIT_FAILED if outcome.reason in ("device", "write") else 0
+    if outcome.closing_error:
+        _error(outcome.closing_error)
+    return EXIT_FAILED if outcome.reason in ("device", "write") or outcome.closing_error else 0
+
+
+def _record_inputs(args: argparse.Namespace) -> list[Path]:
+    """The files ``record`` reads (a replayed recording, the profile): never its output."""
+    from drivers.errors import DeviceError
+
+    paths = [Path(args.calibration)] if args.calibration else []
+    if args.record_device.lower().startswith("replay://"):
+        with contextlib.suppress(DeviceError, ValueError):  # a bad URL: opening it says why
+            paths.append(_recording_path(args.record_device))
+    return paths
 
 
 def print_crossings(events: list, out: TextIO) -> None:

@@ -210,7 +210,6 @@ def create_exclusive(folder: Path, stem: str, mode: int = 0o666,
 def _commit(temporary: Path, path: Path, *, inputs: Iterable[PathLike | None],
             overwrite: bool, option: str) -> None:
     """Put the finished temporary file in place (re-checking, as the target may have come)."""
-    check_output(path, inputs=inputs, overwrite=overwrite, option=option)
     if not overwrite:
         try:
             os.link(temporary, path)  # fails if the target appeared meanwhile: never replaces
@@ -221,10 +220,12 @@ def _commit(temporary: Path, path: Path, *, inputs: Iterable[PathLike | None],
             if exc.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV,
                                  errno.EMLINK):
                 raise
+            check_output(path, inputs=inputs, overwrite=False, option=option)
             os.replace(temporary, path)  # a file system without hard links
         else:
             os.unlink(temporary)
     else:
+        check_output(path, inputs=inputs, overwrite=True, option=option)
         with contextlib.suppress(OSError):  # keep the permissions of the file replaced
             info = os.stat(path, follow_symlinks=False)
             if stat.S_ISREG(info.st_mode):
