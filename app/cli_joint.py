@@ -51,6 +51,9 @@ def add_joint_parser(commands: argparse._SubParsersAction) -> None:
     )
     joint.add_argument("--overwrite", "--force", dest="force", action="store_true",
                        help="replace --out if it exists (never an input)")
+    joint.add_argument("--allow-outside-paths", action="store_true",
+                       help="let a session manifest name files outside its folder (absolute "
+                            "or ../ paths); by default they are refused")
     arm = commands.add_parser(
         "record-arm",
         help="record a simulated measuring arm: one v1 file per sensor, with the truth",
@@ -134,7 +137,8 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
         if args.second is not None:
             return _fail("give a session manifest alone, or two recordings A.csv B.csv")
         try:
-            first, second, config, time_map = session_joint_files(load_session(args.first))
+            session = load_session(args.first, allow_outside=args.allow_outside_paths)
+            first, second, config, time_map = session_joint_files(session)
         except RecordingError as exc:
             return _fail(str(exc))
         manifest, args.first, args.second = args.first, str(first), str(second)

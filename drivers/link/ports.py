@@ -24,6 +24,7 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
+from app.core.devices import printable
 from drivers.errors import DeviceError, DeviceOpenError
 
 ST_VID = 0x0483
@@ -70,6 +71,12 @@ class SerialPortInfo:
     manufacturer: str | None = None
     product: str | None = None
     emulated: bool = False
+
+    def __post_init__(self) -> None:
+        for name in ("description", "serial_number", "manufacturer", "product"):
+            value = getattr(self, name)
+            if isinstance(value, str) and not value.isprintable():  # USB strings: the device's
+                object.__setattr__(self, name, printable(value))
 
     @property
     def vid_pid(self) -> str:
