@@ -69,7 +69,8 @@ def add_joint_parser(commands: argparse._SubParsersAction) -> None:
     arm.add_argument("directory", metavar="DIR", help="where to write the files")
     arm.add_argument("--duration", type=float, default=180.0, metavar="S",
                      help="seconds of device time (default %(default)g)")
-    arm.add_argument("--force", action="store_true", help="overwrite existing files")
+    arm.add_argument("--overwrite", "--force", dest="force", action="store_true",
+                     help="replace existing files")
 
 
 def record_arm_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
