@@ -201,6 +201,8 @@ def runtime_folder(*, create: bool = True) -> Path:
 def shared_ports_folder(*, create: bool = True) -> Path:
     """Where boards served by other processes of this user announce their ports (private,
     checked: see :func:`runtime_folder`)."""
+    if not hasattr(os, "getuid"):  # pseudo-terminals, hence emulated boards: Linux and macOS
+        raise RuntimeFolderError("emulated boards are shared on Linux and macOS only")
     return _private_folder(runtime_folder(create=create) / "emulated-ports", create=create)
 
 
