@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from app.core.recording.errors import RecordingError
+from app.core.safe_output import write_output
 from app.core.version import __version__
 
 MANIFEST_FORMAT = "inclinometer-session"
@@ -115,10 +116,8 @@ def write_session(path: Path, sensors: list[SessionSensor], joints: list[JointCo
         "joints": [j.as_dict() for j in joints],
         **({"note": note} if note else {}),
     }
-    path = Path(path)
-    temporary = path.with_name(path.name + ".tmp")
-    temporary.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    os.replace(temporary, path)
+    path = Path(path)  # a new temporary file (never through a link), renamed over ``path``
+    write_output(path, json.dumps(document, indent=2) + "\n", overwrite=True)
     return path
 
 
