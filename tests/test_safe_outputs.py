@@ -177,3 +177,24 @@ def test_record_never_writes_over_the_recording_it_replays(recording, tmp_path, 
                  "--quiet", str(link)]) == 1
     assert "would overwrite the recording being replayed itself" in capsys.readouterr().err
     assert source.read_bytes() == before
+
+
+@pytest.mark.parametrize("command", [
+    ["evaluate", "{src}", "--json", "{out}"],
+    ["allan", "{src}", "--json", "{out}"],
+    ["calibrate", "{src}", "--out", "{out}"],
+    ["calibrate", "{src}", "--report", "{out}"],
+    ["calibrate-temperature", "{src}", "--out", "{out}"],
+    ["joint", "{src}", "{src}", "--out", "{out}"],
+])
+def test_no_command_writes_over_its_input_even_with_overwrite(recording, tmp_path, capsys,
+                                                             command):
+    source = _source_copy(recording, tmp_path)
+    before = source.read_bytes()
+    link = tmp_path / ("link.html" if "--report" in command else "link.csv")
+    os.link(source, link)
+    args = [a.format(src=source, out=link) for a in command]
+    assert main([*args, "--overwrite"]) == 2
+    assert "would overwrite the input itself" in capsys.readouterr().err
+    assert source.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["in.csv", link.name])
