@@ -10,13 +10,13 @@ import os
 import re
 import shutil
 import signal
+import threading
 import types
 from pathlib import Path
 
 from app.cli import main
 from app.core.alarms import recorded_alarm_events
-from app.core.recording import edit, read_recording
-from app.services import recorder
+from app.core.recording import closing, edit, read_recording
 
 # Roll swings +-10° with a 4 s period: "roll>5" is raised and cleared twice in 6 s.
 SWING = "sim://slow-tilt?odr=104&realtime=0&amplitude=10&roll_period=4&pitch_period=1000&seed=2"
@@ -121,7 +121,7 @@ def test_with_no_room_beside_it_either_the_crossings_are_in_the_message(tmp_path
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
     monkeypatch.setattr(edit, "rewrite_metadata", no_space)
-    monkeypatch.setattr(recorder, "write_output", no_space)
+    monkeypatch.setattr(closing, "write_output", no_space)
     assert _record(out) == 1
     err = capsys.readouterr().err
     line = next(line for line in err.splitlines() if "could not be added" in line)
@@ -129,3 +129,30 @@ def test_with_no_room_beside_it_either_the_crossings_are_in_the_message(tmp_path
     document = json.loads(line.split("here they are: ", 1)[1])
     assert len(document["metadata"]["alarm_events"]) == 4
     assert len(read_recording(out)) > 600
+
+
+def test_the_windows_closing_rewrite_keeps_its_entries_beside_a_file_on_a_full_disk(
+        tmp_path, monkeypatch):
+    from app.services.health import HealthMonitor
+    from app.services.recorder import record_device
+    from drivers.sim.device import SimulatedDevice
+
+    path = tmp_path / "live.csv"
+    record_device(SimulatedDevice("sim://static?odr=104", realtime=False), path, duration_s=2)
+    before = path.read_bytes()
+    real_fdopen = os.fdopen
+    monkeypatch.setattr(edit, "os", _Proxy(
+        os, fdopen=lambda fd, *a, **k: _FullDisk(real_fdopen(fd, *a, **k), 1000)))
+    entries = {"alarm_events": [{"t": 1.5, "quantity": "tilt", "state": "raised"}]}
+    health = HealthMonitor()
+    health.begin_recording()
+    messages: list[str] = []
+    health.end_recording(path, messages.append, also=entries)
+    for thread in threading.enumerate():
+        if thread.name == "save-fault-events":
+            thread.join(10)
+    aside = tmp_path / "live.csv.closing.json"
+    assert messages == [f"{path}: its rows were kept, but the closing metadata could not be "
+                        f"added to it (No space left on device); they were written to {aside}"]
+    assert path.read_bytes() == before
+    assert json.loads(aside.read_text()) == {"recording": "live.csv", "metadata": entries}

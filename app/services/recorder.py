@@ -11,7 +11,6 @@ has its counters stored at the start and, once the file is closed, at the end.
 from __future__ import annotations
 
 import contextlib
-import json
 import math
 import os
 import threading
@@ -25,10 +24,11 @@ from app.core.alarms.recording import alarm_events_metadata
 from app.core.calibration import SensorCalibration
 from app.core.filters import DEFAULT_FILTER, create_filter
 from app.core.pipeline import Pipeline, require_online
-from app.core.recording.errors import RecordingError, RecordingWriteError
+from app.core.recording.closing import store_closing_metadata
+from app.core.recording.errors import RecordingWriteError
 from app.core.recording.format import KEY_REFERENCE, recording_metadata, simulator_metadata
 from app.core.recording.writer import RecordingWriter, WriterStatus
-from app.core.safe_output import OutputLock, OutputRefused, interrupts_held, write_output
+from app.core.safe_output import OutputLock, OutputRefused, interrupts_held
 from app.core.samples import RawBlock
 from app.services.board_health import KEY_STATUS_END, KEY_STATUS_START
 from drivers.errors import DeviceError
@@ -244,41 +244,17 @@ def _record_and_close(
                          bool(held))
 
 
-def closing_metadata_path(path: Path) -> Path:
-    """Where the closing metadata goes when it cannot be written into the recording."""
-    return path.with_name(path.name + ".closing.json")
-
-
 def _store_closing_metadata(status: WriterStatus, closing: dict[str, Any],
                             crossings: list[AlarmEvent]) -> str:
-    """Write ``closing`` into the recording in one atomic rewrite; when that fails (a full
-    disk: the rewrite needs room for a copy), into a small file beside it, else into the
-    message itself. Returns "" when stored in the recording, else what happened."""
-    if not closing:
-        return ""
-    from app.core.recording.edit import rewrite_metadata
-
-    try:
-        rewrite_metadata(status.path, closing)
-        return ""
-    except (OSError, ValueError, RecordingError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+    """The closing metadata into the recording (else beside it); "" when stored in it."""
     what = []
     if crossings:
         what.append(f"{len(crossings)} alarm crossings")
     if KEY_STATUS_END in closing:
         what.append("the board's closing counters")
-    lost = " and ".join(what) or "the closing metadata"
-    head = (f"{status.path}: the {status.rows_written} rows ({status.duration_s:.1f} s) were "
-            f"kept, but the {lost} could not be added to it ({reason})")
-    aside = closing_metadata_path(status.path)
-    document = {"recording": status.path.name, "metadata": closing}
-    text = json.dumps(document, indent=1, default=str) + "\n"
-    try:
-        write_output(aside, text)
-    except OSError:
-        return f"{head}, nor written beside it; here they are: {json.dumps(document)}"
-    return f"{head}; they were written to {aside}"
+    return store_closing_metadata(
+        status.path, closing, "the " + (" and ".join(what) or "closing metadata"),
+        kept=f"the {status.rows_written} rows ({status.duration_s:.1f} s) were kept")
 
 
 def parse_duration(text: str) -> float:
