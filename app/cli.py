@@ -42,6 +42,12 @@ from app.cli_recording import (
     replay_command,
 )
 from app.cli_simulate import add_simulate_parser, simulate_command
+from app.core.safe_output import (
+    OutputRefused,
+    check_output,
+    write_error_message,
+    write_output,
+)
 
 if TYPE_CHECKING:
     from app.core.evaluation import FilterScore, SourceResult, StreamSource
@@ -134,6 +140,8 @@ def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
         help="also write every figure as JSON to FILE ('-': to stdout, the tables then go "
         "to stderr)",
     )
+    evaluate.add_argument("--overwrite", action="store_true",
+                          help="replace the --json FILE if it exists")
     evaluate.add_argument(
         "--per-source", action=argparse.BooleanOptionalAction, default=None,
         help="print each source's full table (RMSE, maximum, throughput, flag); default: "
@@ -180,6 +188,8 @@ class _Pending:
     treatment: str
     """How the samples are prepared, in words (calibration)."""
     load: Callable[[], StreamSource]
+    path: Path | None = None
+    """The recording's file (None for a simulated source)."""
 
 
 def _recording_pending(path: Path, label: str, compensate: bool) -> _Pending:
@@ -210,7 +220,7 @@ def _recording_pending(path: Path, label: str, compensate: bool) -> _Pending:
     def load() -> StreamSource:
         return evaluation.recording_source(str(path), recalibrate=compensate, label=label)
 
-    return _Pending(label, short, treatment, load)
+    return _Pending(label, short, treatment, load, path)
 
 
 def resolve_sources(items: list[str], seconds: float, compensate: bool) -> list[_Pending]:
@@ -358,10 +368,11 @@ def evaluate_sources(args: argparse.Namespace, out: TextIO | None = None) -> int
             raise _Usage("--seconds must be positive")
         if args.repeats is not None and args.repeats < 1:
             raise _Usage("--repeats must be at least 1")
-        if args.json not in (None, "-") and not Path(args.json).resolve().parent.is_dir():
-            raise _Usage(f"--json {args.json}: no such directory")
         pending = resolve_sources(args.sources, args.seconds, compensate=not args.raw)
-    except (_Usage, ValueError) as exc:
+        inputs = [item.path for item in pending]
+        if args.json not in (None, "-"):
+            check_output(args.json, inputs=inputs, overwrite=args.overwrite, option="--json")
+    except (_Usage, ValueError, OutputRefused) as exc:
         print(f"inclinometer: {exc}", file=sys.stderr)
         return 2
     skip = evaluation.DEFAULT_SKIP_S if args.skip is None else args.skip
@@ -418,7 +429,13 @@ def evaluate_sources(args: argparse.Namespace, out: TextIO | None = None) -> int
             sys.stdout.write(text)
             sys.stdout.flush()
         else:
-            Path(args.json).write_text(text, encoding="utf-8")
+            try:
+                write_output(args.json, text, inputs=inputs, overwrite=args.overwrite,
+                             option="--json")
+            except OSError as exc:  # OutputRefused, or a full disk: the old file is intact
+                print(f"inclinometer: {write_error_message(exc, args.json, '--json')}",
+                      file=sys.stderr)
+                return 1
     return 0
 
 

@@ -23,10 +23,20 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
+
+from app.core.devices import printable
+from app.core.safe_output import (
+    OutputRefused,
+    check_output,
+    output_path,
+    write_error_message,
+    write_output,
+)
 
 if TYPE_CHECKING:
     from app.core.calibration_procedures.offline import OfflineCalibration
@@ -72,6 +82,8 @@ def add_calibration_parsers(commands: argparse._SubParsersAction) -> None:
                            help="with --save: store it even when the tilt error gets worse")
     calibrate.add_argument("--report", metavar="FILE.html|FILE.pdf",
                            help="write a calibration report (HTML, or PDF through Qt)")
+    calibrate.add_argument("--overwrite", action="store_true",
+                           help="replace --out and --report files that exist")
     calibrate.add_argument("--device", metavar="URL",
                            help="calibrate from a live device instead of a recording")
     calibrate.add_argument("--seconds", type=float, metavar="N",
@@ -100,6 +112,7 @@ def add_calibration_parsers(commands: argparse._SubParsersAction) -> None:
     allan.add_argument("recording", nargs="?", metavar="RECORDING",
                        help="a recording (format v1) of the sensor lying still")
     allan.add_argument("--json", metavar="OUT", help="write the figures as JSON ('-': stdout)")
+    allan.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     allan.add_argument("--device", metavar="URL", help="read a live device instead")
     allan.add_argument("--seconds", type=float, metavar="N", help="with --device: how long")
     allan.add_argument("--keep-temperature", action="store_true",
@@ -130,6 +143,8 @@ def add_calibration_parsers(commands: argparse._SubParsersAction) -> None:
                              help="store the result as the device's calibration profile")
     temperature.add_argument("--report", metavar="FILE.html|FILE.pdf",
                              help="write a report with the coefficients and a plot")
+    temperature.add_argument("--overwrite", action="store_true",
+                             help="replace --out and --report files that exist")
     temperature.add_argument("--base", metavar="FILE.json",
                              help="merge with this calibration JSON instead of the profile")
     temperature.add_argument("--no-merge", action="store_true",
@@ -220,7 +235,7 @@ def print_summary(result: OfflineCalibration, label: str, stream: CapturedStream
     print(f"{label}: {result.duration_s:.1f} s, {result.samples} samples at {s.odr_hz:.4g} Hz "
           f"(+-{s.accel_fs_g} g, +-{s.gyro_fs_dps} dps), {result.still_s:.1f} s still", file=out)
     if stream.unique_id:
-        print(f"device {stream.unique_id}", file=out)
+        print(f"device {printable(stream.unique_id)}", file=out)
     print(f"method {result.method}: {len(result.poses)} poses accepted, "
           f"{len(result.rejected)} rejected", file=out)
     print(f"  {'#':>2}  {'face':<4}  {'t (s)':>13}  {'T (degC)':>8}  {'|a|-g (mg)':>10}  "
@@ -296,27 +311,65 @@ def _check_outputs(args: argparse.Namespace) -> None:
     if args.out is None and not args.save and args.report is None:
         raise _Usage("say what to do with the result: --out FILE.json, --save and/or "
                      "--report FILE")
-    for option, value in (("--out", args.out), ("--report", args.report)):
-        if value is not None and not Path(value).resolve().parent.is_dir():
-            raise _Usage(f"{option} {value}: no such directory")
     if args.report is not None and Path(args.report).suffix.lower() not in (
             ".html", ".htm", ".pdf"):
         raise _Usage(f"--report {args.report}: name an .html or a .pdf file")
+    for option, value in (("--out", args.out), ("--report", args.report)):
+        if value is not None:
+            try:
+                check_output(value, inputs=_input_paths(args), overwrite=args.overwrite,
+                             option=option)
+            except OutputRefused as exc:
+                raise _Usage(str(exc)) from None
+    if args.out is not None and args.report is not None and (
+            Path(args.out).absolute() == Path(args.report).absolute()):
+        raise _Usage("--out and --report name the same file")
+
+
+def _input_paths(args: argparse.Namespace) -> list[Path]:
+    """The files a command reads (the recording, --base): no output may be one of them."""
+    from drivers.replay import recording_path
+
+    paths = []
+    for value in (getattr(args, "recording", None), getattr(args, "base", None)):
+        if value:
+            try:
+                paths.append(recording_path(value) if "://" in value else Path(value))
+            except ValueError:  # not a replay URL: nothing on disk to protect
+                continue
+    return paths
+
+
+def _write_outputs(args: argparse.Namespace, out: TextIO, json_document: dict[str, Any] | None,
+                   report: Callable[[Path], None]) -> int:
+    """Write ``--out`` (the JSON) and ``--report`` safely; 0, or EXIT_FAILED (said why)."""
+    written = []
+    for option, value in (("--out", args.out), ("--report", args.report)):
+        if value is None:
+            continue
+        try:
+            with output_path(value, inputs=_input_paths(args), overwrite=args.overwrite,
+                             option=option, keep_suffix=True) as temporary:
+                if option == "--out":
+                    text = json.dumps(json_document, indent=2, allow_nan=False) + "\n"
+                    temporary.write_bytes(text.encode("utf-8"))
+                else:
+                    report(temporary)
+        except OSError as exc:
+            command = getattr(args, "command", "calibrate")
+            done = f" ({', '.join(written)} written)" if written else ""
+            print(f"inclinometer {command}: {write_error_message(exc, value, option)}{done}",
+                  file=sys.stderr)
+            return EXIT_FAILED
+        written.append(value)
+        print(f"wrote {value}" if option == "--out" else f"wrote the report {value}", file=out)
+    return 0
 
 
 def _check_save(args: argparse.Namespace, stream: CapturedStream, label: str) -> None:
     if args.save and not stream.unique_id:
         raise _Usage(f"{label}: the device has no unique id, so --save cannot name its "
                      "profile; use --out FILE.json")
-
-
-def _write_json(path: str, document: dict[str, Any], out: TextIO) -> None:
-    """The binding calibration JSON, written atomically."""
-    from app.core.calibration_procedures.profiles import write_bytes_atomic
-
-    text = json.dumps(document, indent=2, allow_nan=False) + "\n"
-    write_bytes_atomic(Path(path), text.encode("utf-8"))
-    print(f"wrote {path}", file=out)
 
 
 def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
@@ -355,8 +408,7 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
     if stream.unit_errors:
         print_truth(result, stream.unit_errors, out)
     created = utc_now_iso()
-    if args.out is not None:
-        _write_json(args.out, calibration_json(result, stream.unique_id, label, created), out)
+    document = calibration_json(result, stream.unique_id, label, created)
     profile = make_profile(
         stream.unique_id or "unknown", result.calibration, result.settings,
         method=result.fit.method, temperature_degc=result.temperature_degc,
@@ -367,13 +419,16 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
     refused = bool(args.save and worse and not args.force)
     if worse:
         print(f"warning: {worse}", file=out)
+    status = _write_outputs(
+        args, out, document,
+        lambda path: write_calibration_report(result, profile, stream, label, path))
+    if status:
+        return status
     if args.save and not refused:
         store = ProfileStore(args.profile_dir)
         path = store.save(profile)
-        print(f"saved as the profile of device {stream.unique_id}: {path}", file=out)
-    if args.report is not None:
-        write_calibration_report(result, profile, stream, label, Path(args.report))
-        print(f"wrote the report {args.report}", file=out)
+        print(f"saved as the profile of device {printable(stream.unique_id)}: {path}",
+              file=out)
     out.flush()
     if refused:
         print(f"inclinometer calibrate: not saved: {worse} Redo the poses, or --force to save "
@@ -478,8 +533,12 @@ def allan_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
 
     out = sys.stdout if out is None else out
     try:
-        if args.json not in (None, "-") and not Path(args.json).resolve().parent.is_dir():
-            raise _Usage(f"--json {args.json}: no such directory")
+        if args.json not in (None, "-"):
+            try:
+                check_output(args.json, inputs=_input_paths(args), overwrite=args.overwrite,
+                             option="--json")
+            except OutputRefused as exc:
+                raise _Usage(str(exc)) from None
         if args.json == "-":
             out = sys.stderr
         stream, label = load_stream(args, out)
@@ -511,7 +570,13 @@ def allan_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             sys.stdout.write(text)
             sys.stdout.flush()
         else:
-            Path(args.json).write_text(text, encoding="utf-8")
+            try:
+                write_output(args.json, text, inputs=_input_paths(args),
+                             overwrite=args.overwrite, option="--json")
+            except OSError as exc:
+                print(f"inclinometer allan: {write_error_message(exc, args.json, '--json')}",
+                      file=sys.stderr)
+                return EXIT_FAILED
             print(f"wrote {args.json}", file=out)
     out.flush()
     return 0
@@ -576,7 +641,7 @@ def print_temperature(fit, calibration, how: str, label: str, stream: CapturedSt
           f"{fit.still_s:.1f} s still in {fit.segments} segment(s), {fit.poses} pose(s)",
           file=out)
     if stream.unique_id:
-        print(f"device {stream.unique_id}", file=out)
+        print(f"device {printable(stream.unique_id)}", file=out)
     print(f"temperature {fit.temp_min_degc:.2f} to {fit.temp_max_degc:.2f} degC (span "
           f"{fit.span_degc:.2f}), {len(fit.bin_temp_degc)} bins; T0 = "
           f"{calibration.temperature.reference_temp_degc:.2f} degC", file=out)
@@ -708,9 +773,7 @@ def temperature_command(args: argparse.Namespace, out: TextIO | None = None) -> 
         how += f" (from {base_label})"
     lines = print_temperature(fit, calibration, how, label, stream, out)
     created = utc_now_iso()
-    if args.out is not None:
-        _write_json(args.out, temperature_json(fit, calibration, how, stream.unique_id, label,
-                                               created), out)
+    document = temperature_json(fit, calibration, how, stream.unique_id, label, created)
     residuals = {"temperature_fit": fit.summary()}
     if existing is not None and calibration.name == name:
         profile = replace(existing, calibration=calibration, created_utc=created,
@@ -723,13 +786,16 @@ def temperature_command(args: argparse.Namespace, out: TextIO | None = None) -> 
             temperature_degc=calibration.temperature.reference_temp_degc,
             residuals=residuals, created_utc=created,
             notes=f"inclinometer calibrate-temperature {label}")
+    status = _write_outputs(
+        args, out, document,
+        lambda path: write_temperature_report(fit, calibration, profile, stream, label, lines,
+                                              path))
+    if status:
+        return status
     if args.save:
         path = store.save(profile)
-        print(f"saved as the profile of device {stream.unique_id}: {path}", file=out)
-    if args.report is not None:
-        write_temperature_report(fit, calibration, profile, stream, label, lines,
-                                 Path(args.report))
-        print(f"wrote the report {args.report}", file=out)
+        print(f"saved as the profile of device {printable(stream.unique_id)}: {path}",
+              file=out)
     out.flush()
     return 0
 

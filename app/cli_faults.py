@@ -18,6 +18,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from app.core.safe_output import check_output, write_error_message, write_output
+
 if TYPE_CHECKING:
     from app.core.faults.evaluation import GroupSummary, SourceSweep
     from app.services.fault_evaluation import FaultEvaluation
@@ -85,6 +87,7 @@ def add_evaluate_faults_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--json", metavar="OUT",
                         help="write every figure as JSON to OUT ('-': stdout, the tables then "
                              "go to stderr)")
+    parser.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     parser.add_argument("--png", metavar="DIR",
                         help="save the NDR and FDI curves as ndr_GROUP.png and fdi_GROUP.png")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -108,8 +111,9 @@ def evaluate_faults_command(args: argparse.Namespace) -> int:
     out: TextIO = sys.stderr if args.json == "-" else sys.stdout
     try:
         settings.check()
-        if args.json not in (None, "-") and not Path(args.json).resolve().parent.is_dir():
-            raise ValueError(f"--json {args.json}: no such directory")
+        if args.json not in (None, "-"):
+            check_output(args.json, inputs=_file_sources(args), overwrite=args.overwrite,
+                         option="--json")
         sources = resolve_fault_sources(args.sources)
         if not sources:
             raise ValueError("no sources")
@@ -130,11 +134,22 @@ def evaluate_faults_command(args: argparse.Namespace) -> int:
             sys.stdout.write(text)
             sys.stdout.flush()
         else:
-            Path(args.json).write_text(text, encoding="utf-8")
+            try:
+                write_output(args.json, text, inputs=_file_sources(args),
+                             overwrite=args.overwrite, option="--json")
+            except OSError as exc:
+                print(f"inclinometer evaluate-faults: "
+                      f"{write_error_message(exc, args.json, '--json')}", file=sys.stderr)
+                return 1
     if args.png is not None:
         for path in save_curves(document, Path(args.png)):
             print(f"wrote {path}", file=out)
     return 0
+
+
+def _file_sources(args: argparse.Namespace) -> list[Path]:
+    """The sources that are files (no output may be one of them)."""
+    return [Path(source) for source in args.sources if "://" not in source]
 
 
 def save_curves(document: dict, directory: Path) -> list[Path]:

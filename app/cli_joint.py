@@ -18,6 +18,8 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from app.core.safe_output import OutputRefused, check_output, write_error_message, write_output
+
 EXIT_USAGE = 2
 MAGIC = "# inclinometer-joint 1"
 AXIS_SPREAD_LIMIT_DEG = 2.0
@@ -47,7 +49,11 @@ def add_joint_parser(commands: argparse._SubParsersAction) -> None:
         help="the hinge axis in A's and B's sensor frames (any length, same direction in "
         "space); 'auto' (default): estimated from the motion",
     )
-    joint.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    joint.add_argument("--overwrite", "--force", dest="force", action="store_true",
+                       help="replace --out if it exists (never an input)")
+    joint.add_argument("--allow-outside-paths", action="store_true",
+                       help="let a session manifest name files outside its folder (absolute "
+                            "or ../ paths); by default they are refused")
     arm = commands.add_parser(
         "record-arm",
         help="record a simulated measuring arm: one v1 file per sensor, with the truth",
@@ -63,7 +69,8 @@ def add_joint_parser(commands: argparse._SubParsersAction) -> None:
     arm.add_argument("directory", metavar="DIR", help="where to write the files")
     arm.add_argument("--duration", type=float, default=180.0, metavar="S",
                      help="seconds of device time (default %(default)g)")
-    arm.add_argument("--force", action="store_true", help="overwrite existing files")
+    arm.add_argument("--overwrite", "--force", dest="force", action="store_true",
+                     help="replace existing files")
 
 
 def record_arm_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
@@ -124,16 +131,18 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
 
     out = sys.stdout if out is None else out
     time_map = None
+    manifest = None
     if str(args.first).lower().endswith(".json"):  # a session manifest names A, B and the joint
         from app.core.recording.session import load_session, session_joint_files
 
         if args.second is not None:
             return _fail("give a session manifest alone, or two recordings A.csv B.csv")
         try:
-            first, second, config, time_map = session_joint_files(load_session(args.first))
+            session = load_session(args.first, allow_outside=args.allow_outside_paths)
+            first, second, config, time_map = session_joint_files(session)
         except RecordingError as exc:
             return _fail(str(exc))
-        args.first, args.second = str(first), str(second)
+        manifest, args.first, args.second = args.first, str(first), str(second)
         if config.axes is not None and args.axis.strip().lower() == "auto":
             args.axis = ":".join(",".join(repr(v) for v in a) for a in config.axes)
     elif args.second is None:
@@ -143,10 +152,11 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     except ValueError as exc:
         return _fail(str(exc))
     target = Path(args.out)
-    if target.exists() and not args.force:
-        return _fail(f"{target} exists; choose another name or add --force")
-    if not target.resolve().parent.is_dir():
-        return _fail(f"--out {target}: no such directory")
+    inputs = [args.first, args.second, manifest]
+    try:
+        check_output(target, inputs=inputs, overwrite=args.force, option="--out")
+    except OutputRefused as exc:
+        return _fail(str(exc))
     blocks = []
     for name in (args.first, args.second):
         try:
@@ -196,9 +206,9 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     head = MAGIC + "\n" + "".join(f"# {k}: {json.dumps(v)}\n" for k, v in info.items())
     text = head + "t,joint_deg\n" + format_table([first.t_s, angle])
     try:
-        target.write_text(text, encoding="utf-8")
+        write_output(target, text, inputs=inputs, overwrite=args.force, option="--out")
     except OSError as exc:
-        return _fail(f"cannot write {target}: {exc.strerror or exc}")
+        return _fail(write_error_message(exc, target, "--out"))
     print(f"axis in A: {_vector(result.j1)}   axis in B: {_vector(result.j2)}"
           f"   ({info['axis_source']})", file=out)
     if estimate is not None:

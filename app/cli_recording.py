@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import shutil
 import signal
@@ -21,6 +22,8 @@ import threading
 import warnings
 from pathlib import Path
 from typing import Any, TextIO
+
+from app.core.safe_output import OutputRefused, check_output, write_error_message
 
 EXIT_USAGE = 2
 EXIT_FAILED = 1
@@ -142,6 +145,8 @@ def add_recording_parsers(commands: argparse._SubParsersAction) -> None:
     replay.add_argument("--filter", dest="filters", metavar="NAME", nargs="+", action="extend",
                         help="filter(s) to run, or 'all' (default: the recorded filter)")
     replay.add_argument("--out", required=True, metavar="ANGLES.csv", help="the file to write")
+    replay.add_argument("--overwrite", action="store_true",
+                        help="replace ANGLES.csv if it exists (never the recording itself)")
     replay.add_argument("--raw", action="store_true",
                         help="do not apply the calibration recorded in the file")
     replay.add_argument("--block", type=int, metavar="N",
@@ -203,6 +208,12 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     if args.compress and target.suffix.lower() != ".gz":
         target = target.with_name(target.name + ".gz")
     try:
+        check_output(target, inputs=_record_inputs(args), overwrite=args.overwrite,
+                     input_name="recording being replayed")
+    except OutputRefused as exc:
+        _error(str(exc))
+        return EXIT_FAILED
+    try:
         device = create_device(args.record_device)
         info = device.open()
     except DeviceError as exc:
@@ -246,9 +257,24 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     }
     print(f"{status.path}: {status.rows_written} rows, {status.duration_s:.1f} s of device "
           f"time ({endings.get(outcome.reason, outcome.reason)})", file=out)
+    if outcome.held_signal:
+        _error("the signal came while the file was being closed: it was finished first")
     if outcome.message:
         _error(outcome.message)
-    return EXIT_FAILED if outcome.reason in ("device", "write") else 0
+    if outcome.closing_error:
+        _error(outcome.closing_error)
+    return EXIT_FAILED if outcome.reason in ("device", "write") or outcome.closing_error else 0
+
+
+def _record_inputs(args: argparse.Namespace) -> list[Path]:
+    """The files ``record`` reads (a replayed recording, the profile): never its output."""
+    from drivers.errors import DeviceError
+
+    paths = [Path(args.calibration)] if args.calibration else []
+    if args.record_device.lower().startswith("replay://"):
+        with contextlib.suppress(DeviceError, ValueError):  # a bad URL: opening it says why
+            paths.append(_recording_path(args.record_device))
+    return paths
 
 
 def print_crossings(events: list, out: TextIO) -> None:
@@ -365,7 +391,12 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     parameters = _replay_parameters(recording, cli_parameters, names)
     outputs = run_filters(recording, names, calibration=calibration, parameters=parameters,
                           block=args.block)
-    write_angles_csv(target, recording, outputs, calibration=calibration)
+    try:
+        write_angles_csv(target, recording, outputs, calibration=calibration,
+                         overwrite=args.overwrite, option="--out")
+    except OSError as exc:  # OutputRefused (a file that came meanwhile), a full disk
+        _error(write_error_message(exc, target, "--out"))
+        return EXIT_FAILED
     reference = recording.reference_quat
     scored = None
     table = []
@@ -405,9 +436,12 @@ def _replay_streamed(args: argparse.Namespace, stream: Any, names: list[str],
         try:
             summary = replay_streamed(stream, names, target,
                                       calibration=None if args.raw else "recorded",
-                                      parameters=parameters, block=args.block)
+                                      parameters=parameters, block=args.block,
+                                      overwrite=args.overwrite, option="--out")
         except (RecordingError, ValueError) as exc:
             failure = str(exc)
+        except OSError as exc:  # a full disk: the temporary file is gone, the target untouched
+            failure = write_error_message(exc, target, "--out")
         else:
             failure = ""
     for warning in caught:
@@ -424,10 +458,14 @@ def _replay_streamed(args: argparse.Namespace, stream: Any, names: list[str],
 
 
 def _replay_target(args: argparse.Namespace, source_path: Path) -> Path | None:
-    """``--out``, or None (said why) when it would overwrite the recording itself."""
+    """``--out``, or None (said why) when it would overwrite the recording itself (the same
+    file, a hard link too) or, without ``--overwrite``, any existing file."""
     target = Path(args.out)
-    if target.exists() and target.resolve() == source_path.resolve():
-        _error("--out would overwrite the recording itself")
+    try:
+        check_output(target, inputs=[source_path], overwrite=args.overwrite, option="--out",
+                     input_name="recording")
+    except OutputRefused as exc:
+        _error(str(exc))
         return None
     return target
 

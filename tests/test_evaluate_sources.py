@@ -244,7 +244,7 @@ def test_replay_param_changes_the_recorded_parameters(tmp_path, capsys):
 
     def replay_rmse(*extra: str) -> float:
         assert main(["replay", str(source), "--out", str(tmp_path / "angles.csv"),
-                     *extra]) == 0
+                     "--overwrite", *extra]) == 0
         printed = capsys.readouterr().out
         return float(re.search(r"^\s+madgwick(?:\s+\S+){2}\s+(\S+)", printed, re.M).group(1))
 

@@ -100,5 +100,5 @@ def test_replay_all_leaves_the_offline_smoothers_out_of_a_long_recording(wobble,
     assert "ekf-smoother" not in header
     # Named explicitly, a smoother still runs (whole file in memory).
     assert main(["replay", str(wobble), "--filter", "ekf-smoother", "--out",
-                 str(target)]) == 0
+                 str(target), "--overwrite"]) == 0
     assert "ekf-smoother.roll" in target.read_text()

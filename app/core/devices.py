@@ -6,13 +6,34 @@ metadata read them without importing a driver.
 
 from __future__ import annotations
 
+import unicodedata
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 
+def printable(text: str) -> str:
+    """``text`` safe to print on a terminal: control and format characters (escape sequences,
+    carriage returns, bidirectional overrides) become ``\\xNN`` / ``\\uNNNN`` escapes.
+
+    Everything a device says about itself is passed through this where it enters, so a
+    hostile unique id cannot rewrite the user's terminal.
+    """
+    if text.isprintable():
+        return text
+    out = []
+    for char in text:
+        if char.isprintable() or char == " " or unicodedata.category(char) not in ("Cc", "Cf",
+                                                                                 "Zl", "Zp"):
+            out.append(char)
+        else:
+            code = ord(char)
+            out.append(f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}")
+    return "".join(out)
+
+
 @dataclass(frozen=True, slots=True)
 class DeviceInfo:
-    """What a device says about itself once open."""
+    """What a device says about itself once open (its texts made :func:`printable`)."""
 
     url: str
     name: str
@@ -27,6 +48,12 @@ class DeviceInfo:
     firmware: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        for name in ("name", "unique_id", "sensor", "firmware"):
+            value = getattr(self, name)
+            if isinstance(value, str) and not value.isprintable():
+                object.__setattr__(self, name, printable(value))
+
 
 @dataclass(frozen=True, slots=True)
 class DeviceMessage:
@@ -35,6 +62,10 @@ class DeviceMessage:
     level: int
     """0 debug, 1 info, 2 warning, 3 error."""
     text: str
+
+    def __post_init__(self) -> None:
+        if isinstance(self.text, str) and not self.text.isprintable():
+            object.__setattr__(self, "text", printable(self.text))
 
 
 @dataclass(frozen=True, slots=True)

@@ -22,6 +22,7 @@ from app.core.recording.format import (
     simulator_metadata,
 )
 from app.core.recording.writer import BASE_COLUMNS, format_table
+from app.core.safe_output import write_output
 from app.core.samples import convert_raw_block
 from drivers.sim.device import SimulatedDevice
 from drivers.sim.options import parse_sim_url
@@ -70,7 +71,7 @@ def record_arm(
     written = []
     for sensor, path in enumerate(paths):
         device = first if sensor == 0 else _arm_url(url, sensor)
-        written.append(_record_sensor(device, sensor, seconds, path))
+        written.append(_record_sensor(device, sensor, seconds, path, overwrite))
     return written
 
 
@@ -84,7 +85,7 @@ def _true_axes(scenario: Arm, sensor: int) -> dict[str, list[float]]:
 
 
 def _record_sensor(device: SimulatedDevice, sensor: int, seconds: float,
-                   path: Path) -> ArmRecording:
+                   path: Path, overwrite: bool = False) -> ArmRecording:
     info = device.open()
     scenario = device.scenario
     assert isinstance(scenario, Arm)
@@ -123,5 +124,5 @@ def _record_sensor(device: SimulatedDevice, sensor: int, seconds: float,
         extra={**simulator_metadata(device), KEY_ARM: arm},
     )
     text = metadata_text(metadata) + ",".join(names) + "\n" + format_table(columns)
-    path.write_text(text, encoding="utf-8")
+    write_output(path, text, overwrite=overwrite)  # atomic; never a file not allowed
     return ArmRecording(path, sensor, wanted, axes)

@@ -18,7 +18,6 @@ import numpy as np
 from app.core.devices import DeviceInfo
 from app.core.faults import FaultDetector, FaultEvent, SensorSpec
 from app.core.faults.recording import KEY_FAULT_EVENTS, recorded_fault_events
-from app.core.recording.errors import RecordingError
 from app.core.samples import RawBlock, SampleBlock, convert_raw_block
 
 OK_STATE = "ok"
@@ -84,13 +83,12 @@ class HealthMonitor:
             return 0
 
         def save() -> None:
-            from app.core.recording.edit import rewrite_metadata
+            from app.core.recording.closing import store_closing_metadata
 
-            try:
-                rewrite_metadata(path, changes)
-            except (OSError, RecordingError) as exc:
-                what = f"The {len(events)} fault events" if events else "The closing metadata"
-                on_error(f"{what} could not be stored in {path}: {exc}")
+            what = f"the {len(events)} fault events" if events else "the closing metadata"
+            problem = store_closing_metadata(path, changes, what)  # else beside the file
+            if problem:
+                on_error(problem)
 
         threading.Thread(target=save, name="save-fault-events", daemon=True).start()
         return len(events)

@@ -16,15 +16,19 @@ import os
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
-from app.core.alarms import AlarmEvent, AlarmMonitor, save_alarm_events
+from app.core.alarms import AlarmEvent, AlarmMonitor
+from app.core.alarms.recording import alarm_events_metadata
 from app.core.calibration import SensorCalibration
 from app.core.filters import DEFAULT_FILTER, create_filter
 from app.core.pipeline import Pipeline, require_online
-from app.core.recording.errors import RecordingError
+from app.core.recording.closing import store_closing_metadata
+from app.core.recording.errors import RecordingWriteError
 from app.core.recording.format import KEY_REFERENCE, recording_metadata, simulator_metadata
 from app.core.recording.writer import RecordingWriter, WriterStatus
+from app.core.safe_output import OutputLock, OutputRefused, interrupts_held
 from app.core.samples import RawBlock
 from app.services.board_health import KEY_STATUS_END, KEY_STATUS_START
 from drivers.errors import DeviceError
@@ -48,6 +52,11 @@ class RecordOutcome:
     pipeline: Pipeline | None = field(default=None, repr=False)
     alarm_events: list[AlarmEvent] = field(default_factory=list)
     """The alarms' crossings (stored in the file's ``alarm_events`` when there are any)."""
+    closing_error: str = ""
+    """Why the closing metadata (alarm crossings, the board's closing counters) is not in
+    the file, and where it went instead; empty when it was stored (or there was none)."""
+    held_signal: bool = False
+    """Ctrl-C (or SIGTERM) came while the file was being closed: it was finished first."""
 
 
 def _cut(raw: RawBlock, count: int) -> RawBlock:
@@ -124,7 +133,12 @@ def record_device(
             require_online(name)
             create_filter(name).warm_up()
     info = device.open()
+    lock = OutputLock(path)
     try:
+        try:
+            lock.acquire()
+        except OutputRefused as exc:
+            raise RecordingWriteError(str(exc), Path(path)) from None
         if pipeline is None:
             pipeline = Pipeline(info.odr_hz, filter_name or DEFAULT_FILTER)
         else:
@@ -150,13 +164,29 @@ def record_device(
             comparison_filters=pipeline.comparisons.values(), note=note,
             reference_source=reference_source_of(device), extra=extra,
         )
-        writer = RecordingWriter(path, metadata, overwrite=overwrite, on_flush=on_flush)
+        writer = RecordingWriter(path, metadata, overwrite=overwrite, on_flush=on_flush,
+                                 lock=lock)
         writer.start()
     except BaseException:
+        lock.release()
         device.close()
         raise
+    try:
+        return _record_and_close(device, writer, pipeline, duration_s, stop, alarms, on_alarms)
+    finally:
+        lock.release()
+
+
+def _record_and_close(
+    device: Any, writer: RecordingWriter, pipeline: Pipeline, duration_s: float | None,
+    stop: threading.Event | None, alarms: AlarmMonitor | None,
+    on_alarms: Callable[[list[AlarmEvent]], None] | None,
+) -> RecordOutcome:
+    """The recording loop, then the closing: held against Ctrl-C so that the rows, the
+    board's closing counters and the alarm crossings all end up in the file."""
     reason, message = "stopped", ""
     first_t: float | None = None
+    held: list[int] = []
     try:
         while stop is None or not stop.is_set():
             try:
@@ -193,26 +223,38 @@ def record_device(
     except KeyboardInterrupt:
         reason = "interrupted"
     finally:
-        board_end = board_status_now(device) if device.is_open else None
-        status = writer.close()
-        device.close()
-    if board_end is not None and status.rows_written and status.state != "failed":
-        from app.core.recording.edit import rewrite_metadata
-
-        try:
-            rewrite_metadata(status.path, {KEY_STATUS_END: board_end})
-        except (OSError, ValueError, RecordingError) as exc:
-            message = message or f"the board's closing counters were not stored: {exc}"
+        with interrupts_held() as held:
+            try:
+                board_end = board_status_now(device) if device.is_open else None
+            finally:
+                status = writer.close()
+                device.close()
+            crossings = alarms.end_recording() if alarms is not None else []
+            closing: dict[str, Any] = {}
+            if board_end is not None and status.rows_written and status.state != "failed":
+                closing[KEY_STATUS_END] = board_end
+            if crossings and status.rows_written:
+                closing.update(alarm_events_metadata(crossings, alarms.config))  # type: ignore[union-attr]
+            closing_error = _store_closing_metadata(status, closing, crossings)
     if status.state == "failed":
         reason, message = "write", status.error or message
-    crossings = alarms.end_recording() if alarms is not None else []
-    if crossings and status.rows_written:
-        try:
-            save_alarm_events(status.path, crossings, alarms.config)  # type: ignore[union-attr]
-        except (OSError, RecordingError) as exc:
-            message = (message + "; " if message else "") + (
-                f"the {len(crossings)} alarm crossings could not be stored in the file: {exc}")
-    return RecordOutcome(status, reason, message, pipeline, crossings)
+    if held and reason in ("stopped", "duration", "end"):
+        reason = "interrupted"
+    return RecordOutcome(status, reason, message, pipeline, crossings, closing_error,
+                         bool(held))
+
+
+def _store_closing_metadata(status: WriterStatus, closing: dict[str, Any],
+                            crossings: list[AlarmEvent]) -> str:
+    """The closing metadata into the recording (else beside it); "" when stored in it."""
+    what = []
+    if crossings:
+        what.append(f"{len(crossings)} alarm crossings")
+    if KEY_STATUS_END in closing:
+        what.append("the board's closing counters")
+    return store_closing_metadata(
+        status.path, closing, "the " + (" and ".join(what) or "closing metadata"),
+        kept=f"the {status.rows_written} rows ({status.duration_s:.1f} s) were kept")
 
 
 def parse_duration(text: str) -> float:

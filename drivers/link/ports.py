@@ -4,8 +4,9 @@ Real ports come from ``serial.tools.list_ports``. Emulated boards served on pseu
 (:mod:`drivers.emulated_nucleo`) register themselves here with the USB identity a real board
 would have, so discovery and reconnect-by-USB-serial work the same way for them: in this
 process, and, for ``inclinometer simulate --pty`` in another terminal, through a small file
-per board in a per-user temporary folder (removed when the board stops; stale ones are
-ignored).
+per board in this user's private runtime folder (:func:`runtime_folder`: owner and mode
+checked, files written atomically without following links; removed when the board stops;
+stale entries, and entries naming a process or a port that is not this user's, are ignored).
 """
 
 from __future__ import annotations
@@ -15,13 +16,16 @@ import dataclasses
 import errno
 import json
 import os
+import secrets
+import stat
 import sys
 import tempfile
 import threading
 from dataclasses import dataclass
 from pathlib import Path
 
-from drivers.errors import DeviceOpenError
+from app.core.devices import printable
+from drivers.errors import DeviceError, DeviceOpenError
 
 ST_VID = 0x0483
 MCP2221_VID_PID = (0x04D8, 0x00DD)
@@ -67,6 +71,12 @@ class SerialPortInfo:
     manufacturer: str | None = None
     product: str | None = None
     emulated: bool = False
+
+    def __post_init__(self) -> None:
+        for name in ("description", "serial_number", "manufacturer", "product"):
+            value = getattr(self, name)
+            if isinstance(value, str) and not value.isprintable():  # USB strings: the device's
+                object.__setattr__(self, name, printable(value))
 
     @property
     def vid_pid(self) -> str:
@@ -115,68 +125,236 @@ _virtual_lock = threading.Lock()
 _virtual_ports: dict[str, SerialPortInfo] = {}
 
 
-def shared_ports_folder() -> Path:
-    """Where boards served by other processes of this user announce their ports."""
-    user = os.getuid() if hasattr(os, "getuid") else os.getlogin()
-    return Path(tempfile.gettempdir()) / f"inclinometer-{user}" / "emulated-ports"
+RUNTIME_FOLDER_MODE = 0o700
+MAX_ENTRY_BYTES = 16 << 10
+"""An announcement is a few hundred bytes; anything larger is not ours."""
 
 
-def _shared_file(device: str) -> Path:
-    return shared_ports_folder() / (device.strip("/").replace("/", "_") + ".json")
+class RuntimeFolderError(DeviceError):
+    """The private folder for files shared between this user's processes is not safe."""
+
+
+def _uid() -> int:
+    return os.getuid()
+
+
+def _check_private(path: Path, info: os.stat_result) -> str:
+    """Why ``info`` (an lstat of ``path``) is not a private folder of ours; "" when it is."""
+    if stat.S_ISLNK(info.st_mode):
+        return f"{path} is a symbolic link"
+    if not stat.S_ISDIR(info.st_mode):
+        return f"{path} is not a folder"
+    if info.st_uid != _uid():
+        return f"{path} belongs to another user (uid {info.st_uid})"
+    if stat.S_IMODE(info.st_mode) != RUNTIME_FOLDER_MODE:
+        return f"{path} is open to others (mode {stat.S_IMODE(info.st_mode):o}, not 700)"
+    return ""
+
+
+def _private_folder(path: Path, *, create: bool) -> Path:
+    """``path`` as a folder that only we can write (made 0700 when ``create``); raises
+    RuntimeFolderError when it exists but is not ours, or is a link, or is open to others."""
+    if create:
+        with contextlib.suppress(FileExistsError):
+            os.mkdir(path, RUNTIME_FOLDER_MODE)
+    try:
+        info = os.lstat(path)
+        if (stat.S_ISDIR(info.st_mode) and info.st_uid == _uid()
+                and not info.st_mode & (stat.S_IWGRP | stat.S_IWOTH)
+                and stat.S_IMODE(info.st_mode) != RUNTIME_FOLDER_MODE):
+            # Ours and writable by us alone (e.g. 755 from an older version): nobody else
+            # can have put anything in it, so closing it to others is safe.
+            os.chmod(path, RUNTIME_FOLDER_MODE, follow_symlinks=False)
+            info = os.lstat(path)
+    except (OSError, NotImplementedError) as exc:
+        raise RuntimeFolderError(f"the runtime folder {path} cannot be used: "
+                                 f"{getattr(exc, 'strerror', None) or exc}") from None
+    why = _check_private(path, info)
+    if why:
+        raise RuntimeFolderError(
+            f"refusing to use the runtime folder: {why}. It may have been planted by another "
+            f"user; remove it (or set XDG_RUNTIME_DIR to a private folder) and try again.")
+    return path
+
+
+def runtime_folder(*, create: bool = True) -> Path:
+    """This user's private folder for files shared between its processes.
+
+    ``$XDG_RUNTIME_DIR/inclinometer`` when XDG_RUNTIME_DIR is set, ours and mode 0700; else
+    ``<temp>/inclinometer-<uid>``, created mode 0700. Either is checked (lstat: ours, not a
+    link, mode 0700); one that is not raises :class:`RuntimeFolderError`.
+    """
+    if not hasattr(os, "getuid"):  # Windows: the per-user temporary folder is private
+        folder = Path(tempfile.gettempdir()) / "inclinometer"
+        if create:
+            folder.mkdir(exist_ok=True)
+        return folder
+    base = os.environ.get("XDG_RUNTIME_DIR", "")
+    if base and os.path.isabs(base):
+        with contextlib.suppress(OSError):
+            if not _check_private(Path(base), os.lstat(base)):
+                return _private_folder(Path(base) / "inclinometer", create=create)
+    return _private_folder(Path(tempfile.gettempdir()) / f"inclinometer-{_uid()}",
+                           create=create)
+
+
+def shared_ports_folder(*, create: bool = True) -> Path:
+    """Where boards served by other processes of this user announce their ports (private,
+    checked: see :func:`runtime_folder`)."""
+    if not hasattr(os, "getuid"):  # pseudo-terminals, hence emulated boards: Linux and macOS
+        raise RuntimeFolderError("emulated boards are shared on Linux and macOS only")
+    return _private_folder(runtime_folder(create=create) / "emulated-ports", create=create)
+
+
+def _entry_name(device: str) -> str:
+    return device.strip("/").replace("/", "_") + ".json"
+
+
+def _open_folder(folder: Path) -> int:
+    """An fd of the checked folder: every later step works relative to it (no re-resolving)."""
+    flags = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_NOFOLLOW", 0)
+    fd = os.open(folder, flags)
+    why = _check_private(folder, os.fstat(fd))
+    if why:
+        os.close(fd)
+        raise RuntimeFolderError(f"refusing to use the runtime folder: {why}")
+    return fd
 
 
 def register_virtual_port(info: SerialPortInfo, *, shared: bool = False) -> None:
     """Make an emulated board's port visible to listing and lookup.
 
-    With ``shared``, other processes of this user see it too (``inclinometer simulate``).
+    With ``shared``, other processes of this user see it too (``inclinometer simulate``): a
+    small file in the private runtime folder, written atomically (a new file made with
+    O_EXCL | O_NOFOLLOW, then renamed), never through a link. Raises
+    :class:`RuntimeFolderError` when that folder is not safe.
     """
+    if shared:
+        _write_entry(info)
     with _virtual_lock:
         _virtual_ports[info.device] = info
-    if shared:
-        path = _shared_file(info.device)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"port": dataclasses.asdict(info), "process": os.getpid()}))
+
+
+def _write_entry(info: SerialPortInfo) -> None:
+    data = json.dumps({"port": dataclasses.asdict(info), "process": os.getpid()}).encode()
+    folder = _open_folder(shared_ports_folder())
+    try:
+        name = _entry_name(info.device)
+        temporary = f".{name}.{secrets.token_hex(4)}.tmp"
+        flags = (os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
+                 | getattr(os, "O_CLOEXEC", 0))
+        fd = os.open(temporary, flags, 0o600, dir_fd=folder)
+        try:
+            with os.fdopen(fd, "wb") as handle:
+                handle.write(data)
+            os.replace(temporary, name, src_dir_fd=folder, dst_dir_fd=folder)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(temporary, dir_fd=folder)
+            raise
+    except OSError as exc:
+        raise RuntimeFolderError(f"cannot announce {info.device} in the runtime folder: "
+                                 f"{exc.strerror or exc}") from None
+    finally:
+        os.close(folder)
+
+
+def _read_entry(folder: int, name: str) -> dict | None:
+    """An announcement, read without following links, only from a regular file of ours."""
+    flags = (os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+             | getattr(os, "O_CLOEXEC", 0))
+    try:
+        fd = os.open(name, flags, dir_fd=folder)
+    except OSError:
+        return None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode) or info.st_uid != _uid() or (
+                info.st_size > MAX_ENTRY_BYTES):
+            return None
+        entry = json.loads(os.read(fd, MAX_ENTRY_BYTES))
+    except (OSError, ValueError):
+        return None
+    finally:
+        os.close(fd)
+    return entry if isinstance(entry, dict) else None
 
 
 def unregister_virtual_port(device: str) -> None:
     with _virtual_lock:
         _virtual_ports.pop(device, None)
-    with contextlib.suppress(OSError, ValueError):
-        path = _shared_file(device)
-        if json.loads(path.read_text()).get("process") == os.getpid():
-            path.unlink()
+    try:
+        folder = _open_folder(shared_ports_folder(create=False))
+    except (OSError, DeviceError):
+        return
+    try:
+        name = _entry_name(device)
+        entry = _read_entry(folder, name)
+        if entry is not None and entry.get("process") == os.getpid():
+            with contextlib.suppress(OSError):
+                os.unlink(name, dir_fd=folder)
+    finally:
+        os.close(folder)
 
 
-def _process_alive(pid: int) -> bool:
+def _process_ours(pid: int) -> bool:
+    """``pid`` is a live process of this user."""
+    if pid <= 0:
+        return False
+    if os.path.isdir("/proc/self"):
+        try:
+            return os.stat(f"/proc/{pid}").st_uid == _uid()
+        except OSError:
+            return False
     try:
         os.kill(pid, 0)
-    except ProcessLookupError:
+    except OSError:  # gone, or another user's (EPERM)
         return False
-    except OSError:  # exists, but another user's
-        return True
     return True
 
 
+def _pty_ours(device: str) -> bool:
+    """``device`` is a pseudo-terminal that this user owns (what an emulated board serves)."""
+    real = os.path.realpath(device)
+    if not (real.startswith("/dev/pts/") or real.startswith("/dev/ttys")):
+        return False
+    try:
+        info = os.stat(real)
+    except OSError:
+        return False
+    return stat.S_ISCHR(info.st_mode) and info.st_uid == _uid()
+
+
 def _shared_ports() -> list[SerialPortInfo]:
+    """Ports announced by this user's other processes; entries naming a process or a port
+    that is not ours are ignored (and stale ones of ours removed)."""
+    try:
+        folder = _open_folder(shared_ports_folder(create=False))
+    except (OSError, DeviceError):
+        return []
     found = []
     try:
-        paths = sorted(shared_ports_folder().glob("*.json"))
+        names = sorted(n for n in os.listdir(folder) if n.endswith(".json"))
+        for name in names:
+            entry = _read_entry(folder, name)
+            try:
+                pid = int(entry["process"])  # type: ignore[index]
+                info = SerialPortInfo(**entry["port"])  # type: ignore[index]
+                if not isinstance(info.device, str) or name != _entry_name(info.device):
+                    continue
+            except (ValueError, TypeError, KeyError):
+                continue
+            if pid == os.getpid():
+                continue
+            if _process_ours(pid) and _pty_ours(info.device):
+                found.append(info)
+            elif not _process_ours(pid):  # left behind by a board of ours that was killed
+                with contextlib.suppress(OSError):
+                    os.unlink(name, dir_fd=folder)
     except OSError:
-        return []
-    for path in paths:
-        try:
-            entry = json.loads(path.read_text())
-            pid = int(entry["process"])
-            info = SerialPortInfo(**entry["port"])
-        except (OSError, ValueError, TypeError, KeyError):
-            continue
-        if pid == os.getpid():
-            continue
-        if _process_alive(pid) and os.path.exists(info.device):
-            found.append(info)
-        else:  # left behind by a board that was killed
-            with contextlib.suppress(OSError):
-                path.unlink()
+        return found
+    finally:
+        os.close(folder)
     return found
 
 

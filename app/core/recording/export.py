@@ -38,6 +38,7 @@ from app.core.recording.format import (
 from app.core.recording.reader import Recording
 from app.core.recording.stream import RecordingStream, device_blocks, prefetched
 from app.core.recording.writer import format_table_bytes
+from app.core.safe_output import output_file
 from app.core.samples import convert_raw_block
 from app.core.scoring import DEFAULT_SKIP_S, SCORE_COLUMN, ErrorAccumulator
 
@@ -154,8 +155,13 @@ def write_angles_csv(
     *,
     calibration: SensorCalibration | None = None,
     overwrite: bool = True,
+    option: str = "",
 ) -> int:
-    """Write the filters' angles (see the module docstring); returns the rows written."""
+    """Write the filters' angles (see the module docstring); returns the rows written.
+
+    Written through :func:`~app.core.safe_output.output_file`: atomically, never over the
+    recording itself, over an existing file only with ``overwrite`` (OutputRefused).
+    """
     path = Path(path)
     reference = recording.reference_quat
     names: list[str] = ["t"]
@@ -176,7 +182,7 @@ def write_angles_csv(
     metadata = _angles_metadata(recording, outputs, calibration)
     head = [ANGLES_MAGIC, *(metadata_line(k, v) for k, v in metadata.items()), ",".join(names)]
     n = len(recording)
-    with open(path, "wb" if overwrite else "xb") as out:
+    with output_file(path, inputs=[recording.path], overwrite=overwrite, option=option) as out:
         out.write(("\n".join(head) + "\n").encode("utf-8"))
         for start in range(0, n, EXPORT_ROWS):
             out.write(format_table_bytes([c[start:start + EXPORT_ROWS] for c in columns]))
@@ -224,6 +230,7 @@ def replay_streamed(
     block: int | None = None,
     skip_s: float = DEFAULT_SKIP_S,
     overwrite: bool = True,
+    option: str = "",
 ) -> StreamedReplay:
     """:func:`run_filters` and :func:`write_angles_csv` in one pass over a streamed recording.
 
@@ -254,7 +261,7 @@ def replay_streamed(
     pending_rows = 0
     t0: float | None = None
     path = Path(out_path)
-    with open(path, "wb" if overwrite else "xb") as out:
+    with output_file(path, inputs=[stream.path], overwrite=overwrite, option=option) as out:
         head_lines = [ANGLES_MAGIC, *(metadata_line(k, v) for k, v in metadata.items()),
                       ",".join(names)]
         out.write(("\n".join(head_lines) + "\n").encode("utf-8"))

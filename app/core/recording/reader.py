@@ -401,8 +401,15 @@ class RecordingHead:
 
 
 def _describe(line: bytes) -> str:
-    text = line[:60].decode("utf-8", errors="replace").rstrip("\r")
-    return repr(text + ("..." if len(line) > 60 else ""))
+    """What a foreign first line is, never what it says (the file may be a secret)."""
+    try:
+        text = line.decode("utf-8")
+    except UnicodeDecodeError:
+        return f"binary data ({len(line)} bytes)"
+    if not text.isprintable():
+        return f"binary data ({len(line)} bytes)"
+    kind = "a CSV line" if "," in text else "a line of text"
+    return f"{kind} of {len(text)} characters"
 
 
 def _parse_head(data: Buffer, path: Path | None) -> RecordingHead:

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from app.core.recording.errors import RecordingError
+from app.core.safe_output import write_output
 from app.core.version import __version__
 
 MANIFEST_FORMAT = "inclinometer-session"
@@ -115,10 +116,8 @@ def write_session(path: Path, sensors: list[SessionSensor], joints: list[JointCo
         "joints": [j.as_dict() for j in joints],
         **({"note": note} if note else {}),
     }
-    path = Path(path)
-    temporary = path.with_name(path.name + ".tmp")
-    temporary.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    os.replace(temporary, path)
+    path = Path(path)  # a new temporary file (never through a link), renamed over ``path``
+    write_output(path, json.dumps(document, indent=2) + "\n", overwrite=True)
     return path
 
 
@@ -147,11 +146,36 @@ def _axis(value: Any, what: str, path: Path) -> tuple[float, float, float]:
     return x, y, z
 
 
-def load_session(manifest_path: str | os.PathLike[str]) -> Session:
+OUTSIDE_FLAG = "--allow-outside-paths"
+"""The command-line option that lets a manifest name files outside its folder."""
+
+
+def _confined_file(path: Path, k: int, file: str, allow_outside: bool) -> None:
+    """Refuse a sensor file that is not inside the manifest's folder: absolute, with ``..``,
+    or a link that leads out (unless ``allow_outside``). Never reads the file."""
+    if allow_outside:
+        return
+    relative = Path(file)
+    outside = relative.is_absolute() or bool(relative.drive) or ".." in relative.parts
+    if not outside:
+        folder = os.path.realpath(path.parent)
+        target = os.path.realpath(path.parent / relative)
+        outside = os.path.commonpath([folder, target]) != folder
+    if outside:
+        raise SessionManifestError(
+            f"{path}: sensor {k}'s file {file!r} is outside the manifest's folder; a manifest "
+            f"names its files relative to its folder, inside it ({OUTSIDE_FLAG} reads it "
+            "anyway)", path)
+
+
+def load_session(manifest_path: str | os.PathLike[str], *,
+                 allow_outside: bool = False) -> Session:
     """Read a session manifest: files (checked to exist), roles, time maps, joints.
 
-    Raises :class:`SessionManifestError` (a :class:`RecordingError`) with a message that
-    names the problem: not JSON, another format or version, a missing file, a bad field.
+    The files must lie inside the manifest's folder (no absolute paths, no ``..``, no link
+    leading out) unless ``allow_outside``. Raises :class:`SessionManifestError` (a
+    :class:`RecordingError`) with a message that names the problem: not JSON, another format
+    or version, a missing file or one outside the folder, a bad field.
     """
     path = Path(manifest_path)
     try:
@@ -184,6 +208,7 @@ def load_session(manifest_path: str | os.PathLike[str]) -> Session:
         if scale <= 0.0:
             raise SessionManifestError(f"{path}: sensor {k}: clock.scale must be positive", path)
         file = item["file"]
+        _confined_file(path, k, file, allow_outside)
         if not (path.parent / file).is_file():
             raise SessionManifestError(
                 f"{path}: sensor {k}'s file {file!r} is missing (looked in {path.parent})", path)

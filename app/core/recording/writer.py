@@ -47,6 +47,7 @@ from app.core.recording.format import (
     REQUIRED_COLUMNS,
     metadata_text,
 )
+from app.core.safe_output import OutputLock, OutputRefused, check_output
 from app.core.samples import RawBlock, SampleBlock, convert_raw_block
 
 log = logging.getLogger(__name__)
@@ -201,7 +202,12 @@ class RecordingWriter:
     metadata : ``key -> JSON value`` (see :func:`~app.core.recording.format.recording_metadata`).
     reference : write the reference columns ``qw..qz``. None: decide from the first block (the
         header row is then written with it).
-    overwrite : replace an existing file (default: refuse).
+    overwrite : replace an existing regular file (default: refuse). The new recording is
+        created beside it under a temporary name and renamed over it once its metadata is on
+        disk: the old file is never truncated (a reader of it keeps its data).
+    lock : an :class:`~app.core.safe_output.OutputLock` on ``path`` the caller holds (and
+        releases, e.g. after its final metadata rewrite); None: the writer takes one itself
+        and releases it when the file is closed. A second writer to the same file is refused.
     flush_interval_s : longest wait before rows are flushed and fsynced.
     on_error : called once, from the writer thread, with the message when the recording
         stops on a write error. A GUI re-emits it as a queued signal.
@@ -229,8 +235,11 @@ class RecordingWriter:
         opener: Opener = _open_unbuffered,
         max_pending_rows: int = DEFAULT_MAX_PENDING_ROWS,
         compress: bool | None = None,
+        lock: OutputLock | None = None,
     ) -> None:
         self.path = Path(path)
+        self._given_lock = lock
+        self._own_lock: OutputLock | None = None
         self.compress = self.path.suffix.lower() == ".gz" if compress is None else compress
         self.metadata = dict(metadata)
         self._reference = reference
@@ -252,6 +261,7 @@ class RecordingWriter:
         self._pieces: list[tuple[bytes, float, float]] = []
         self._buffer_bytes = 0
         self._dirty_since: float | None = None
+        self._head_size = 0
 
     # -- producer side (any thread) ----------------------------------------------------------
     def start(self) -> RecordingWriter:
@@ -261,9 +271,43 @@ class RecordingWriter:
         """
         if self._thread is not None:
             raise RuntimeError("the writer was started already")
-        mode = "wb" if self._overwrite else "xb"
+        if self._given_lock is None:
+            try:
+                self._own_lock = OutputLock(self.path).acquire()
+            except OutputRefused as exc:
+                raise RecordingWriteError(str(exc), self.path) from None
         try:
-            handle = self._opener(self.path, mode)
+            self._create()
+        except BaseException:
+            self._release_lock()
+            raise
+        self._status = WriterStatus(self.path, "recording", bytes_written=self._head_size)
+        self._accepting = True
+        self._thread = threading.Thread(
+            target=self._run, name=f"recording-writer:{self.path.name}", daemon=True)
+        self._thread.start()
+        return self
+
+    def _release_lock(self) -> None:
+        lock, self._own_lock = self._own_lock, None
+        if lock is not None:
+            lock.release()
+
+    def _create(self) -> None:
+        """Create the file with its metadata (and header), fsynced; an overwritten file is
+        replaced by a rename only then."""
+        replacing = None
+        if self._overwrite:
+            try:
+                check_output(self.path, overwrite=True)  # a regular file or nothing
+            except OutputRefused as exc:
+                raise RecordingWriteError(str(exc), self.path) from None
+            if os.path.lexists(self.path):
+                replacing = self.path
+        target = self.path if replacing is None else self.path.with_name(
+            f".{self.path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+        try:
+            handle = self._opener(target, "xb")
         except FileExistsError:
             raise RecordingWriteError(
                 f"{self.path} exists; choose another name or allow overwriting", self.path
@@ -283,20 +327,19 @@ class RecordingWriter:
         try:
             self._write_all(encoded)
             os.fsync(handle.fileno())
-        except OSError as exc:
+            if replacing is not None:
+                os.replace(target, self.path)
+        except BaseException as exc:
+            self._file = None
             with contextlib.suppress(OSError):
                 handle.close()
             with contextlib.suppress(OSError):
-                self.path.unlink()
+                target.unlink()
+            if not isinstance(exc, OSError):
+                raise
             raise RecordingWriteError(
                 f"cannot write {self.path}: {exc.strerror or exc}", self.path) from exc
-        size = len(encoded)
-        self._status = WriterStatus(self.path, "recording", bytes_written=size)
-        self._accepting = True
-        self._thread = threading.Thread(
-            target=self._run, name=f"recording-writer:{self.path.name}", daemon=True)
-        self._thread.start()
-        return self
+        self._head_size = len(encoded)
 
     def write(self, block: RawBlock) -> bool:
         """Queue a block (never blocks). False when the recording is not (or no longer) on.
@@ -394,6 +437,7 @@ class RecordingWriter:
                        "so far were kept.")
         finally:
             self._close_file()
+            self._release_lock()
 
     def _add(self, raw: RawBlock) -> None:
         block = convert_raw_block(raw)
