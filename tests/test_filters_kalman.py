@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import time
 
 import numpy as np
 import pytest
@@ -392,22 +391,3 @@ def test_switching_ekf_bias_estimation_off_freezes_and_on_restarts_its_covarianc
     f.set_parameter("estimate_bias", True)
     sigma = math.radians(f.get_parameter("bias_initial"))
     np.testing.assert_allclose(np.diag(f.covariance)[2:], sigma**2)
-
-
-@pytest.mark.parametrize("cls", FILTERS)
-def test_batch_throughput_is_at_least_a_million_samples_per_second(cls):
-    n = 1_000_000
-    rng = np.random.default_rng(0)
-    data = block(
-        np.arange(n) / 6667.0, accel_for(3.0, 2.0) + rng.normal(0, 0.05, (n, 3)),
-        rng.normal(0, 0.01, (n, 3)),
-    )
-    f = cls()
-    f.process(block([0.0, 0.001], accel_for(0.0, 0.0)))  # compile (or load the cache)
-    best = math.inf
-    for _ in range(3):
-        f = cls()
-        start = time.perf_counter()
-        f._process(data)
-        best = min(best, time.perf_counter() - start)
-    assert n / best >= 1e6, f"{n / best:.3g} samples/s"
