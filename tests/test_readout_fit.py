@@ -14,6 +14,7 @@ import pytest
 from PySide6.QtCore import QRect
 from PySide6.QtGui import QColor, QFontMetrics, QImage
 from PySide6.QtWidgets import QApplication, QLabel, QWidget
+from test_display_refresh import raw_block
 
 from app.core.readout import slope_from_angle
 from app.gui import theme
@@ -211,3 +212,63 @@ def test_the_unit_sits_with_the_digits_after_full_screen_and_back(qtbot, app, un
     else:
         assert abs(bottom) <= 2, f"% ends {bottom} px off the digits' baseline"
     assert after == before
+
+
+# -- stale, undefined direction: the readouts fed by the presenter (fixture `live`: conftest) --
+
+@pytest.fixture
+def dark(app: QApplication) -> QApplication:
+    """The dark theme, applied before the views are made (asked for before ``live``)."""
+    theme.apply_theme(app, "dark")
+    return app
+
+
+def test_figures_of_a_lost_device_are_greyed_with_when_they_were_live(dark, live):
+    readouts = live.presenter.readouts
+    live.presenter.settings.readout_rate_hz = 1e6  # every refresh updates the texts
+    live.pipeline.process(raw_block(0, 104, roll=131.0, pitch=0.0))
+    before = time.time()
+    assert live.presenter.refresh()
+    value = readouts.valueLabel("roll")
+    live_colour = value.palette().color(value.foregroundRole()).name()
+    assert readouts.readoutText("roll") == "+131.00°" and not readouts.isStale()
+    live.presenter.show_stale("simulated cable unplugged")
+    assert readouts.isStale()
+    assert value.palette().color(value.foregroundRole()).name() == theme.TEXT_STALE != live_colour
+    stamp = readouts.staleText().rsplit(" ", 1)[-1]
+    shown = time.strftime("%H:%M:%S", time.localtime(before))
+    assert "last live" in readouts.staleText() and stamp >= shown  # HH:MM:SS, same day
+    assert readouts.readoutText("roll") == "+131.00°"  # the last figures stay, greyed
+    live.pipeline.process(raw_block(104, 20, roll=131.0, pitch=0.0))
+    live.presenter.refresh()
+    assert not readouts.isStale() and readouts.staleText() == ""
+    assert value.palette().color(value.foregroundRole()).name() == live_colour
+
+
+def test_direction_of_a_level_reading_is_a_dash(qtbot, app):
+    theme.apply_theme(app, "dark")
+    widget = _readouts(qtbot)
+    widget.setValues(0.0012, -0.003, 0.0032, 211.7, "deg")  # after a tare: noise
+    assert widget.readoutText("tilt") == "0.00°"
+    assert widget.readoutText("direction") == "—"
+    assert widget.valueLabel("direction").parentWidget().side.text() == "—"
+    widget.setValues(0.021, -0.052, 0.056, 211.7, "mm/m")  # the same tilt: 0.06 mm/m
+    assert widget.readoutText("direction") == "211.7° −x−y"
+    widget.setValues(1.5, -0.8, 1.7, 331.9, "deg")
+    assert widget.readoutText("direction") == "331.9° +x−y"
+
+
+def test_the_truth_line_is_averaged_like_the_readouts(live):
+    live.presenter.settings.readout_rate_hz = 1e6
+    live.presenter.settings.averaging_s = 0.5
+    # Half the window at roll 10°, half at 30°: the truth's newest row says 30°, the mean 20°.
+    live.pipeline.process(raw_block(0, 26, roll=10.0, pitch=0.0))
+    live.pipeline.process(raw_block(26, 26, roll=30.0, pitch=0.0))
+    live.presenter.refresh()
+    truth = live.presenter.truth_label.text()
+    shown = float(live.presenter.readouts.readoutText("roll").rstrip("°"))
+    assert "(0.5 s mean)" in truth
+    truth_roll = float(truth.split("roll ")[1].split("°")[0])
+    assert abs(truth_roll - 20.0) < 1.0
+    error = float(truth.split("reading error ")[1].split("°")[0])
+    assert error == pytest.approx(abs(shown - truth_roll), abs=0.02)

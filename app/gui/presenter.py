@@ -195,8 +195,9 @@ class LivePresenter(QObject):
         plots.resync = self._resync_plots
         self._last_live: float | None = None
         """Wall-clock time (``time.time()``) the readouts last showed new data."""
-        session.disconnected.connect(self._mark_stale)
-        session.reconnecting.connect(self._mark_stale)
+        if isinstance(session, DeviceSession):  # (tests drive a bare pipeline)
+            session.disconnected.connect(self.show_stale)
+            session.reconnecting.connect(self.show_stale)
         self._shown = {
             view: ScreenPresence(view) for view in (level, readouts, plots, filter_panel)
         }
@@ -204,9 +205,9 @@ class LivePresenter(QObject):
     def start(self) -> None:
         self.clock.start()
 
-    def _mark_stale(self, *_reason) -> None:
-        """The device was lost: the figures on show are grey, with when they were live,
-        until new data arrive."""
+    def show_stale(self, *_reason: object) -> None:
+        """The device was lost (a connection error, an unplug, a disconnect): the figures on
+        show turn grey, with the time they were last live, until new data arrive."""
         if self._last_live is not None and self.readouts.isValid():
             self.readouts.setStale(self._last_live)
 
