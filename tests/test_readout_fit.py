@@ -232,14 +232,19 @@ def test_figures_of_a_lost_device_are_greyed_with_when_they_were_live(dark, live
     value = readouts.valueLabel("roll")
     live_colour = value.palette().color(value.foregroundRole()).name()
     assert readouts.readoutText("roll") == "+131.00°" and not readouts.isStale()
+    # The last rows before the loss are still buffered when it is reported: shown, but
+    # they do not make the figures live again.
+    live.pipeline.process(raw_block(104, 10, roll=131.0, pitch=0.0))
     live.presenter.show_stale("simulated cable unplugged")
+    assert readouts.isStale()
+    live.presenter.refresh()
     assert readouts.isStale()
     assert value.palette().color(value.foregroundRole()).name() == theme.TEXT_STALE != live_colour
     stamp = readouts.staleText().rsplit(" ", 1)[-1]
     shown = time.strftime("%H:%M:%S", time.localtime(before))
     assert "last live" in readouts.staleText() and stamp >= shown  # HH:MM:SS, same day
     assert readouts.readoutText("roll") == "+131.00°"  # the last figures stay, greyed
-    live.pipeline.process(raw_block(104, 20, roll=131.0, pitch=0.0))
+    live.pipeline.process(raw_block(114, 20, roll=131.0, pitch=0.0))
     live.presenter.refresh()
     assert not readouts.isStale() and readouts.staleText() == ""
     assert value.palette().color(value.foregroundRole()).name() == live_colour

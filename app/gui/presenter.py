@@ -195,6 +195,8 @@ class LivePresenter(QObject):
         plots.resync = self._resync_plots
         self._last_live: float | None = None
         """Wall-clock time (``time.time()``) the readouts last showed new data."""
+        self._stale_rows: int | None = None
+        """Rows written when the device was lost (None: live)."""
         if isinstance(session, DeviceSession):  # (tests drive a bare pipeline)
             session.disconnected.connect(self.show_stale)
             session.reconnecting.connect(self.show_stale)
@@ -209,6 +211,8 @@ class LivePresenter(QObject):
         """The device was lost (a connection error, an unplug, a disconnect): the figures on
         show turn grey, with the time they were last live, until new data arrive."""
         if self._last_live is not None and self.readouts.isValid():
+            # Rows already buffered are not news: only rows after these make it live again.
+            self._stale_rows = self.session.pipeline.orientation.total_written
             self.readouts.setStale(self._last_live)
 
     def stop(self) -> None:
@@ -390,8 +394,12 @@ class LivePresenter(QObject):
         self._shown_quat = recent["quat"]
         unit = self.settings.unit
         self.readouts.setValid(True)
-        self._last_live = time.time()
-        self.readouts.setStale(None)
+        if self._stale_rows is None:
+            self._last_live = time.time()
+        elif self.session.pipeline.orientation.total_written > self._stale_rows:
+            self._stale_rows = None
+            self._last_live = time.time()
+            self.readouts.setStale(None)
         self.readouts.setValues(
             float(slope_from_angle(angles.roll_deg, unit)),
             float(slope_from_angle(angles.pitch_deg, unit)),

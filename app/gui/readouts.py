@@ -203,6 +203,12 @@ class _ReadoutTile(QFrame):
         side_font = QFont(note_font)
         side_font.setBold(True)
         self.side.setFont(side_font)
+        # Room for the widest raised side: a direction that appears (the tilt leaves zero)
+        # or changes sector does not re-lay out the window.
+        side_metrics = QFontMetricsF(side_font)
+        self.side.setFixedSize(
+            math.ceil(max(side_metrics.horizontalAdvance(side) for side in (*_SIDES, NO_VALUE)))
+            + 2, math.ceil(side_metrics.height()))
         self._value_row.setSpacing(max(2, value_px // 16))
 
     def setUnit(self, unit_label: str) -> None:
@@ -216,10 +222,17 @@ class _ReadoutTile(QFrame):
         big = self.unit.text() == "°"
         # A degree sign in the digits' font is placed exactly like them (centred); a
         # smaller unit sits at the bottom, lifted onto the digits' baseline.
-        self.unit.setFont(self._value_font if big else self._unit_font)
+        # Only what changes is set: new margins would ask the window to re-lay out.
+        font = self._value_font if big else self._unit_font
+        if self.unit.font() != font:
+            self.unit.setFont(font)
         vertical = Qt.AlignmentFlag.AlignVCenter if big else Qt.AlignmentFlag.AlignBottom
-        self.unit.setAlignment(Qt.AlignmentFlag.AlignLeft | vertical)
-        self.unit.setContentsMargins(0, 0, 0, 0 if big else max(0, self._unit_lift))
+        alignment = Qt.AlignmentFlag.AlignLeft | vertical
+        if self.unit.alignment() != alignment:
+            self.unit.setAlignment(alignment)
+        lift = 0 if big else max(0, self._unit_lift)
+        if self.unit.contentsMargins().bottom() != lift:
+            self.unit.setContentsMargins(0, 0, 0, lift)
 
 
 class TiltReadouts(QWidget):
