@@ -277,10 +277,13 @@ class TiltReadouts(QWidget):
             self._tiles[name] = _ReadoutTile(_CAPTIONS[name], _NOTES[name], value_px, self)
         self._place_tiles()
         self._tiles["direction"].setUnit("°")
+        for name, tile in self._tiles.items():  # only the direction names a raised side
+            tile.side.setVisible(name == "direction")
         self._alarm: tuple[str, ...] = ()
         # Space a tile needs per pixel of digit size, measured once on the fonts.
         width_100 = QFontMetricsF(_readout_font(100)).horizontalAdvance(_WIDEST_VALUE)
         width_100 += QFontMetricsF(_readout_font(45)).horizontalAdvance(_WIDEST_UNIT)
+        width_100 += 3 * 100 / 16  # the value row's three gaps (1/16 of the digit size)
         height_100 = sum(
             QFontMetricsF(font).height()
             for font in (_readout_font(100), _readout_font(30), _readout_font(28))
@@ -495,7 +498,10 @@ class TiltReadouts(QWidget):
 
     def _tile_overhead(self) -> tuple[float, float]:
         """Width and height of a tile that do not grow with the digits (margins, spacing)."""
-        return 40.0, 32.0
+        # Across: margins 2 x 14, frame and padding 2 x 2, the digits' and unit's 2 px each,
+        # and slack. Down: margins 2 x 10, frame 2 x 2, four gaps of 2, the digits' 2 px
+        # and the rounding of three label heights.
+        return 40.0, 38.0
 
     def _fit(self, columns: int) -> float:
         """The digit size at which tiles in ``columns`` fill the widget."""
