@@ -138,3 +138,21 @@ def test_the_truth_is_averaged_over_the_readouts_rows():
     half[:25] = np.nan
     partial = compare_to_truth(estimate, half, pitch, np.full(len(roll), 0.05))
     assert partial is not None and partial.roll_deg > 35.0
+
+
+def test_after_a_tare_the_reading_error_is_measured_in_the_tared_frame():
+    """The readouts show the tared attitude (q * conj(T)); the truth is absolute. Turned into
+    the same frame, a perfect estimate has no error (not the tare's 1.58°)."""
+    from app.core import quaternion as quat
+
+    roll, pitch = np.full(20, 1.5), np.full(20, 0.5)
+    estimate = quaternion_from_roll_pitch(roll, pitch)
+    tare = quaternion_from_roll_pitch(1.5, 0.5)  # tared where it lies
+    shown = quat.normalize(quat.multiply(estimate, quat.conjugate(tare)))
+    assert averaged_angles(shown).tilt_deg == pytest.approx(0.0, abs=1e-9)
+    zero = np.zeros(20)
+    untared = compare_to_truth(shown, roll, pitch, zero)
+    tared = compare_to_truth(shown, roll, pitch, zero, tare_quat=tare)
+    assert untared.reading_error_deg == pytest.approx(1.58, abs=0.01)  # the wrong comparison
+    assert tared.reading_error_deg == pytest.approx(0.0, abs=1e-6)
+    assert (tared.roll_deg, tared.pitch_deg) == pytest.approx((1.5, 0.5))  # the simulator's

@@ -18,6 +18,7 @@ from app.core.orientation import (
     quaternion_from_roll_pitch,
     up_in_sensor_frame,
 )
+from app.core.quaternion import rotate
 
 
 def averaged_angles(quat: np.ndarray) -> TiltAngles | None:
@@ -161,11 +162,15 @@ class TruthComparison:
 
 def compare_to_truth(
     quat: np.ndarray, ref_roll_deg: np.ndarray, ref_pitch_deg: np.ndarray,
-    incl_error_deg: np.ndarray,
+    incl_error_deg: np.ndarray, tare_quat: np.ndarray | None = None,
 ) -> TruthComparison | None:
     """The truth averaged exactly like :func:`averaged_angles` averages the estimate (mean
     up vector over the same rows), so the truth line and the readouts describe the same
-    time; None when no row has a truth (not a simulator) or no estimate."""
+    time; None when no row has a truth (not a simulator) or no estimate.
+
+    ``quat`` are the quaternions the readouts show; after a tare they are in the tared frame
+    (``tare_quat``, the tare's rotation T: shown = q * conj(T)), and the truth is turned into
+    that frame for the reading error. The truth's angles stay the simulator's own."""
     ref_roll = np.asarray(ref_roll_deg, dtype=np.float64).ravel()
     ref_pitch = np.asarray(ref_pitch_deg, dtype=np.float64).ravel()
     quat = np.asarray(quat, dtype=np.float64).reshape(-1, 4)
@@ -176,6 +181,8 @@ def compare_to_truth(
         quaternion_from_roll_pitch(ref_roll[keep], ref_pitch[keep])).mean(axis=0)
     estimate_up = up_in_sensor_frame(quat[keep]).mean(axis=0)
     truth = angles_from_up(truth_up)
+    if tare_quat is not None:
+        truth_up = rotate(np.asarray(tare_quat, dtype=np.float64), truth_up)
     cosine = np.dot(truth_up, estimate_up) / (
         np.linalg.norm(truth_up) * np.linalg.norm(estimate_up))
     error = float(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))))

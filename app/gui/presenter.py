@@ -413,10 +413,13 @@ class LivePresenter(QObject):
         """The simulator's truth over the same averaging window as the readouts (so during
         a turn both describe the same time), the error of the shown reading, and the
         per-sample RMS error; empty without a truth."""
+        tare = self.session.pipeline.level_reference
         truth = compare_to_truth(recent["quat"], recent["ref_roll"], recent["ref_pitch"],
-                                 recent["incl_error"])
+                                 recent["incl_error"],
+                                 None if tare is None else tare.quaternion)
+        untared = "" if tare is None else ", not tared"
         text = "" if truth is None else (
-            f"Simulator truth ({self.settings.averaging_s:g} s mean)  "
+            f"Simulator truth ({self.settings.averaging_s:g} s mean{untared})  "
             f"roll {truth.roll_deg:+.2f}°  pitch {truth.pitch_deg:+.2f}°  ·  "
             f"reading error {truth.reading_error_deg:.2f}°  ·  "
             f"sample error {truth.sample_rms_deg:.2f}° RMS"
