@@ -7,12 +7,18 @@ import math
 import numpy as np
 import pytest
 
+from app.core.orientation import quaternion_from_roll_pitch
 from app.core.readout import (
     LEVEL_RATIO_TEXT,
     SLOPE_UNITS,
+    UNDEFINED,
+    averaged_angles,
+    compare_to_truth,
+    format_direction,
     format_slope,
     reading_text,
     slope_from_angle,
+    tilt_is_zero,
 )
 
 
@@ -85,3 +91,68 @@ def test_readouts_show_ratios_and_copy_what_they_show(qtbot):
     assert readouts.reading() == ""
     readouts.setValid(False)
     assert readouts.reading() == ""
+
+
+def test_a_slope_too_steep_for_its_unit_reads_over():
+    assert format_slope(999.99, "mm/m") == "999.99"
+    assert format_slope(slope_from_angle(60.0, "mm/m"), "mm/m", signed=True) == "+OVER"
+    assert format_slope(slope_from_angle(-89.99, "in/ft"), "in/ft") == "-OVER"
+    assert format_slope(slope_from_angle(85.0, "percent"), "percent") == "OVER"
+    assert format_slope(math.inf, "mm/m") == "OVER"
+    assert format_slope(180.0, "deg") == "180.00"  # degrees never overflow
+
+
+def test_direction_is_undefined_while_the_tilt_reads_zero():
+    """After a tare the tilt is noise around zero: its direction is a random bearing."""
+    assert tilt_is_zero("0.00") and tilt_is_zero("+0.00") and tilt_is_zero(LEVEL_RATIO_TEXT)
+    assert not tilt_is_zero("0.01") and not tilt_is_zero("1:9999") and not tilt_is_zero("")
+    for unit in SLOPE_UNITS:
+        level = format_slope(slope_from_angle(0.0001, unit), unit)
+        assert format_direction(217.3, level) == UNDEFINED, unit
+    assert format_direction(217.34, format_slope(0.01, "deg")) == "217.3"
+    assert format_direction(359.97, "1.00") == "0.0"
+    assert format_direction(math.nan, "1.00") == ""
+    # The resolution is the unit's: 0.004° reads 0.00° but 0.07 mm/m.
+    tilt = 0.004
+    assert format_direction(90.0, format_slope(tilt, "deg")) == UNDEFINED
+    assert format_direction(90.0, format_slope(slope_from_angle(tilt, "mm/m"), "mm/m")) == "90.0"
+
+
+def test_the_truth_is_averaged_over_the_readouts_rows():
+    """During a turn the truth's newest row and the averaged reading are far apart; averaged
+    over the same rows, they agree as well as the estimate does."""
+    roll = np.linspace(0.0, 54.0, 50)  # turning at 108°/s over a 0.5 s window
+    pitch = np.zeros_like(roll)
+    estimate = quaternion_from_roll_pitch(roll + 0.05, pitch)
+    truth = compare_to_truth(estimate, roll, pitch, np.full(len(roll), 0.05))
+    shown = averaged_angles(estimate)
+    assert truth is not None and shown is not None
+    assert abs(truth.roll_deg - 27.0) < 0.5  # the middle of the window, not its end (54)
+    assert abs(shown.roll_deg - truth.roll_deg) == pytest.approx(0.05, abs=1e-6)
+    assert truth.reading_error_deg == pytest.approx(0.05, abs=1e-6)
+    assert truth.sample_rms_deg == pytest.approx(0.05)
+    # Rows without a truth (not a simulator) are left out; none at all: no truth line.
+    nan = np.full(len(roll), np.nan)
+    assert compare_to_truth(estimate, nan, nan, nan) is None
+    half = roll.copy()
+    half[:25] = np.nan
+    partial = compare_to_truth(estimate, half, pitch, np.full(len(roll), 0.05))
+    assert partial is not None and partial.roll_deg > 35.0
+
+
+def test_after_a_tare_the_reading_error_is_measured_in_the_tared_frame():
+    """The readouts show the tared attitude (q * conj(T)); the truth is absolute. Turned into
+    the same frame, a perfect estimate has no error (not the tare's 1.58°)."""
+    from app.core import quaternion as quat
+
+    roll, pitch = np.full(20, 1.5), np.full(20, 0.5)
+    estimate = quaternion_from_roll_pitch(roll, pitch)
+    tare = quaternion_from_roll_pitch(1.5, 0.5)  # tared where it lies
+    shown = quat.normalize(quat.multiply(estimate, quat.conjugate(tare)))
+    assert averaged_angles(shown).tilt_deg == pytest.approx(0.0, abs=1e-9)
+    zero = np.zeros(20)
+    untared = compare_to_truth(shown, roll, pitch, zero)
+    tared = compare_to_truth(shown, roll, pitch, zero, tare_quat=tare)
+    assert untared.reading_error_deg == pytest.approx(1.58, abs=0.01)  # the wrong comparison
+    assert tared.reading_error_deg == pytest.approx(0.0, abs=1e-6)
+    assert (tared.roll_deg, tared.pitch_deg) == pytest.approx((1.5, 0.5))  # the simulator's

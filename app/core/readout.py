@@ -12,7 +12,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from app.core.orientation import TiltAngles, angles_from_up, up_in_sensor_frame
+from app.core.orientation import (
+    TiltAngles,
+    angles_from_up,
+    quaternion_from_roll_pitch,
+    up_in_sensor_frame,
+)
+from app.core.quaternion import rotate
 
 
 def averaged_angles(quat: np.ndarray) -> TiltAngles | None:
@@ -53,6 +59,11 @@ RATIO_LIMIT = 10_000.0
 LEVEL_RATIO_TEXT = "1:∞"
 
 _TANGENT_SCALE = {"percent": 100.0, "mm/m": 1000.0, "in/ft": 12.0}
+SLOPE_LIMIT = 999.995
+"""A slope (%, mm/m, in/ft) this steep or steeper reads :data:`OVER_TEXT`: past 45° in
+mm/m, 84° in %, 89° in in/ft a levelling unit says little, and its figures would not fit
+the readouts (whose widest text is "−999.99")."""
+OVER_TEXT = "OVER"
 
 
 def slope_from_angle(angle_deg: np.ndarray | float, unit: str) -> np.ndarray | float:
@@ -78,8 +89,9 @@ def slope_from_angle(angle_deg: np.ndarray | float, unit: str) -> np.ndarray | f
 def format_slope(value: float, unit: str, signed: bool = False) -> str:
     """The text of a value already in ``unit``: two decimals (``+1.23``, ``-0.45``), or for
     a ratio ``1:57.3`` (``-1:57.3`` when signed and negative) with 3 significant figures
-    up to 1:9999, and ``1:∞`` flatter than :data:`RATIO_LIMIT`. Non-finite values (other
-    than a level ratio) give ``""``. Negative zero is shown as zero."""
+    up to 1:9999, and ``1:∞`` flatter than :data:`RATIO_LIMIT`; a slope past
+    :data:`SLOPE_LIMIT` reads ``OVER`` (signed like the value). NaN (and other non-finite
+    values in degrees) give ``""``. Negative zero is shown as zero."""
     if unit == "ratio":
         if np.isnan(value):
             return ""
@@ -94,12 +106,90 @@ def format_slope(value: float, unit: str, signed: bool = False) -> str:
             text = f"1:{run:.2f}"
         sign = "-" if value < 0 else "+"
         return f"{sign}{text}" if signed or sign == "-" else text
-    if not np.isfinite(value):
+    if not np.isfinite(value) and unit not in _TANGENT_SCALE:
         return ""
+    if np.isnan(value):
+        return ""
+    if unit in _TANGENT_SCALE and abs(value) >= SLOPE_LIMIT:
+        sign = "-" if value < 0 else "+"
+        return f"{sign}{OVER_TEXT}" if signed or sign == "-" else OVER_TEXT
     text = f"{value:+.2f}" if signed else f"{value:.2f}"
     if text in ("-0.00", "+0.00"):
         return "+0.00" if signed else "0.00"
     return text
+
+
+UNDEFINED = "—"
+"""The text of a figure that has no meaning (the direction of a level reading)."""
+
+
+def format_direction(direction_deg: float, tilt_text: str) -> str:
+    """The tilt direction as shown: ``123.4`` (one decimal, 360.0 shown as 0.0), or
+    :data:`UNDEFINED` when the tilt, as displayed (``tilt_text``, from :func:`format_slope`),
+    is level or below the display resolution ("0.00", "1:∞"): the direction of a tilt that
+    reads zero is only noise (after a tare it would be a random bearing). ``""`` when
+    ``direction_deg`` is not finite (no data)."""
+    if not np.isfinite(direction_deg):
+        return ""
+    if tilt_is_zero(tilt_text):
+        return UNDEFINED
+    text = f"{direction_deg % 360.0:.1f}"
+    return "0.0" if text == "360.0" else text
+
+
+def tilt_is_zero(tilt_text: str) -> bool:
+    """Whether a tilt's displayed text (:func:`format_slope`) reads level: every digit of a
+    decimal text is zero, or the ratio is ``1:∞``."""
+    if tilt_text == LEVEL_RATIO_TEXT:
+        return True
+    digits = [c for c in tilt_text if c.isdigit()]
+    return bool(digits) and ":" not in tilt_text and not any(c != "0" for c in digits)
+
+
+@dataclass(frozen=True, slots=True)
+class TruthComparison:
+    """A simulator's truth over the readouts' averaging window, and how far off the shown
+    reading is (degrees)."""
+
+    roll_deg: float
+    pitch_deg: float
+    reading_error_deg: float
+    """Angle between the averaged estimate's and the averaged truth's up directions: the
+    error of the figures on the screen."""
+    sample_rms_deg: float
+    """RMS of the per-sample inclination errors in the same window."""
+
+
+def compare_to_truth(
+    quat: np.ndarray, ref_roll_deg: np.ndarray, ref_pitch_deg: np.ndarray,
+    incl_error_deg: np.ndarray, tare_quat: np.ndarray | None = None,
+) -> TruthComparison | None:
+    """The truth averaged exactly like :func:`averaged_angles` averages the estimate (mean
+    up vector over the same rows), so the truth line and the readouts describe the same
+    time; None when no row has a truth (not a simulator) or no estimate.
+
+    ``quat`` are the quaternions the readouts show; after a tare they are in the tared frame
+    (``tare_quat``, the tare's rotation T: shown = q * conj(T)), and the truth is turned into
+    that frame for the reading error. The truth's angles stay the simulator's own."""
+    ref_roll = np.asarray(ref_roll_deg, dtype=np.float64).ravel()
+    ref_pitch = np.asarray(ref_pitch_deg, dtype=np.float64).ravel()
+    quat = np.asarray(quat, dtype=np.float64).reshape(-1, 4)
+    keep = np.isfinite(ref_roll) & np.isfinite(ref_pitch) & np.all(np.isfinite(quat), axis=1)
+    if not np.any(keep):
+        return None
+    truth_up = up_in_sensor_frame(
+        quaternion_from_roll_pitch(ref_roll[keep], ref_pitch[keep])).mean(axis=0)
+    estimate_up = up_in_sensor_frame(quat[keep]).mean(axis=0)
+    truth = angles_from_up(truth_up)
+    if tare_quat is not None:
+        truth_up = rotate(np.asarray(tare_quat, dtype=np.float64), truth_up)
+    cosine = np.dot(truth_up, estimate_up) / (
+        np.linalg.norm(truth_up) * np.linalg.norm(estimate_up))
+    error = float(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))))
+    errors = np.asarray(incl_error_deg, dtype=np.float64).ravel()[keep]
+    errors = errors[np.isfinite(errors)]
+    rms = float(np.sqrt(np.mean(errors ** 2))) if len(errors) else float("nan")
+    return TruthComparison(float(truth.roll_deg), float(truth.pitch_deg), error, rms)
 
 
 def reading_text(roll: float, pitch: float, tilt: float, unit: str) -> str:

@@ -23,7 +23,7 @@ from app.core.comparison import summarize_errors
 from app.core.decimation import IncrementalMinMax, connect_mask, decimation_factor
 from app.core.filters import FILTERS
 from app.core.measurement_log import Measurement, measure
-from app.core.readout import SLOPE_UNITS, averaged_angles, slope_from_angle
+from app.core.readout import SLOPE_UNITS, averaged_angles, compare_to_truth, slope_from_angle
 from app.core.samples import STANDARD_GRAVITY_M_S2
 from app.gui.bubble_level import BubbleLevel
 from app.gui.filter_panel import FilterPanel
@@ -193,12 +193,27 @@ class LivePresenter(QObject):
         self.plot_appends = 0
         """How often new samples were drawn onto the plots without a rebuild."""
         plots.resync = self._resync_plots
+        self._last_live: float | None = None
+        """Wall-clock time (``time.time()``) the readouts last showed new data."""
+        self._stale_rows: int | None = None
+        """Rows written when the device was lost (None: live)."""
+        if isinstance(session, DeviceSession):  # (tests drive a bare pipeline)
+            session.disconnected.connect(self.show_stale)
+            session.reconnecting.connect(self.show_stale)
         self._shown = {
             view: ScreenPresence(view) for view in (level, readouts, plots, filter_panel)
         }
 
     def start(self) -> None:
         self.clock.start()
+
+    def show_stale(self, *_reason: object) -> None:
+        """The device was lost (a connection error, an unplug, a disconnect): the figures on
+        show turn grey, with the time they were last live, until new data arrive."""
+        if self._last_live is not None and self.readouts.isValid():
+            # Rows already buffered are not news: only rows after these make it live again.
+            self._stale_rows = self.session.pipeline.orientation.total_written
+            self.readouts.setStale(self._last_live)
 
     def stop(self) -> None:
         self.clock.stop()
@@ -379,6 +394,12 @@ class LivePresenter(QObject):
         self._shown_quat = recent["quat"]
         unit = self.settings.unit
         self.readouts.setValid(True)
+        if self._stale_rows is None:
+            self._last_live = time.time()
+        elif self.session.pipeline.orientation.total_written > self._stale_rows:
+            self._stale_rows = None
+            self._last_live = time.time()
+            self.readouts.setStale(None)
         self.readouts.setValues(
             float(slope_from_angle(angles.roll_deg, unit)),
             float(slope_from_angle(angles.pitch_deg, unit)),
@@ -386,15 +407,23 @@ class LivePresenter(QObject):
             angles.direction_deg,
             unit,
         )
-        ref_roll, ref_pitch = recent["ref_roll"][-1], recent["ref_pitch"][-1]
-        if np.isfinite(ref_roll):
-            rms = float(np.sqrt(np.nanmean(recent["incl_error"] ** 2)))
-            text = (
-                f"Simulator truth  roll {ref_roll:+.2f}°  pitch {ref_pitch:+.2f}°  ·  "
-                f"inclination error {rms:.3f}° RMS"
-            )
-        else:
-            text = ""
+        self._show_truth(recent)
+
+    def _show_truth(self, recent: dict) -> None:
+        """The simulator's truth over the same averaging window as the readouts (so during
+        a turn both describe the same time), the error of the shown reading, and the
+        per-sample RMS error; empty without a truth."""
+        tare = self.session.pipeline.level_reference
+        truth = compare_to_truth(recent["quat"], recent["ref_roll"], recent["ref_pitch"],
+                                 recent["incl_error"],
+                                 None if tare is None else tare.quaternion)
+        untared = "" if tare is None else ", not tared"
+        text = "" if truth is None else (
+            f"Simulator truth ({self.settings.averaging_s:g} s mean{untared})  "
+            f"roll {truth.roll_deg:+.2f}°  pitch {truth.pitch_deg:+.2f}°  ·  "
+            f"reading error {truth.reading_error_deg:.2f}°  ·  "
+            f"sample error {truth.sample_rms_deg:.2f}° RMS"
+        )
         if self.truth_label.text() != text:
             self.truth_label.setText(text)
 

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterable
 
 from PySide6.QtCore import Property, QSize, Qt
-from PySide6.QtGui import QFont, QFontDatabase, QFontMetricsF, QResizeEvent
+from PySide6.QtGui import QFont, QFontDatabase, QFontMetrics, QFontMetricsF, QResizeEvent
 from PySide6.QtWidgets import (
     QFrame,
     QGridLayout,
@@ -17,7 +18,13 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.core.readout import SLOPE_UNITS, format_slope, reading_text
+from app.core.readout import (
+    SLOPE_UNITS,
+    UNDEFINED,
+    format_direction,
+    format_slope,
+    reading_text,
+)
 from app.gui import theme
 from app.gui.elided_label import ElidedLabel
 
@@ -38,9 +45,14 @@ _NOTES = {
 }
 # Raised side for each 45° sector of the tilt direction, counter-clockwise from +x.
 _SIDES = ("+x", "+x+y", "+y", "−x+y", "−x", "−x−y", "−y", "+x−y")
-# The widest text a readout is sized for, so the layout does not jump as digits change.
+# The widest text a readout is sized for, so the layout does not jump as digits change
+# ("−180.00", "−999.99" mm/m, "−1:9999"; more than 999.99 in a slope unit reads OVER).
 _WIDEST_VALUE = "−000.00"
 _WIDEST_UNIT = "in/ft"
+STATES: tuple[str, ...] = ("alarm", "stale")
+"""The tiles' dynamic properties, styled by ``[alarm="true"]`` / ``[stale="true"]`` rules in
+the stylesheet (resources/styles/instrument.qss); a change only re-polishes, so fonts and
+sizes stay as they are."""
 _FIXED_FAMILIES = (
     "JetBrains Mono",
     "Cascadia Mono",
@@ -72,12 +84,6 @@ def _unit_key(unit: str) -> str:
     raise ValueError(f"unknown unit {unit!r}")
 
 
-def _format_direction(direction_deg: float) -> str:
-    """``123.4``: one decimal, 360.0 shown as 0.0."""
-    text = f"{direction_deg % 360.0:.1f}"
-    return "0.0" if text == "360.0" else text
-
-
 def raised_side_label(direction_deg: float) -> str:
     """Short compass label of the raised side (``+x``, ``+x+y``, ``+y``, ``−x+y`` ...)."""
     sector = int(((direction_deg + 22.5) % 360.0) // 45.0) % len(_SIDES)
@@ -88,6 +94,16 @@ def _set_text(label: QLabel, text: str) -> None:
     """``label.setText(text)`` unless it already shows ``text`` (no relayout, no repaint)."""
     if label.text() != text:
         label.setText(text)
+
+
+def _repolish(widget: QWidget) -> None:
+    """Re-apply the stylesheet to ``widget`` and its labels after a dynamic property
+    changed (Qt does not re-evaluate ``[name="value"]`` selectors by itself)."""
+    style = widget.style()
+    for target in (widget, *widget.findChildren(QLabel)):
+        style.unpolish(target)
+        style.polish(target)
+        target.update()
 
 
 class _ReadoutTile(QFrame):
@@ -102,15 +118,15 @@ class _ReadoutTile(QFrame):
         self.caption.setObjectName("ReadoutCaption")
         self.value = QLabel(NO_VALUE)
         self.value.setObjectName("ReadoutValue")
-        self.value.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignBaseline)
+        self.value.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
         # Not selectable: a selectable label keeps a text document that it builds anew on
         # every setText (Ctrl+C copies the reading as text).
         self.unit = QLabel("")
         self.unit.setObjectName("ReadoutUnit")
-        self.unit.setAlignment(Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignBaseline)
+        self.unit.setAlignment(Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignBottom)
         self.note = QLabel(note)
         self.note.setObjectName("ReadoutSide")
-        self.note.setTextFormat(Qt.TextFormat.RichText)
+        self.note.setTextFormat(Qt.TextFormat.PlainText)
         # A figure beside the note (the raised side): it changes while streaming, so it is
         # a label that repaints without re-laying out the window.
         self.side = ElidedLabel("")
@@ -120,8 +136,8 @@ class _ReadoutTile(QFrame):
         self._value_row = value_row
         self._value_px = 0
         value_row.addStretch(1)
-        value_row.addWidget(self.value, 0, Qt.AlignmentFlag.AlignBaseline)
-        value_row.addWidget(self.unit, 0, Qt.AlignmentFlag.AlignBaseline)
+        value_row.addWidget(self.value)
+        value_row.addWidget(self.unit)
         value_row.addStretch(1)
 
         layout = QVBoxLayout(self)
@@ -137,7 +153,18 @@ class _ReadoutTile(QFrame):
         note_row.addWidget(self.side)
         note_row.addStretch(1)
         layout.addLayout(note_row)
+        for state in STATES:
+            self.setProperty(state, False)
         self.setValuePixelSize(value_px)
+
+    def setState(self, state: str, on: bool) -> None:
+        """Set a dynamic property (:data:`STATES`) and restyle: colours change, the fonts and
+        every size stay (a font swap would change the digits' width inside a fixed label)."""
+        if bool(self.property(state)) == bool(on):
+            return
+        self.setProperty(state, bool(on))
+        _repolish(self)
+        self.setValuePixelSize(self._value_px)  # unchanged sizes: only asserts the fonts
 
     def setValuePixelSize(self, value_px: int) -> None:
         """Size the digits (and with them caption, unit and note) to ``value_px`` pixels."""
@@ -149,30 +176,63 @@ class _ReadoutTile(QFrame):
         self.caption.setFont(caption_font)
         value_font = _readout_font(value_px)
         self.value.setFont(value_font)
-        widest = QFontMetricsF(value_font).horizontalAdvance(_WIDEST_VALUE)
+        value_metrics = QFontMetricsF(value_font)
+        widest = value_metrics.horizontalAdvance(_WIDEST_VALUE)
+        height = math.ceil(value_metrics.height()) + 2
         # A fixed size: a QLabel whose size may change asks every layout up to the window to
         # be redone on each setText, several times a second for a readout (and the main
         # window's layout then re-places every dock). The widest text always fits.
-        self.value.setFixedSize(math.ceil(widest) + 2, self.value.sizeHint().height())
+        self.value.setFixedSize(math.ceil(widest) + 2, height)
         self._value_font = value_font
         self._unit_font = _readout_font(max(12, round(value_px * 0.45)))
-        unit_widest = QFontMetricsF(self._unit_font).horizontalAdvance(_WIDEST_UNIT)
-        self.unit.setMinimumWidth(math.ceil(unit_widest) + 2)
-        self.unit.setFont(self._value_font if self.unit.text() == "°" else self._unit_font)
+        unit_metrics = QFontMetricsF(self._unit_font)
+        unit_widest = max(unit_metrics.horizontalAdvance(_WIDEST_UNIT),
+                          value_metrics.horizontalAdvance("°"))
+        # As high as the digits, the unit's text at the bottom, raised so that its baseline
+        # is the digits' (a box layout has no baseline alignment): "°" and "mm/m" stay
+        # beside the digits at every size, also after full screen and back.
+        self.unit.setFixedSize(math.ceil(unit_widest) + 2, height)
+        digits, unit = QFontMetrics(value_font), QFontMetrics(self._unit_font)
+        # Centred digits: their baseline lies (height - text height) // 2 + descent above
+        # the label's bottom.
+        self._unit_lift = (height - digits.height()) // 2 + digits.descent() - unit.descent()
+        self._apply_unit_font()
         note_font = QFont(self.font())
         note_font.setPixelSize(max(10, round(value_px * 0.3)))
         self.note.setFont(note_font)
         side_font = QFont(note_font)
         side_font.setBold(True)
         self.side.setFont(side_font)
+        # Room for the widest raised side: a direction that appears (the tilt leaves zero)
+        # or changes sector does not re-lay out the window.
+        side_metrics = QFontMetricsF(side_font)
+        self.side.setFixedSize(
+            math.ceil(max(side_metrics.horizontalAdvance(side) for side in (*_SIDES, NO_VALUE)))
+            + 2, math.ceil(side_metrics.height()))
         self._value_row.setSpacing(max(2, value_px // 16))
 
     def setUnit(self, unit_label: str) -> None:
         """Show ``unit_label``; a degree sign is set as large as the digits, like "+1.23°"."""
         if unit_label == self.unit.text():
             return
-        self.unit.setFont(self._value_font if unit_label == "°" else self._unit_font)
         self.unit.setText(unit_label)
+        self._apply_unit_font()
+
+    def _apply_unit_font(self) -> None:
+        big = self.unit.text() == "°"
+        # A degree sign in the digits' font is placed exactly like them (centred); a
+        # smaller unit sits at the bottom, lifted onto the digits' baseline.
+        # Only what changes is set: new margins would ask the window to re-lay out.
+        font = self._value_font if big else self._unit_font
+        if self.unit.font() != font:
+            self.unit.setFont(font)
+        vertical = Qt.AlignmentFlag.AlignVCenter if big else Qt.AlignmentFlag.AlignBottom
+        alignment = Qt.AlignmentFlag.AlignLeft | vertical
+        if self.unit.alignment() != alignment:
+            self.unit.setAlignment(alignment)
+        lift = 0 if big else max(0, self._unit_lift)
+        if self.unit.contentsMargins().bottom() != lift:
+            self.unit.setContentsMargins(0, 0, 0, lift)
 
 
 class TiltReadouts(QWidget):
@@ -217,10 +277,13 @@ class TiltReadouts(QWidget):
             self._tiles[name] = _ReadoutTile(_CAPTIONS[name], _NOTES[name], value_px, self)
         self._place_tiles()
         self._tiles["direction"].setUnit("°")
+        for name, tile in self._tiles.items():  # only the direction names a raised side
+            tile.side.setVisible(name == "direction")
         self._alarm: tuple[str, ...] = ()
         # Space a tile needs per pixel of digit size, measured once on the fonts.
         width_100 = QFontMetricsF(_readout_font(100)).horizontalAdvance(_WIDEST_VALUE)
         width_100 += QFontMetricsF(_readout_font(45)).horizontalAdvance(_WIDEST_UNIT)
+        width_100 += 3 * 100 / 16  # the value row's three gaps (1/16 of the digit size)
         height_100 = sum(
             QFontMetricsF(font).height()
             for font in (_readout_font(100), _readout_font(30), _readout_font(28))
@@ -237,6 +300,12 @@ class TiltReadouts(QWidget):
             "background: #e8a93a; color: #15171a; border-radius: 3px; padding: 1px 6px;"
         )
         self._hold_badge.hide()
+        self._stale = False
+        self._stale_badge = QLabel("", self)
+        self._stale_badge.setObjectName("StaleBadge")
+        self._stale_badge.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self._stale_badge.hide()
+        self._size_badge()
         self._show_texts()
 
     # ---- API -----------------------------------------------------------------------------
@@ -311,15 +380,37 @@ class TiltReadouts(QWidget):
         if bool(valid) == self._valid:
             return
         self._valid = bool(valid)
+        if not self._valid:
+            self.setStale(None)  # dashes are not a reading, live or not
         self._show_texts()
 
     def setHold(self, held: bool) -> None:
         """Show or hide the HOLD badge (the caller decides whether values still change)."""
         self._held = bool(held)
         self._hold_badge.setVisible(self._held)
-        if self._held:
-            self._place_hold_badge()
-            self._hold_badge.raise_()
+        self._place_hold_badge()
+
+    def setStale(self, last_live: float | None) -> None:
+        """Grey the figures as no longer live, with the time (``time.time()`` seconds) they
+        were last live in a badge, e.g. after the device was lost; ``None``: live again."""
+        stale = last_live is not None
+        if stale:
+            stamp = time.strftime("%H:%M:%S", time.localtime(last_live))
+            self._stale_badge.setText(f"NOT LIVE  ·  last live {stamp}")
+        if stale != self._stale:
+            self._stale = stale
+            for tile in self._tiles.values():
+                tile.setState("stale", stale)
+        self._stale_badge.setVisible(stale)
+        self._place_hold_badge()
+
+    def isStale(self) -> bool:
+        """Whether the figures are shown as no longer live."""
+        return self._stale
+
+    def staleText(self) -> str:
+        """The stale badge's text (``""`` while live)."""
+        return self._stale_badge.text() if self._stale else ""
 
     def setAlarm(self, quantities: Iterable[str]) -> None:
         """Show these readouts (``roll``, ``pitch``, ``tilt``) in the alarm state: digits and
@@ -329,15 +420,8 @@ class TiltReadouts(QWidget):
         if alarm == self._alarm:
             return
         self._alarm = alarm
-        color = theme.ALARM_STATE
         for name, tile in self._tiles.items():
-            on = name in alarm
-            tile.setProperty("alarm", on)  # for [alarm="true"] selectors in a stylesheet
-            tile.setStyleSheet(
-                f"QFrame#ReadoutTile {{ border: 2px solid {color}; }}"
-                f" QLabel#ReadoutValue, QLabel#ReadoutUnit, QLabel#ReadoutCaption"
-                f" {{ color: {color}; }}" if on else ""
-            )
+            tile.setState("alarm", name in alarm)
 
     def alarmQuantities(self) -> tuple[str, ...]:
         """The readouts shown in the alarm state."""
@@ -365,8 +449,8 @@ class TiltReadouts(QWidget):
         """
         tile = self._tiles[quantity]
         number = tile.value.text()
-        if number == NO_VALUE:
-            return NO_VALUE
+        if number in (NO_VALUE, UNDEFINED):
+            return number
         unit = tile.unit.text()
         text = f"{number}{unit}" if unit in ("°", "") else f"{number} {unit}"
         if quantity == "direction":
@@ -379,11 +463,16 @@ class TiltReadouts(QWidget):
 
     # ---- Internals -----------------------------------------------------------------------
 
+    def _direction_text(self) -> str:
+        """The direction's figure: undefined (a dash) while the tilt reads zero."""
+        tilt_text = format_slope(self._values["tilt"], self._unit)
+        return format_direction(self._values["direction"], tilt_text)
+
     def _side_text(self) -> str:
-        direction = self._values["direction"]
-        if not self._valid or not math.isfinite(direction):
+        direction = self._direction_text()
+        if not self._valid or direction in ("", UNDEFINED):
             return NO_VALUE
-        return raised_side_label(direction)
+        return raised_side_label(self._values["direction"])
 
     def _show_texts(self) -> None:
         """Put the values into the labels; a label whose text stays the same is not touched,
@@ -392,7 +481,8 @@ class TiltReadouts(QWidget):
         for name, tile in self._tiles.items():
             value = self._values[name]
             if name == "direction":
-                text = _format_direction(value) if math.isfinite(value) else ""
+                text = self._direction_text()
+                tile.setUnit("" if text == UNDEFINED else "°")
             else:
                 text = format_slope(value, self._unit, signed=name != "tilt")
                 tile.setUnit(suffix)
@@ -408,7 +498,10 @@ class TiltReadouts(QWidget):
 
     def _tile_overhead(self) -> tuple[float, float]:
         """Width and height of a tile that do not grow with the digits (margins, spacing)."""
-        return 40.0, 32.0
+        # Across: margins 2 x 14, frame and padding 2 x 2, the digits' and unit's 2 px each,
+        # and slack. Down: margins 2 x 10, frame 2 x 2, four gaps of 2, the digits' 2 px
+        # and the rounding of three label heights.
+        return 40.0, 38.0
 
     def _fit(self, columns: int) -> float:
         """The digit size at which tiles in ``columns`` fill the widget."""
@@ -437,8 +530,10 @@ class TiltReadouts(QWidget):
         badge_font.setBold(True)
         badge_font.setLetterSpacing(QFont.SpacingType.PercentageSpacing, 115)
         self._hold_badge.setFont(badge_font)
-        if self._held:
-            self._place_hold_badge()
+        stale_badge = getattr(self, "_stale_badge", None)
+        if stale_badge is not None:
+            stale_badge.setFont(badge_font)
+        self._place_hold_badge()
 
     def _restore_fonts(self, _theme_name: str = "") -> None:
         """After a theme switch: a new application stylesheet puts back the fonts the labels
@@ -486,9 +581,15 @@ class TiltReadouts(QWidget):
         )
 
     def _place_hold_badge(self) -> None:
-        self._hold_badge.adjustSize()
-        badge = self._hold_badge.size()
-        self._hold_badge.move(self.width() - badge.width() - 10, 9)
+        """HOLD in the top-right corner, the stale badge left of it (or there)."""
+        right = self.width() - 10
+        for badge in (self._hold_badge, getattr(self, "_stale_badge", None)):
+            if badge is None or badge.isHidden():
+                continue
+            badge.adjustSize()
+            badge.move(right - badge.width(), 9)
+            badge.raise_()
+            right -= badge.width() + 6
 
     def resizeEvent(self, event: QResizeEvent) -> None:
         """Keep the HOLD badge in the top-right corner; auto scale: fit the digits."""

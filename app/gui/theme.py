@@ -44,6 +44,7 @@ class Theme:
     TEXT_DISABLED: str
     TEXT_STRONG: str  # text on checked / selected controls
     TEXT_VALUE: str  # the big readout digits
+    TEXT_STALE: str  # readout digits no longer live (the device was lost): greyed, legible
     SELECTION_BG: str
     SELECTION_TEXT: str
     CHECKED_BG: str
@@ -87,10 +88,10 @@ DARK = Theme(
     RAISED_HOVER="#343a41", RAISED_PRESSED="#23272c", PRESSED_BG="#1a1d20",
     BORDER="#3a4047", BORDER_SOFT="#30353b", BORDER_HOVER="#4a5159", SEPARATOR="#2b3035",
     TEXT="#dfe3e8", TEXT_DIM="#8b939c", TEXT_DISABLED="#5d646c", TEXT_STRONG="#ffffff",
-    TEXT_VALUE="#eef1f4", SELECTION_BG="#2f4656", SELECTION_TEXT="#0d1114",
+    TEXT_VALUE="#eef1f4", TEXT_STALE="#7d858e", SELECTION_BG="#2f4656", SELECTION_TEXT="#0d1114",
     CHECKED_BG="#243a48",
     ACCENT="#4aa8d8", ACCENT_FILL="#3b7ea3",
-    OK_GREEN="#4cc38a", WARN_AMBER="#e8a93a", ALARM_RED="#e5534b",
+    OK_GREEN="#4cc38a", WARN_AMBER="#e8a93a", ALARM_RED="#ef665e",
     AXIS_X="#e86a5f", AXIS_Y="#6cc77a", AXIS_Z="#5b9be6",
     TRACE_ROLL="#58c4d0", TRACE_PITCH="#c48ce0", TRACE_TILT="#e8c468",
     TRACE_DIRECTION="#a0a8b2", TRACE_REFERENCE="#9aa0a6", PLOT_GRID="#30353b",
@@ -110,10 +111,10 @@ LIGHT = Theme(
     RAISED_HOVER="#ffffff", RAISED_PRESSED="#d5d9de", PRESSED_BG="#f3f5f7",
     BORDER="#a9b0b8", BORDER_SOFT="#c9ced4", BORDER_HOVER="#7f8892", SEPARATOR="#d3d7dc",
     TEXT="#15191e", TEXT_DIM="#4a525b", TEXT_DISABLED="#99a0a8", TEXT_STRONG="#0b1a26",
-    TEXT_VALUE="#0b0d10", SELECTION_BG="#cfe3f2", SELECTION_TEXT="#ffffff",
+    TEXT_VALUE="#0b0d10", TEXT_STALE="#6b737c", SELECTION_BG="#cfe3f2", SELECTION_TEXT="#ffffff",
     CHECKED_BG="#cfe3f2",
     ACCENT="#1565a8", ACCENT_FILL="#3d85c2",
-    OK_GREEN="#17803f", WARN_AMBER="#a85d00", ALARM_RED="#c4261d",
+    OK_GREEN="#14703a", WARN_AMBER="#935100", ALARM_RED="#c4261d",
     AXIS_X="#c8372d", AXIS_Y="#238a35", AXIS_Z="#1f5fc2",
     TRACE_ROLL="#00838f", TRACE_PITCH="#8e3fb0", TRACE_TILT="#9a6b00",
     TRACE_DIRECTION="#5a626b", TRACE_REFERENCE="#4a525b", PLOT_GRID="#dde1e5",
@@ -134,7 +135,7 @@ HIGH_CONTRAST = Theme(
     RAISED_HOVER="#2a2a2a", RAISED_PRESSED="#000000", PRESSED_BG="#0d0d0d",
     BORDER="#ffffff", BORDER_SOFT="#bfbfbf", BORDER_HOVER="#ffe14d", SEPARATOR="#8c8c8c",
     TEXT="#ffffff", TEXT_DIM="#e6e6e6", TEXT_DISABLED="#8c8c8c", TEXT_STRONG="#000000",
-    TEXT_VALUE="#ffffff", SELECTION_BG="#ffe14d", SELECTION_TEXT="#000000",
+    TEXT_VALUE="#ffffff", TEXT_STALE="#a6a6a6", SELECTION_BG="#ffe14d", SELECTION_TEXT="#000000",
     CHECKED_BG="#ffe14d",
     ACCENT="#ffe14d", ACCENT_FILL="#ffe14d",
     OK_GREEN="#3dff7a", WARN_AMBER="#ffb224", ALARM_RED="#ff4d4d",
@@ -151,6 +152,36 @@ HIGH_CONTRAST = Theme(
     BUBBLE_RIM_WHITE=0.7,
     LINE_WIDTH=2.0,
 )
+
+TEXT_ON_BACKGROUND: tuple[tuple[str, str, str], ...] = (
+    ("TEXT", "WINDOW_BG", "window, dock and dialog text"),
+    ("TEXT", "PANEL_BG", "dock panels, tool tips, group boxes"),
+    ("TEXT", "BASE_BG", "fields, tables, lists"),
+    ("TEXT", "RAISED_BG", "buttons, combo boxes"),
+    ("TEXT", "RAISED_HOVER", "a hovered button"),
+    ("TEXT_DIM", "WINDOW_BG", "toolbar labels, tabs, group titles"),
+    ("TEXT_DIM", "PANEL_BG", "status bar, dock titles, table headers"),
+    ("TEXT_DIM", "BASE_BG", "readout captions, units and notes; plot axes and legends"),
+    ("TEXT_DIM", "VIAL_PLATE", "the bubble level's scale and captions"),
+    ("TEXT_DISABLED", "WINDOW_BG", "disabled controls"),
+    ("TEXT_DISABLED", "PANEL_BG", "disabled buttons"),
+    ("TEXT_DISABLED", "BASE_BG", "disabled fields"),
+    ("TEXT_STRONG", "SELECTION_BG", "the selected menu item"),
+    ("TEXT_STRONG", "CHECKED_BG", "checked buttons"),
+    ("TEXT_VALUE", "BASE_BG", "the readout digits"),
+    ("TEXT_STALE", "BASE_BG", "readout digits no longer live"),
+    ("SELECTION_TEXT", "ACCENT", "highlighted rows (the palette's Highlight)"),
+    ("ACCENT", "PANEL_BG", "tare in the status bar, links"),
+    ("OK_GREEN", "PANEL_BG", "calibrated, self-test passed"),
+    ("WARN_AMBER", "PANEL_BG", "uncalibrated, alarm problems"),
+    ("ALARM_RED", "PANEL_BG", "recording, failed checks"),
+    ("ALARM_RED", "BASE_BG", "readout digits in alarm"),
+    ("ALARM_RED", "VIAL_PLATE", "the bubble level's OVER RANGE"),
+    ("BASE_BG", "WARN_AMBER", "the HOLD badge"),
+    ("BEZEL_TEXT", "VIAL_PLATE", "the bubble level's engraved +X/+Y"),
+)
+"""Every text colour of a theme with the background it is drawn on (colour names, and
+where): what the WCAG contrast check (tests/test_theme_contrast.py) measures."""
 
 THEMES: dict[str, Theme] = {t.name: t for t in (DARK, LIGHT, HIGH_CONTRAST)}
 """The themes by name."""
@@ -259,6 +290,7 @@ def load_stylesheet(theme: Theme | None = None) -> str:
     """
     theme = theme or _current
     colours = _colour_fields(theme)
+    colours["ALARM_STATE"] = theme.ALARM_RED
     resources = files("resources")
     template = (resources / "styles" / "instrument.qss").read_text(encoding="utf-8")
     stylesheet = _TOKEN.sub(lambda match: colours[match.group(1)], template)
