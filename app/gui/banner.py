@@ -6,6 +6,7 @@ bookmark") is in the accent colour, so that it does not read as a failure.
 
 from __future__ import annotations
 
+from PySide6.QtGui import QColor
 from PySide6.QtWidgets import QFrame, QHBoxLayout, QLabel, QToolButton, QWidget
 
 from app.gui import theme
@@ -56,9 +57,11 @@ class MessageBanner(QFrame):
 
     def restyle(self, _theme_name: str = "") -> None:
         """The current theme's colour for the severity."""
-        colour = self.colour()
+        colour = QColor(self.colour())
+        # A fifth of the colour over the window: Qt reads "#rrggbbaa" as "#aarrggbb".
+        fill = f"rgba({colour.red()}, {colour.green()}, {colour.blue()}, 51)"
         self.setProperty("severity", self._severity)
         self.setStyleSheet(
-            f"#errorBanner {{ background: {colour}33; border: 1px solid {colour};"
+            f"#errorBanner {{ background: {fill}; border: 1px solid {colour.name()};"
             " border-radius: 4px; }"
         )
