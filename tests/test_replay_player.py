@@ -272,6 +272,8 @@ def test_a_paused_seek_in_the_window_shows_the_data_there_and_notices_are_inform
 
     assert window.status_device.text().startswith("Replay of tour-104hz.csv")
     pause(qtbot, window)
+    qtbot.waitUntil(lambda: window.device_bar.status_label.text() == "Replay paused",
+                    timeout=TIMEOUT_MS)
     start = TOUR_START_S
     slider = window.replay_bar.slider
     qtbot.mouseClick(slider, Qt.MouseButton.LeftButton,
@@ -297,6 +299,18 @@ def test_a_paused_seek_in_the_window_shows_the_data_there_and_notices_are_inform
     assert "No further bookmark" in window.banner.label.text()
     assert window.banner.severity == "info"
     assert "ERROR" not in window.messages.toPlainText()
+
+    # Played to the end, the button says Replay; pressed, it plays from the start again.
+    bar = window.replay_bar
+    bar.play_button.click()
+    qtbot.waitUntil(lambda: bar.ended, timeout=TIMEOUT_MS)
+    assert bar.play_button.text() == REPLAY_TEXT and not bar.play_button.isChecked()
+    qtbot.waitUntil(lambda: window.device_bar.status_label.text() == "Replay ended",
+                    timeout=TIMEOUT_MS)
+    bar.play_button.click()
+    qtbot.waitUntil(lambda: newest_t(window) - TOUR_START_S < 5.0, timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: bar.play_button.text() == "Pause" and not bar.ended,
+                    timeout=TIMEOUT_MS)
 
 
 def test_export_draws_every_plot_with_the_plots_dock_behind_a_tab(qtbot, window, tmp_path):

@@ -671,6 +671,8 @@ class MainWindow(QMainWindow):
         stalled = status.measured_rate_hz <= 0.0 and status.samples > 0
         lost = f"  ·  lost {status.lost_samples:,}" if status.lost_samples else ""
         text = f"{status.measured_rate_hz:.1f} Hz{lost}"
+        if status.replay is not None and not status.replay.playing:  # not stalled: paused
+            stalled, text = False, "Replay ended" if status.replay.ended else "Replay paused"
         self.device_bar.set_state("stalled" if stalled else "streaming", text)
         self.status_rate.setText(
             f"{status.samples:,} samples  ·  lost {status.lost_samples:,}  ·  "
