@@ -168,12 +168,16 @@ def test_clicking_the_groove_seeks_there(qtbot, bar):
     assert bar.requests[-1] == ("seek", pytest.approx(170.0, abs=0.5))
 
 
-def test_the_end_state_says_replay_and_plays_again(qtbot, bar):
+def test_the_end_state_says_replay_and_plays_again(qtbot, qapp, bar):
     bar.show_position(199.0, 200.0, True)
     assert bar.play_button.text() == "Pause"
+    qapp.processEvents()
+    step_at = bar.step_button.mapTo(bar, QPoint(0, 0))
     bar.show_position(200.0, 200.0, False, True)
     assert bar.play_button.text() == REPLAY_TEXT and not bar.play_button.isChecked()
     assert bar.ended
+    qapp.processEvents()
+    assert bar.step_button.mapTo(bar, QPoint(0, 0)) == step_at  # the longer text moves nothing
     bar.play_button.click()
     assert bar.requests[-1] == ("play", None)
     bar.show_position(0.5, 200.0, True)
