@@ -130,6 +130,31 @@ def test_nothing_further_is_a_notice_and_bookmarks_are_reported():
     device.close()
 
 
+def test_a_loop_back_to_the_start_starts_the_views_afresh():
+    from app.services.acquisition import Acquisition
+    from app.services.connection import Connection
+    from app.services.recording_control import RecordingControl
+
+    pipeline, connection = Pipeline(), Connection()
+    acquisition = Acquisition(connection, pipeline,
+                              RecordingControl(on_error=print, on_status=lambda _s: None),
+                              on_message=lambda _level, _text: None)
+    info = connection.open(replay_url(sample_recording("wobble-104hz"), speed="max", loop=1,
+                                      exact=0, block=512))
+    pipeline.configure(info.odr_hz)
+    device = connection.device
+    while device.last_block_generation == 0:
+        acquisition.step()
+    # The first block after the loop: the buffers hold it alone, so the 0.5 s average is
+    # over 0.5 s of the new pass, not over the whole recording that came before.
+    held = pipeline.orientation.latest(len(pipeline.orientation))["t"]
+    assert held[0] == device.start_t_s and np.all(np.diff(held) > 0)
+    assert pipeline.counters.samples == len(held) == 512
+    t = pipeline.orientation.window(0.5, ["t"])["t"]
+    assert 0.4 < t[-1] - t[0] <= 0.5
+    connection.close()
+
+
 # -- the bar and the banner ----------------------------------------------------------------------
 @pytest.fixture
 def bar(qtbot, qapp):
