@@ -452,7 +452,10 @@ class ReplayDevice(Device):
             raise ValueError(f"lead-in {lead_in_s!r} must be >= 0 s")
         with self._cond:
             target = self._index_at(position_s)
-            start = self._index_at(max(0.0, position_s - lead_in_s)) if lead_in_s else target
+            start = target
+            if lead_in_s and self._rows is not None and self._rows.exists(target):
+                reached = self._rows.t(target) - self._rows.first_t  # clamped to the end
+                start = self._index_at(max(0.0, reached - lead_in_s))
             self._seek_index(min(start, target))
             self._lead_in_end = target
             self._cond.notify_all()

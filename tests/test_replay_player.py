@@ -67,6 +67,11 @@ def test_a_paused_seek_delivers_the_lead_in_up_to_the_new_position_at_once():
     device.step()
     after = device.read(0.05)
     assert after.t_s[0] - start == pytest.approx(30.0, abs=0.02) and not after.gap[0]
+    # Past the end: the lead-in is the last 5 s before the last sample.
+    device.seek(1e6, lead_in_s=5.0)
+    block = device.read(0.05)
+    assert block.t_s[0] - start == pytest.approx(device.duration_s - 5.0, abs=0.02)
+    assert device.position_s == pytest.approx(device.duration_s)
     device.close()
 
 
