@@ -192,10 +192,15 @@ def test_clicking_the_groove_seeks_there(qtbot, bar):
     assert slider.value() == pytest.approx(750, abs=1000 / slider.width() + 1)
     bar.show_position(150.0, 200.0, True)
     assert slider.value() == 750
+    bar.panel.layout().activate()
+    width = slider.width()
+    bar.show_position(5.0, 200.0, True)  # fewer digits: the slider keeps its width
+    bar.panel.layout().activate()
+    assert slider.width() == width
     # The keys seek too: Page Up goes 10 % on.
     slider.setFocus()
     qtbot.keyClick(slider, Qt.Key.Key_PageUp)
-    assert bar.requests[-1] == ("seek", pytest.approx(170.0, abs=0.5))
+    assert bar.requests[-1] == ("seek", pytest.approx(25.0, abs=0.5))  # 5 s + 10 %
 
 
 def test_the_end_state_says_replay_and_plays_again(qtbot, qapp, bar):

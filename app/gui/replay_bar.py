@@ -202,6 +202,7 @@ class ReplayBar(QToolBar):
         self.addWidget(self.panel)
         self._duration_s = 0.0
         self._ended = False
+        self._label_duration_s = -1.0
         self._bookmarks_key: tuple[tuple[float, ...], float] = ((), 0.0)
         self._seek_target: tuple[float, float] | None = None  # (position s, until monotonic)
         self._align_overview()
@@ -290,6 +291,10 @@ class ReplayBar(QToolBar):
         if (self._seek_target is None and not self.slider.isSliderDown()
                 and duration_s > 0):
             self.slider.setValue(round(SLIDER_STEPS * position_s / duration_s))
+        if duration_s != self._label_duration_s:  # as wide as its widest text: nothing moves
+            self._label_duration_s = duration_s
+            self.position_label.setText(f" {duration_s:.1f} / {duration_s:.1f} s ")
+            self.position_label.setFixedWidth(self.position_label.sizeHint().width())
         self.position_label.setText(f" {position_s:.1f} / {duration_s:.1f} s ")
         self.overview.set_duration(duration_s)
         self.overview.show_position(position_s)
