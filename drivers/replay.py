@@ -34,7 +34,10 @@ After a seek (or a loop back to the start)
 ------------------------------------------
 The stream jumps: backwards in time, or forwards over samples the filters never see. The
 first sample of the next block is marked as a gap (every filter restarts its integration
-there) and :attr:`generation` goes up. The block's generation is in
+there) and :attr:`generation` goes up. ``seek(position_s, lead_in_s)`` starts that much
+earlier and lets the next :meth:`read` return the lead-in up to ``position_s`` at once, in one
+block, playing or paused (the filters converge on it, and a paused replay shows the attitude
+at the new position); pacing then goes on from ``position_s``. The block's generation is in
 :attr:`last_block_generation` right after :meth:`read` returns it. A consumer whose buffers must
 hold one continuous, increasing time line (the pipeline's ring buffers) compares it with the
 previous block's and, when it changed, starts afresh before processing the block:
@@ -215,6 +218,7 @@ class ReplayDevice(Device):
         self._anchor_wall = 0.0
         self._anchor_t = 0.0
         self._step_samples = 0  # > 0: deliver this many while paused; -1: one block
+        self._lead_in_end = 0  # > _pos: a seek's lead-in, delivered at once up to here
         self._discontinuity = False
         self._generation = 0
         self._last_block_generation = 0
@@ -436,14 +440,24 @@ class ReplayDevice(Device):
             self._step_samples = -1 if samples is None else int(samples)
             self._cond.notify_all()
 
-    def seek(self, position_s: float) -> float:
+    def seek(self, position_s: float, lead_in_s: float = 0.0) -> float:
         """Continue from the first sample at or after ``position_s`` (s from the start).
 
-        Clamped to the recording; returns the position reached. See the module docstring for
-        what happens to the stream.
+        With ``lead_in_s`` > 0 the stream restarts that much earlier (at most at the start)
+        and the next :meth:`read` returns the lead-in up to ``position_s`` in one block, even
+        while paused. Clamped to the recording; returns the position reached. See the module
+        docstring for what happens to the stream.
         """
+        if not math.isfinite(lead_in_s) or lead_in_s < 0:
+            raise ValueError(f"lead-in {lead_in_s!r} must be >= 0 s")
         with self._cond:
-            self._seek_index(self._index_at(position_s))
+            target = self._index_at(position_s)
+            start = target
+            if lead_in_s and self._rows is not None and self._rows.exists(target):
+                reached = self._rows.t(target) - self._rows.first_t  # clamped to the end
+                start = self._index_at(max(0.0, reached - lead_in_s))
+            self._seek_index(min(start, target))
+            self._lead_in_end = target
             self._cond.notify_all()
             return self._position_s()
 
@@ -578,9 +592,10 @@ class ReplayDevice(Device):
         rows = self._rows
         if rows is None:
             return 0.0
-        if not rows.exists(self._pos):
+        index = max(self._pos, self._lead_in_end)  # a seek's lead-in is not the position
+        if not rows.exists(index):
             return float(rows.last_t - rows.first_t)
-        return float(rows.t(self._pos) - rows.first_t)
+        return float(rows.t(index) - rows.first_t)
 
     def _index_at(self, position_s: float) -> int:
         if not math.isfinite(position_s):
@@ -597,6 +612,7 @@ class ReplayDevice(Device):
             self._discontinuity = True
             self._generation += 1
         self._pos = index
+        self._lead_in_end = 0
         self._anchor()
 
     def _anchor(self) -> None:
@@ -622,6 +638,11 @@ class ReplayDevice(Device):
             self._discontinuity = True
             self._generation += 1
             self._anchor()
+        if self._lead_in_end > self._pos:
+            block = self._deliver(self._lead_in_end)
+            self._lead_in_end = 0
+            self._anchor()  # paced from the seek's position on
+            return block, None
         if self._step_samples:
             count = self._step_samples
             self._step_samples = 0

@@ -11,6 +11,7 @@ from PySide6.QtCore import QSettings
 from app.core.recording import read_recording
 from app.gui import theme
 from app.gui.main_window import MainWindow
+from app.services.replay_control import SEEK_LEAD_IN_S
 from app.services.session import DeviceSession
 
 TIMEOUT_MS = 30_000
@@ -72,11 +73,12 @@ def test_record_then_replay_through_the_same_pipeline(qtbot, window, tmp_path, a
     before = session.pipeline.counters.samples
     window.replay_bar.control.emit("seek", 1.0)  # s from the start of the recording
     window.replay_bar.play_button.setChecked(True)
-    # A seek starts the views afresh (time must not run backwards), then data flows again.
+    # A seek starts the views afresh (time must not run backwards), then data flows again;
+    # the views get the lead-in before the new position (here from the recording's start).
     qtbot.waitUntil(lambda: session.pipeline.counters.samples < before, timeout=TIMEOUT_MS)
     qtbot.waitUntil(lambda: session.pipeline.counters.samples > 100, timeout=TIMEOUT_MS)
     first_t = session.pipeline.samples.latest(len(session.pipeline.samples))["t"][0]
-    assert first_t == pytest.approx(t[0] + 1.0, abs=0.05)
+    assert first_t == pytest.approx(t[0] + max(0.0, 1.0 - SEEK_LEAD_IN_S), abs=0.05)
 
 
 def test_sample_recordings_are_offered_and_open(qtbot, window):

@@ -31,7 +31,6 @@ from PySide6.QtWidgets import (
     QPushButton,
     QScrollArea,
     QSizePolicy,
-    QToolButton,
     QVBoxLayout,
     QWidget,
 )
@@ -50,6 +49,7 @@ from app.gui import theme
 from app.gui.alarm_panel import AlarmPanel
 from app.gui.arm_panel import ArmPanel
 from app.gui.attitude_view import AttitudeView
+from app.gui.banner import MessageBanner as ErrorBanner
 from app.gui.bubble_level import BubbleLevel
 from app.gui.calibration_wizard import CalibrationWizard
 from app.gui.device_bar import DeviceBar
@@ -73,6 +73,7 @@ from app.services.devices import (
     replay_url,
 )
 from app.services.recording_control import recording_cost
+from app.services.replay_control import replay_caption
 from app.services.session import DeviceSession
 from app.services.stream_status import StreamStatus
 
@@ -107,38 +108,6 @@ def format_age(age: timedelta) -> str:
     if seconds < 86400 * 2:
         return f"{seconds / 3600:.0f} h"
     return f"{seconds / 86400:.0f} d"
-
-
-class ErrorBanner(QFrame):
-    """A dismissible one-line message across the top of the window."""
-
-    def __init__(self, parent: QWidget | None = None) -> None:
-        super().__init__(parent)
-        self.setObjectName("errorBanner")
-        self.restyle()
-        theme.notifier().changed.connect(self.restyle)
-        layout = QHBoxLayout(self)
-        layout.setContentsMargins(10, 4, 4, 4)
-        self.label = QLabel()
-        self.label.setWordWrap(True)
-        layout.addWidget(self.label, 1)
-        close = QToolButton()
-        close.setText("✕")
-        close.setAutoRaise(True)
-        close.clicked.connect(self.hide)
-        layout.addWidget(close)
-        self.hide()
-
-    def show_message(self, text: str) -> None:
-        self.label.setText(text)
-        self.show()
-
-    def restyle(self, _theme_name: str = "") -> None:
-        """The current theme's alarm colour."""
-        self.setStyleSheet(
-            f"#errorBanner {{ background: {theme.ALARM_RED}33; border: 1px solid {theme.ALARM_RED};"
-            " border-radius: 4px; }"
-        )
 
 
 class MainWindow(QMainWindow):
@@ -290,6 +259,7 @@ class MainWindow(QMainWindow):
         session.connected.connect(self._on_connected)
         session.disconnected.connect(self._on_disconnected)
         session.error.connect(self.show_error)
+        session.notice.connect(self.show_notice)
         session.deviceMessage.connect(self._on_device_message)
         self.device_panel.selfTestRequested.connect(session.requestSelfTest)
         session.selfTestAvailable.connect(self.device_panel.set_self_test_available)
@@ -524,6 +494,11 @@ class MainWindow(QMainWindow):
         self.banner.show_message(message)
         self.log(message, error=True)
 
+    def show_notice(self, message: str) -> None:
+        """Information on the banner (styled as information, not as an error) and in Messages."""
+        self.banner.show_message(message, "info")
+        self.log(message)
+
     def log(self, message: str, error: bool = False) -> None:
         stamp = time.strftime("%H:%M:%S")
         self.messages.appendPlainText(f"{stamp}  {'ERROR  ' if error else ''}{message}")
@@ -670,7 +645,7 @@ class MainWindow(QMainWindow):
         self.device_bar.select_url(info.url)
         self.device_bar.set_state("streaming", "Streaming")
         self.device_panel.show_info(info)
-        self.status_device.setText(f"{info.name}  ·  {info.odr_hz:.1f} Hz")
+        self.status_device.setText(f"{replay_caption(info) or info.name}  ·  {info.odr_hz:.1f} Hz")
         self.replay_bar.setVisible(is_replay_url(info.url))
         is_sim = urlsplit(info.url).scheme == "sim"
         if is_sim:
@@ -705,6 +680,8 @@ class MainWindow(QMainWindow):
         stalled = status.measured_rate_hz <= 0.0 and status.samples > 0
         lost = f"  ·  lost {status.lost_samples:,}" if status.lost_samples else ""
         text = f"{status.measured_rate_hz:.1f} Hz{lost}"
+        if status.replay is not None and not status.replay.playing:  # not stalled: paused
+            stalled, text = False, "Replay ended" if status.replay.ended else "Replay paused"
         self.device_bar.set_state("stalled" if stalled else "streaming", text)
         self.status_rate.setText(
             f"{status.samples:,} samples  ·  lost {status.lost_samples:,}  ·  "

@@ -437,7 +437,13 @@ class LivePlots(QWidget):
         """
         suffix = path.lower().rsplit(".", 1)[-1]
         if suffix in ("png", "svg"):
-            self._before_scene_paint()  # what the screen shows, in the scene
+            # Every trace from the buffers, whatever the screen shows: a hidden view (a dock
+            # behind another tab) is not kept up to date, and a stretch without data (a seek)
+            # emptied its traces.
+            self._fast = QRegion()
+            if self.resync is not None:
+                self.resync()
+            self._before_scene_paint()  # without a presenter: at least where they scrolled to
         if suffix == "png":
             from pyqtgraph import exporters
 

@@ -1,8 +1,8 @@
 """The whole replayed session at a glance: each accelerometer axis's min-max band over time.
 
 Built from the replay's :class:`~app.core.recording.index.Overview` (a long recording's grows
-while it is indexed in the background). A line marks the position, ticks mark gaps; a click
-asks to go there.
+while it is indexed in the background). A line marks the position, ticks mark gaps, dashed
+lines the recorded alarms and amber ones the bookmarks; a click asks to go there.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from PySide6.QtWidgets import QWidget
 from app.core.recording.index import Overview
 from app.gui import theme
 
-HEIGHT_PX = 46
+HEIGHT_PX = 36
 
 
 class ReplayOverview(pg.PlotWidget):
@@ -26,7 +26,7 @@ class ReplayOverview(pg.PlotWidget):
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.setFixedHeight(HEIGHT_PX)
-        self.setMinimumWidth(260)
+        self.setMinimumWidth(200)
         self.setToolTip("The whole recording: accelerometer x, y, z (min to max). "
                         "Click to go there.")
         self.setMenuEnabled(False)
@@ -47,9 +47,11 @@ class ReplayOverview(pg.PlotWidget):
             self._bands.append(band)
         self.position = pg.InfiniteLine(angle=90, movable=False,
                                         pen=pg.mkPen(theme.TEXT, width=2))
+        self.position.setZValue(10)
         self.addItem(self.position)
         self._gaps: list[pg.InfiniteLine] = []
         self._alarm_marks: list[pg.InfiniteLine] = []
+        self._bookmarks: list[pg.InfiniteLine] = []
         self._duration_s = 0.0
         self.scene().sigMouseClicked.connect(self._on_click)
         self._on_theme_changed()
@@ -63,6 +65,8 @@ class ReplayOverview(pg.PlotWidget):
             high.setPen(pg.mkPen(colour))
             band.setBrush(pg.mkBrush(pg.mkColor(colour).lighter(60)))
         self.position.setPen(pg.mkPen(theme.TEXT, width=2))
+        for line in self._bookmarks:
+            line.setPen(self._bookmark_pen())
 
     def show_overview(self, overview: Overview, duration_s: float,
                       gaps_s: tuple[float, ...] = ()) -> None:
@@ -100,6 +104,25 @@ class ReplayOverview(pg.PlotWidget):
     def alarm_marks(self) -> list[float]:
         """The positions marked as alarms (s from the start)."""
         return [float(line.value()) for line in self._alarm_marks]
+
+    @staticmethod
+    def _bookmark_pen() -> pg.QtGui.QPen:
+        return pg.mkPen(theme.WARN_AMBER, width=2)
+
+    def show_bookmarks(self, positions_s: tuple[float, ...]) -> None:
+        """Mark the replay's bookmarks (s from the start)."""
+        for line in self._bookmarks:
+            self.removeItem(line)
+        self._bookmarks = []
+        for position in positions_s[:200]:
+            line = pg.InfiniteLine(position, angle=90, pen=self._bookmark_pen())
+            line.setZValue(5)  # over the bands, under the position line
+            self.addItem(line)
+            self._bookmarks.append(line)
+
+    def bookmarks(self) -> list[float]:
+        """The positions marked as bookmarks (s from the start)."""
+        return [float(line.value()) for line in self._bookmarks]
 
     def set_duration(self, duration_s: float) -> None:
         if duration_s > 0 and duration_s != self._duration_s:

@@ -50,6 +50,8 @@ class Acquisition:
         self._checked_device: object | None = None
         self.alarms = alarms or AlarmMonitor()
         self._on_alarms = on_alarms
+        self._generation: tuple[object, int] | None = None
+        """A replay and its jump count (seeks, loops) at its last block."""
         self.on_received: Callable[[float, float], None] | None = None
         """Called with (session time of a block's newest sample, host ``time.monotonic()`` when
         the block arrived), from the worker thread: what a clock alignment needs."""
@@ -71,6 +73,15 @@ class Acquisition:
             self._on_message(note.level, note.text)
         if raw is None or not len(raw):
             return 0
+        generation = getattr(device, "last_block_generation", None)
+        if generation is not None:
+            last = self._generation
+            if last is not None and last[0] is device and last[1] != generation and (
+                    device.info is not None):
+                # The replay jumped (a loop back to the start, a seek): time would run
+                # backwards in the buffers, so the views start afresh (drivers/replay.py).
+                self.pipeline.configure(device.info.odr_hz)
+            self._generation = (device, generation)
         self.connection.continue_time_axis(raw)
         if self.on_received is not None:
             self.on_received(float(raw.t_s[-1]), received_s)

@@ -7,8 +7,11 @@ functions do nothing to other devices.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import PurePath
+from typing import NamedTuple
 
 from app.core.alarms import recorded_alarm_events
+from app.core.devices import DeviceInfo
 from app.core.filters import known_parameters
 from app.core.filters.base import OrientationFilter
 from app.core.pipeline import Pipeline
@@ -17,36 +20,77 @@ from drivers.base import Device
 
 COMMANDS = ("play", "pause", "step", "speed", "loop", "seek", "next_gap", "next_bookmark",
             "add_bookmark")
+SEEK_LEAD_IN_S = 10.0
+"""A jump (seek, next gap, next bookmark) replays this much before the new position at once:
+the filter converges on it, a paused replay shows the attitude there, and the plots (10 s
+wide by default) are filled up to it."""
 
 
 class ReplayCommandError(ValueError):
     """A replay command that cannot be carried out (no further gap, an unknown command...)."""
 
 
+class ReplayNotice(ReplayCommandError):
+    """A command with nothing to do (no further gap or bookmark): information, not an error."""
+
+
+class ReplayState(NamedTuple):
+    """Where a replay is, for the transport bar (sent with each stream status)."""
+
+    position_s: float
+    duration_s: float
+    playing: bool
+    """Playing and not at the end."""
+    ended: bool = False
+    """Every sample was delivered and the replay does not loop: Play starts it again."""
+    bookmarks_s: tuple[float, ...] = ()
+    """The bookmarks' positions, s from the start."""
+
+
 def is_replay(device: Device | None) -> bool:
     return getattr(device, "scheme", "") == "replay"
 
 
-def replay_position(device: Device | None) -> tuple[float, float, bool] | None:
-    """(position s, duration s, playing) of a replay; None for any other device."""
+def replay_position(device: Device | None) -> ReplayState | None:
+    """Position, duration, playing, ended and bookmarks of a replay; None for any other
+    device."""
     if not is_replay(device):
         return None
-    return (float(device.position_s), float(device.duration_s),  # type: ignore[union-attr]
-            bool(device.playing))  # type: ignore[union-attr]
+    replay = device  # a drivers.replay.ReplayDevice
+    ended = bool(replay.at_end)  # type: ignore[union-attr]
+    bookmarks = tuple(replay.bookmark_position_s(b)  # type: ignore[union-attr]
+                      for b in replay.bookmarks)  # type: ignore[union-attr]
+    return ReplayState(float(replay.position_s), float(replay.duration_s),  # type: ignore[union-attr]
+                       bool(replay.playing) and not ended,  # type: ignore[union-attr]
+                       ended, bookmarks)
+
+
+def replay_caption(info: DeviceInfo) -> str:
+    """"Replay of FILE" for a replayed recording's device info; "" for any other device."""
+    replay = info.extra.get("replay") if isinstance(info.extra, dict) else None
+    if not isinstance(replay, dict) or not replay.get("path"):
+        return ""
+    return f"Replay of {PurePath(str(replay['path'])).name}"
 
 
 def replay_command(device: Device | None, pipeline: Pipeline, name: str, value: object) -> None:
     """Carry out one of :data:`COMMANDS` on a replay (ignored for other devices).
 
     ``speed`` 0 means as fast as possible; ``seek`` is in seconds from the start. A jump
-    (seek, next gap, next bookmark) starts the views afresh, since time would run backwards.
-    Raises :class:`ReplayCommandError` and the driver's DeviceError or ValueError.
+    (seek, next gap, next bookmark) starts the views afresh, since time would run backwards,
+    with :data:`SEEK_LEAD_IN_S` before the new position (delivered at once, also while
+    paused: the views show the attitude there). ``play`` at the end starts from the beginning.
+    Raises :class:`ReplayCommandError` (:class:`ReplayNotice` when there is nothing to do)
+    and the driver's DeviceError or ValueError.
     """
     if not is_replay(device):
         return
     assert device is not None
     replay = device  # a drivers.replay.ReplayDevice
     if name == "play":
+        if replay.at_end:  # type: ignore[attr-defined]
+            pipeline.configure(replay.info.odr_hz)
+            replay.seek(0.0)  # type: ignore[attr-defined]
         replay.play()
     elif name == "pause":
         replay.pause()
@@ -61,7 +105,7 @@ def replay_command(device: Device | None, pipeline: Pipeline, name: str, value: 
     elif name in ("seek", "next_gap", "next_bookmark"):
         target = _jump_target(replay, name, value)
         pipeline.configure(replay.info.odr_hz)
-        replay.seek(target)
+        replay.seek(target, SEEK_LEAD_IN_S)
     else:
         raise ReplayCommandError(f"unknown replay command {name!r} (known: "
                                  f"{', '.join(COMMANDS)})")
@@ -75,11 +119,11 @@ def _jump_target(replay: object, name: str, value: object) -> float:
         later = [replay.bookmark_position_s(b) for b in replay.bookmarks  # type: ignore[attr-defined]
                  if replay.bookmark_position_s(b) > position + 1e-9]  # type: ignore[attr-defined]
         if not later:
-            raise ReplayCommandError("No further bookmark in this recording.")
+            raise ReplayNotice("No further bookmark in this recording.")
         return min(later)
     later = [p for p in replay.gap_positions_s if p > position + 1e-9]  # type: ignore[attr-defined]
     if not later:
-        raise ReplayCommandError("No further gap in this recording.")
+        raise ReplayNotice("No further gap in this recording.")
     return later[0]
 
 

@@ -24,6 +24,7 @@ class DeviceSession(QObject):
     connected = Signal(object)  # DeviceInfo
     disconnected = Signal(str)
     error = Signal(str)
+    notice = Signal(str)  # information (not an error) for the user
     status = Signal(object)  # StreamStatus
     filterChanged = Signal(str, dict)
     comparisonsChanged = Signal(list)
@@ -95,6 +96,7 @@ class DeviceSession(QObject):
         self.worker.connected.connect(self.connected)
         self.worker.disconnected.connect(self.disconnected)
         self.worker.error.connect(self.error)
+        self.worker.notice.connect(self.notice)
         self.worker.status.connect(self.status)
         self.worker.filterChanged.connect(self.filterChanged)
         self.worker.comparisonsChanged.connect(self.comparisonsChanged)

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 from app.core.devices import BoardStatus
 from app.core.recording.index import Overview
+from app.services.replay_control import ReplayState
 
 RATE_WINDOW_S = 2.0
 
@@ -24,8 +25,8 @@ class StreamStatus:
     gaps: int
     pipeline_load: float
     """Fraction of one core the pipeline used over the last interval."""
-    replay: tuple[float, float, bool] | None = None
-    """For a replay: position (s), duration (s), playing."""
+    replay: ReplayState | None = None
+    """For a replay: position (s), duration (s), playing, ended, bookmarks (s)."""
     overview: Overview | None = None
     """For a replay, when it changed since the last status: the session's envelope."""
     gaps_s: tuple[float, ...] | None = None

@@ -28,6 +28,7 @@ from app.services.health import HealthMonitor, recorded_events_note
 from app.services.recording_control import RecordingControl
 from app.services.replay_control import (
     OverviewTracker,
+    ReplayNotice,
     is_replay,
     recorded_alarm_marks,
     recorded_alarms_note,
@@ -50,6 +51,7 @@ class DeviceWorker(QObject):
     connected = Signal(object)  # DeviceInfo
     disconnected = Signal(str)  # the reason, "" when the user asked
     error = Signal(str)
+    notice = Signal(str)  # information for the user (a request with nothing to do)
     status = Signal(object)  # StreamStatus
     filterChanged = Signal(str, dict)  # name, parameter values
     comparisonsChanged = Signal(list)  # names of the filters running side by side
@@ -366,6 +368,8 @@ class DeviceWorker(QObject):
         next_gap, next_bookmark, add_bookmark."""
         try:
             replay_command(self.connection.device, self.pipeline, name, value)
+        except ReplayNotice as exc:
+            self.notice.emit(str(exc))
         except (DeviceError, ValueError) as exc:
             self.error.emit(str(exc))
 
