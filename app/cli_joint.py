@@ -116,6 +116,8 @@ def _vector(v: np.ndarray) -> str:
 
 
 def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    from app.cli_errors import one_line
+    from app.cli_recording import check_recorded_calibration
     from app.core.joint.alignment import align_to
     from app.core.joint.offline import joint_angle_offline
     from app.core.recording.errors import RecordingError
@@ -133,6 +135,10 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             first, second, config, time_map = session_joint_files(load_session(args.first))
         except RecordingError as exc:
             return _fail(str(exc))
+        except RecursionError:
+            return _fail(f"{args.first}: not a session manifest (its JSON is nested too deeply)")
+        except ValueError as exc:  # an integer of thousands of digits, a NUL in the name
+            return _fail(f"{args.first}: not a session manifest ({one_line(exc)})")
         args.first, args.second = str(first), str(second)
         if config.axes is not None and args.axis.strip().lower() == "auto":
             args.axis = ":".join(",".join(repr(v) for v in a) for a in config.axes)
@@ -157,6 +163,7 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             return _fail(f"{name}: cannot read the recording: {exc.strerror or exc}")
         if len(recording) < 2:
             return _fail(f"{name}: fewer than two samples")
+        check_recorded_calibration(recording.metadata, Path(name))
         calibration = recording.calibration
         blocks.append(recording.sample_block(calibration))
     if time_map is not None:  # B's clock onto A's, as the manifest maps them
