@@ -82,8 +82,13 @@ def _manifest(first: str, second: str, clock: str = "1.0") -> str:
 def build_corpus(root: Path) -> list[Case]:
     """Write the hostile files into ``root`` (an empty folder) and return the cases."""
     root = Path(root)
-    good = root / "good.csv"
-    good.write_text(recording_text(), encoding="utf-8")
+    write_files(root)
+    return corpus_cases(root)
+
+
+def write_files(root: Path) -> None:
+    """The corpus's files (a few hundred kilobytes in all)."""
+    (root / "good.csv").write_text(recording_text(), encoding="utf-8")
     files = {
         "nan": recording_text(poison="nan"),
         "inf": recording_text(poison="inf"),
@@ -104,8 +109,22 @@ def build_corpus(root: Path) -> list[Case]:
     readonly = root / "readonly"
     readonly.mkdir()
     readonly.chmod(stat.S_IRUSR | stat.S_IXUSR)
+
+
+def read_only_folder(root: Path) -> Path:
+    """A folder no file can be created in."""
+    readonly = root / "readonly"
     if os.geteuid() == 0:  # root writes into any folder of its own: take sysfs instead
         readonly = Path("/sys")
+    return readonly
+
+
+def corpus_cases(root: Path) -> list[Case]:
+    """The cases over the files :func:`write_files` put in ``root`` (pure: no file is
+    touched, so that the list can name tests before the files exist)."""
+    root = Path(root)
+    good = root / "good.csv"
+    readonly = read_only_folder(root)
     missing = root / "no-such-folder"
     g = str(good)
     odr_digits = "9" * 400
@@ -167,6 +186,8 @@ def build_corpus(root: Path) -> list[Case]:
             "--out", str(root / "calibration-gyro.json"))
         add(f"--min-span {value}", "calibrate-temperature", g, "--min-span", value,
             "--out", str(root / "temperature-span.json"))
+    add("--seconds x (not a number)", "evaluate", "sim://static", "--seconds", "x")
+    add("--odr x (not a number)", "simulate", "--pty", "--odr", "x")
     add("--block 10**30", "replay", g, "--block", "1" + "0" * 30, "--out",
         str(root / "angles-block.csv"))
     add("--repeats 10**30", "evaluate", "sim://static", "--seconds", "1",
