@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
-from app.cli_errors import CommandError, check_output_folder, finite, one_line
+from app.cli_errors import CommandError, check_output_folder, finite, one_line, printable
 
 if TYPE_CHECKING:
     from app.core.calibration_procedures.offline import OfflineCalibration
@@ -222,7 +222,7 @@ def print_summary(result: OfflineCalibration, label: str, stream: CapturedStream
     print(f"{label}: {result.duration_s:.1f} s, {result.samples} samples at {s.odr_hz:.4g} Hz "
           f"(+-{s.accel_fs_g} g, +-{s.gyro_fs_dps} dps), {result.still_s:.1f} s still", file=out)
     if stream.unique_id:
-        print(f"device {stream.unique_id}", file=out)
+        print(f"device {printable(stream.unique_id)}", file=out)
     print(f"method {result.method}: {len(result.poses)} poses accepted, "
           f"{len(result.rejected)} rejected", file=out)
     print(f"  {'#':>2}  {'face':<4}  {'t (s)':>13}  {'T (degC)':>8}  {'|a|-g (mg)':>10}  "
@@ -366,7 +366,7 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
     if args.save:
         store = ProfileStore(args.profile_dir)
         path = store.save(profile)
-        print(f"saved as the profile of device {stream.unique_id}: {path}", file=out)
+        print(f"saved as the profile of device {printable(stream.unique_id)}: {path}", file=out)
     if args.report is not None:
         write_calibration_report(result, profile, stream, label, Path(args.report))
         print(f"wrote the report {args.report}", file=out)
@@ -580,7 +580,7 @@ def print_temperature(fit, calibration, how: str, label: str, stream: CapturedSt
           f"{fit.still_s:.1f} s still in {fit.segments} segment(s), {fit.poses} pose(s)",
           file=out)
     if stream.unique_id:
-        print(f"device {stream.unique_id}", file=out)
+        print(f"device {printable(stream.unique_id)}", file=out)
     print(f"temperature {fit.temp_min_degc:.2f} to {fit.temp_max_degc:.2f} degC (span "
           f"{fit.span_degc:.2f}), {len(fit.bin_temp_degc)} bins; T0 = "
           f"{calibration.temperature.reference_temp_degc:.2f} degC", file=out)
@@ -730,7 +730,7 @@ def temperature_command(args: argparse.Namespace, out: TextIO | None = None) -> 
             notes=f"inclinometer calibrate-temperature {label}")
     if args.save:
         path = store.save(profile)
-        print(f"saved as the profile of device {stream.unique_id}: {path}", file=out)
+        print(f"saved as the profile of device {printable(stream.unique_id)}: {path}", file=out)
     if args.report is not None:
         write_temperature_report(fit, calibration, profile, stream, label, lines,
                                  Path(args.report))

@@ -52,6 +52,16 @@ def debug_wanted(argv: list[str]) -> bool:
     return "--debug" in argv or os.environ.get(DEBUG_ENV, "").strip() not in ("", "0")
 
 
+_CONTROL = {c: f"\\x{c:02x}" for c in [*range(0x20), 0x7F, *range(0x80, 0xA0)]}
+
+
+def printable(value: object) -> str:
+    """``value`` as text with control characters (terminal escape sequences, carriage
+    returns, newlines) shown as ``\\xNN``: text from a device or a file never drives the
+    terminal."""
+    return str(value).translate(_CONTROL)
+
+
 def one_line(exc: BaseException) -> str:
     """The exception's message on one line, bounded; the kind of error when it has none."""
     if isinstance(exc, RecursionError):
@@ -65,7 +75,7 @@ def one_line(exc: BaseException) -> str:
         text = "a number has more digits than can be read (over 4300)"
     else:
         text = str(exc) or type(exc).__name__
-    text = " ".join(text.split())
+    text = printable(" ".join(text.split()))
     if len(text) > MESSAGE_MAX_CHARS:
         text = text[:MESSAGE_MAX_CHARS] + "..."
     return text

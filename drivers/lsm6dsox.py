@@ -85,6 +85,8 @@ def odr_problem(odr_hz: float) -> str | None:
     """Why ``odr_hz`` cannot be asked of the chip (None when it snaps to an ODR)."""
     if not math.isfinite(odr_hz):
         return "is not a finite number"
+    if odr_hz <= 0.0:
+        return "must be positive (12.5 ... 6667 Hz)"
     if not ODR_SNAP_MIN_HZ <= odr_hz <= ODR_SNAP_MAX_HZ:
         return (f"is outside the LSM6DSOX's rates (12.5 ... 6667 Hz; from "
                 f"{ODR_SNAP_MIN_HZ:g} to {ODR_SNAP_MAX_HZ:g} Hz snap to the nearest)")

@@ -175,3 +175,10 @@ def test_the_real_command_gives_one_line_and_exit_2(corpus):
                               timeout=60, check=False)
         assert_one_line(done.returncode, done.stderr)
     assert not (corpus / "pipe.csv").exists()
+
+
+def test_terminal_escapes_from_a_device_or_a_file_are_shown_not_obeyed():
+    assert cli_errors.printable("SIM-\x1b[31mRED\x1b[0m\x9b") == "SIM-\\x1b[31mRED\\x1b[0m\\x9b"
+    line = cli_errors.one_line(ValueError("bad id '\x1b]0;owned\x07'\r\nsecond line"))
+    assert "\x1b" not in line and "\x07" not in line and "\n" not in line
+    assert line == "bad id '\\x1b]0;owned\\x07' second line"
