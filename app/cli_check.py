@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
-from app.cli_errors import printable
+from app.cli_errors import finite, printable
 
 if TYPE_CHECKING:
     from app.core.devices import BoardStatus
@@ -333,6 +333,7 @@ def check_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     from drivers import lsm6dsox
 
     out = sys.stdout if out is None else out
+    finite(args.seconds, "--seconds", positive=True, maximum=3600.0)
     rates = list(lsm6dsox.ODR_LABELS_HZ.values())
     if args.rates:
         try:

@@ -18,6 +18,8 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from app.cli_errors import finite
+
 EXIT_USAGE = 2
 MAGIC = "# inclinometer-joint 1"
 AXIS_SPREAD_LIMIT_DEG = 2.0
@@ -72,6 +74,7 @@ def record_arm_command(args: argparse.Namespace, out: TextIO | None = None) -> i
     from drivers.errors import DeviceError
 
     out = sys.stdout if out is None else out
+    finite(args.duration, "--duration", positive=True, maximum=86400.0)
     try:
         written = record_arm(args.url, args.duration, Path(args.directory),
                              overwrite=args.force)

@@ -186,6 +186,13 @@ def corpus_cases(root: Path) -> list[Case]:
             "--out", str(root / "calibration-gyro.json"))
         add(f"--min-span {value}", "calibrate-temperature", g, "--min-span", value,
             "--out", str(root / "temperature-span.json"))
+    for value in ("nan", "inf"):
+        add(f"--seconds {value}", "check-board", "/dev/null", "--seconds", value)
+        add(f"--seconds {value}", "evaluate-faults", "sim://static", "--seconds", value)
+        add(f"--clean-seconds {value}", "evaluate-faults", "sim://static",
+            "--clean-seconds", value)
+        add(f"--duration {value}", "record-arm", "sim://arm", str(root / "arm"),
+            "--duration", value)
     add("--seconds x (not a number)", "evaluate", "sim://static", "--seconds", "x")
     add("--odr x (not a number)", "simulate", "--pty", "--odr", "x")
     add("--block 10**30", "replay", g, "--block", "1" + "0" * 30, "--out",
