@@ -469,7 +469,7 @@ def main(argv: list[str] | None = None) -> int:
         command = calibration_command
     if command is not None:
         install_warning_format()
-        return run_guarded(lambda: command(args), argv)
+        return run_guarded(lambda: command(args), argv, debug=args.debug)
     return _start_gui(args)
 
 

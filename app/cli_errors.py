@@ -47,9 +47,9 @@ def _expected() -> tuple[type[BaseException], ...]:
             OverflowError, RecursionError, MemoryError)
 
 
-def debug_wanted(argv: list[str]) -> bool:
-    """True with ``--debug`` among the arguments or ``INCLINOMETER_DEBUG`` set (not 0)."""
-    return "--debug" in argv or os.environ.get(DEBUG_ENV, "").strip() not in ("", "0")
+def debug_wanted(flag: bool = False) -> bool:
+    """True with ``--debug`` (``flag``) or ``INCLINOMETER_DEBUG`` set (not 0)."""
+    return flag or os.environ.get(DEBUG_ENV, "").strip() not in ("", "0")
 
 
 _CONTROL = {c: f"\\x{c:02x}" for c in [*range(0x20), 0x7F, *range(0x80, 0xA0)]}
@@ -117,20 +117,22 @@ def install_warning_format() -> None:
     warnings.showwarning = _show_warning
 
 
-def run_guarded(command: Callable[[], int], argv: list[str]) -> int:
-    """Run ``command``; return its exit status, or the status of the error it raised."""
+def run_guarded(command: Callable[[], int], argv: list[str], debug: bool = False) -> int:
+    """Run ``command``; return its exit status, or the status of the error it raised
+    (``argv`` goes into the crash log; ``debug``: let every error through, traceback and
+    all)."""
     try:
         return command()
     except KeyboardInterrupt:
         print("inclinometer: interrupted", file=sys.stderr)
         return 130
     except _expected() as exc:
-        if debug_wanted(argv):
+        if debug_wanted(debug):
             raise
         print(f"inclinometer: {one_line(exc)}", file=sys.stderr)
         return exc.code if isinstance(exc, CommandError) else EXIT_USAGE
     except Exception as exc:
-        if debug_wanted(argv):
+        if debug_wanted(debug):
             raise
         log = _log_crash(argv)
         where = (f"the traceback is in {log}" if log is not None
