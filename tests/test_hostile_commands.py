@@ -182,3 +182,18 @@ def test_terminal_escapes_from_a_device_or_a_file_are_shown_not_obeyed():
     line = cli_errors.one_line(ValueError("bad id '\x1b]0;owned\x07'\r\nsecond line"))
     assert "\x1b" not in line and "\x07" not in line and "\n" not in line
     assert line == "bad id '\\x1b]0;owned\\x07' second line"
+
+
+@pytest.mark.parametrize("poison", [float("nan"), float("inf"), 1e308])
+def test_the_allan_analysis_refuses_samples_no_sensor_gives(poison):
+    """The window's Allan panel calls the analysis directly: it refuses them too."""
+    import numpy as np
+
+    from app.core.allan import analyse_static
+
+    rng = np.random.default_rng(1)
+    gyro = rng.normal(0.0, 1e-3, (2000, 3))
+    accel = rng.normal(0.0, 1e-2, (2000, 3)) + [0.0, 0.0, 9.81]
+    gyro[700, 1] = poison
+    with pytest.raises(ValueError, match="not finite or beyond"):
+        analyse_static(gyro, accel, 100.0)
