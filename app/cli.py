@@ -14,6 +14,9 @@
                                     a hinge's angle between two sensors (app/cli_joint.py)
 ``inclinometer record-arm URL DIR`` a simulated measuring arm, one recording per sensor
 ``inclinometer --version``
+
+Bad input ends in one line ``inclinometer: MESSAGE`` and exit status 2 (app/cli_errors.py);
+``inclinometer --debug COMMAND ...`` or ``INCLINOMETER_DEBUG=1`` shows Python's tracebacks.
 """
 
 from __future__ import annotations

@@ -208,13 +208,21 @@ def corpus_cases(root: Path) -> list[Case]:
                          ("speed=1e300", "speed=1e300"), ("seed=" + "9" * 400,
                                                           "seed of 400 digits")):
         url = f"sim://static?realtime=0&{option}"
-        add(f"device URL {what}", "record", "--device", url, "--duration", "0.1",
+        add(f"sim URL {what}", "record", "--device", url, "--duration", "0.1",
             str(root / f"rec-{len(cases)}.csv"))
-        add(f"device URL {what}", "diagnose", url, "--seconds", "0.5")
+        add(f"sim URL {what}", "diagnose", url, "--seconds", "0.5")
     for option, what in ((f"odr={odr_digits}", "odr of 400 digits"),
                          ("odr=1e300", "odr=1e300"), ("odr=-5", "odr=-5")):
-        add(f"device URL {what}", "diagnose", f"lsm6dsox://emulated?{option}",
+        add(f"lsm6dsox URL {what}", "diagnose", f"lsm6dsox://emulated?{option}",
             "--seconds", "0.5")
+    for option, what in (("odr=1e9", "odr=1e9"), ("timeout=1e300", "timeout=1e300"),
+                         ("baud=nan", "baud=nan")):
+        add(f"serial URL {what}", "diagnose", f"serial:///dev/null?{option}",
+            "--seconds", "0.5")
+    for option, what in (("start=nan", "start=nan"), ("block=" + "9" * 5000,
+                                                      "block of 5000 digits"),
+                         ("speed=1e300", "speed=1e300")):
+        add(f"replay URL {what}", "diagnose", f"replay://{g}?{option}", "--seconds", "0.5")
     return cases
 
 
