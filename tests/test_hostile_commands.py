@@ -193,7 +193,7 @@ def test_the_allan_analysis_refuses_samples_no_sensor_gives(poison):
 
     rng = np.random.default_rng(1)
     gyro = rng.normal(0.0, 1e-3, (2000, 3))
-    accel = rng.normal(0.0, 1e-2, (2000, 3)) + [0.0, 0.0, 9.81]
+    accel = rng.normal(0.0, 1e-2, (2000, 3)) + np.array([0.0, 0.0, 9.81])
     gyro[700, 1] = poison
     with pytest.raises(ValueError, match="not finite or beyond"):
         analyse_static(gyro, accel, 100.0)
