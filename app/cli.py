@@ -14,6 +14,9 @@
                                     a hinge's angle between two sensors (app/cli_joint.py)
 ``inclinometer record-arm URL DIR`` a simulated measuring arm, one recording per sensor
 ``inclinometer --version``
+
+Bad input ends in one line ``inclinometer: MESSAGE`` and exit status 2 (app/cli_errors.py);
+``inclinometer --debug COMMAND ...`` or ``INCLINOMETER_DEBUG=1`` shows Python's tracebacks.
 """
 
 from __future__ import annotations
@@ -27,17 +30,19 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, NoReturn, TextIO
 
 from app import __version__
 from app.cli_calibration import CALIBRATION_COMMANDS, add_calibration_parsers, calibration_command
 from app.cli_check import add_check_parser, check_command
 from app.cli_diagnose import add_diagnose_parser, diagnose_command
+from app.cli_errors import DEBUG_ENV, EXIT_USAGE, CommandError, check_output_folder, finite
 from app.cli_faults import add_evaluate_faults_parser, evaluate_faults_command
 from app.cli_joint import add_joint_parser, joint_command, record_arm_command
 from app.cli_recording import (
     add_param_argument,
     add_recording_parsers,
+    check_recorded_calibration,
     record_command,
     replay_command,
 )
@@ -54,11 +59,16 @@ if TYPE_CHECKING:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="inclinometer",
         description="LSM6DSOX tilt meter and IMU workbench. With no command, start the GUI.",
     )
     parser.add_argument("--version", action="version", version=f"inclinometer {__version__}")
+    parser.add_argument(
+        "--debug", action="store_true",
+        help=f"show the Python traceback of an error (also {DEBUG_ENV}=1); without it an "
+        "unexpected error prints one line and keeps the traceback in the crash log",
+    )
     parser.add_argument(
         "--device", metavar="URL",
         help="device to connect at start (default: the last one used, or sim://interactive)",
@@ -84,6 +94,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 EVALUATE_DEFAULT_SECONDS = 60.0
+MAX_SECONDS = 86400.0
+"""The longest simulator stream ``evaluate --seconds`` makes (and the longest --skip)."""
+MAX_REPEATS = 1000
 GLOB_CHARACTERS = "*?["
 
 
@@ -174,7 +187,7 @@ def _number(value: float, spec: str) -> str:
     return format(value, spec) if math.isfinite(value) else "-"
 
 
-class _Usage(Exception):
+class _Usage(CommandError):
     """A source or option the command cannot use: message for the user, exit 2."""
 
 
@@ -202,11 +215,13 @@ def _recording_pending(path: Path, label: str, compensate: bool) -> _Pending:
     if not path.is_file():
         raise _Usage(f"{label}: no such file" if not path.exists() else f"{label}: not a file")
     try:
-        _, header = read_metadata(path)
+        metadata, header = read_metadata(path)
     except RecordingError as exc:
         raise _Usage(str(exc)) from None
     except OSError as exc:
         raise _Usage(f"{label}: cannot read the recording: {exc.strerror or exc}") from None
+    if compensate:
+        check_recorded_calibration(metadata, path)
     if not all(column in header for column in REFERENCE_COLUMNS):
         try:  # a broken row says more than the missing columns: read the file for it
             read_recording(path)
@@ -364,10 +379,13 @@ def evaluate_sources(args: argparse.Namespace, out: TextIO | None = None) -> int
     try:
         parameters = parse_filter_parameters(args.params)
         check_parameters_for(parameters, filters)
-        if args.seconds <= 0:
-            raise _Usage("--seconds must be positive")
-        if args.repeats is not None and args.repeats < 1:
-            raise _Usage("--repeats must be at least 1")
+        finite(args.seconds, "--seconds", positive=True, maximum=MAX_SECONDS)
+        if args.skip is not None:
+            finite(args.skip, "--skip", minimum=0.0, maximum=MAX_SECONDS)
+        if args.repeats is not None and not 1 <= args.repeats <= MAX_REPEATS:
+            raise _Usage(f"--repeats must be from 1 to {MAX_REPEATS}")
+        if args.json not in (None, "-"):
+            check_output_folder(args.json, "--json")
         pending = resolve_sources(args.sources, args.seconds, compensate=not args.raw)
         inputs = [item.path for item in pending]
         if args.json not in (None, "-"):
@@ -450,34 +468,35 @@ def scheme_of_recording(source: str) -> bool:
         return False
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage errors as one line (``inclinometer COMMAND: MESSAGE (see --help)``), exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"{self.prog}: {message} (see {self.prog} --help)\n")
+
+
 def main(argv: list[str] | None = None) -> int:
+    """The ``inclinometer`` command: every sub-command runs through the one error path of
+    :mod:`app.cli_errors` (bad input: one line and exit status 2)."""
+    from app.cli_errors import install_warning_format, run_guarded
+
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
     if args.smoke_test is not None:
         from app.gui.smoke_test import run_smoke_test
 
         return run_smoke_test(args.smoke_test or None)
-    if args.command == "devices":
-        return list_devices()
-    if args.command == "evaluate":
-        return evaluate_sources(args)
-    if args.command == "record":
-        return record_command(args)
-    if args.command == "replay":
-        return replay_command(args)
-    if args.command == "simulate":
-        return simulate_command(args)
-    if args.command == "check-board":
-        return check_command(args)
-    if args.command == "diagnose":
-        return diagnose_command(args)
-    if args.command == "evaluate-faults":
-        return evaluate_faults_command(args)
-    if args.command == "joint":
-        return joint_command(args)
-    if args.command == "record-arm":
-        return record_arm_command(args)
-    if args.command in CALIBRATION_COMMANDS:
-        return calibration_command(args)
+    command = _COMMANDS.get(args.command)
+    if command is None and args.command in CALIBRATION_COMMANDS:
+        command = calibration_command
+    if command is not None:
+        install_warning_format()
+        return run_guarded(lambda: command(args), argv, debug=args.debug)
+    return _start_gui(args)
+
+
+def _start_gui(args: argparse.Namespace) -> int:
+    """Check ``--filter`` and ``--device``, then start the window."""
     if args.filter is not None:
         from app.core.filters import FILTERS, ONLINE_FILTERS
 
@@ -502,6 +521,20 @@ def main(argv: list[str] | None = None) -> int:
     from app.gui.application import run_gui
 
     return run_gui(args.device, args.filter)
+
+
+_COMMANDS: dict[str | None, Callable[[argparse.Namespace], int]] = {
+    "devices": lambda args: list_devices(),
+    "evaluate": lambda args: evaluate_sources(args),
+    "record": record_command,
+    "replay": replay_command,
+    "simulate": simulate_command,
+    "check-board": check_command,
+    "diagnose": diagnose_command,
+    "evaluate-faults": evaluate_faults_command,
+    "joint": joint_command,
+    "record-arm": record_arm_command,
+}
 
 
 if __name__ == "__main__":

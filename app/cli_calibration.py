@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
+from app.cli_errors import CommandError, check_output_folder, finite, one_line
 from app.core.devices import printable
 from app.core.safe_output import (
     OutputRefused,
@@ -47,9 +48,11 @@ EXIT_FAILED = 1
 EXIT_USAGE = 2
 DEFAULT_ACCEL_FS_G = 4
 DEFAULT_GYRO_FS_DPS = 250
+MAX_SECONDS = 7 * 86400.0
+"""The longest ``--seconds`` and ``--gyro-seconds`` (a week)."""
 
 
-class _Usage(Exception):
+class _Usage(CommandError):
     """Bad arguments or an unreadable input: exit 2."""
 
 
@@ -186,6 +189,7 @@ def load_stream(args: argparse.Namespace, out: TextIO) -> tuple[CapturedStream, 
             raise _Usage("give a RECORDING or --device URL, not both")
         if args.seconds is None:
             raise _Usage("--device needs --seconds N (how long to read)")
+        finite(args.seconds, "--seconds", positive=True, maximum=MAX_SECONDS)
         print(f"reading {args.seconds:g} s from {args.device} ...", file=out)
         out.flush()
         try:
@@ -311,6 +315,9 @@ def _check_outputs(args: argparse.Namespace) -> None:
     if args.out is None and not args.save and args.report is None:
         raise _Usage("say what to do with the result: --out FILE.json, --save and/or "
                      "--report FILE")
+    for option, value in (("--out", args.out), ("--report", args.report)):
+        if value is not None:
+            check_output_folder(value, option)
     if args.report is not None and Path(args.report).suffix.lower() not in (
             ".html", ".htm", ".pdf"):
         raise _Usage(f"--report {args.report}: name an .html or a .pdf file")
@@ -389,8 +396,7 @@ def calibrate_command(args: argparse.Namespace, out: TextIO | None = None) -> in
     out = sys.stdout if out is None else out
     try:
         _check_outputs(args)
-        if not math.isfinite(args.gyro_seconds) or args.gyro_seconds <= 0:
-            raise _Usage("--gyro-seconds must be positive")
+        finite(args.gyro_seconds, "--gyro-seconds", positive=True, maximum=MAX_SECONDS)
         stream, label = load_stream(args, out)
         _check_save(args, stream, label)
         try:
@@ -530,10 +536,12 @@ def print_allan(result, label: str, stream: CapturedStream, out: TextIO) -> None
 def allan_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """The ``allan`` sub-command: refuses a record that is too short or not at rest."""
     from app.core.allan import analyse_static, figure_support, static_record_problem
+    from app.core.sample_checks import implausible_message, implausible_rows
 
     out = sys.stdout if out is None else out
     try:
         if args.json not in (None, "-"):
+            check_output_folder(args.json, "--json")
             try:
                 check_output(args.json, inputs=_input_paths(args), overwrite=args.overwrite,
                              option="--json")
@@ -543,6 +551,11 @@ def allan_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             out = sys.stderr
         stream, label = load_stream(args, out)
         block = stream.block
+        message = implausible_message(
+            block.t_s, implausible_rows(block.gyro_rad_s, block.accel_m_s2),
+            "the gyroscope or accelerometer")
+        if message is not None:
+            raise _Usage(f"{label}: {message}")
         problem = static_record_problem(block.gyro_rad_s, block.accel_m_s2,
                                         stream.settings.odr_hz)
         if problem:
@@ -565,7 +578,9 @@ def allan_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
         document = {**result.to_json(), "source": label,
                     "device_unique_id": stream.unique_id,
                     "supported": figure_support(result).to_json()}
-        text = json.dumps(document, indent=1, allow_nan=False) + "\n"
+        # A figure the data cannot give (NaN: e.g. too short for the bias instability) is
+        # written as null: JSON has no NaN (docs/calibration-lab.md).
+        text = json.dumps(json_nulls(document), indent=1, allow_nan=False) + "\n"
         if args.json == "-":
             sys.stdout.write(text)
             sys.stdout.flush()
@@ -580,6 +595,17 @@ def allan_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             print(f"wrote {args.json}", file=out)
     out.flush()
     return 0
+
+
+def json_nulls(value: Any) -> Any:
+    """``value`` with every NaN or infinite float (numpy's too) replaced by None."""
+    if isinstance(value, dict):
+        return {key: json_nulls(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_nulls(item) for item in value]
+    if isinstance(value, float | np.floating) and not math.isfinite(float(value)):
+        return None
+    return value
 
 
 # -- calibrate-temperature -------------------------------------------------------------------------
@@ -597,6 +623,10 @@ def _read_base(path: str):
         raise _Usage(f"--base {path}: no such file") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise _Usage(f"--base {path}: not a calibration JSON file ({exc})") from None
+    except RecursionError:
+        raise _Usage(f"--base {path}: not a calibration JSON file (nested too deeply)") from None
+    except ValueError as exc:  # an integer of thousands of digits
+        raise _Usage(f"--base {path}: not a calibration JSON file ({one_line(exc)})") from None
     try:
         calibration = calibration_from_json(document)
     except ValueError as exc:
@@ -735,8 +765,9 @@ def temperature_command(args: argparse.Namespace, out: TextIO | None = None) -> 
     out = sys.stdout if out is None else out
     try:
         _check_outputs(args)
-        if not math.isfinite(args.min_span) or args.min_span <= 0:
-            raise _Usage("--min-span must be a positive number of degC")
+        finite(args.min_span, "--min-span", positive=True, maximum=1000.0)
+        if args.reference_temp is not None:
+            finite(args.reference_temp, "--reference-temp", minimum=-273.15, maximum=1000.0)
         base = base_temp = None
         base_label = ""
         if args.base is not None:

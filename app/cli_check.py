@@ -29,6 +29,8 @@ from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
+from app.cli_errors import finite, printable
+
 if TYPE_CHECKING:
     from app.core.devices import BoardStatus
     from drivers.base import Device
@@ -265,7 +267,8 @@ def check_board(port: str, rates: list[float], seconds: float, self_test: bool,
         return False
     try:
         extra = info.extra
-        print(f"board     {info.name}, firmware {info.firmware}, unique id {info.unique_id}",
+        print(f"board     {printable(info.name)}, firmware {printable(info.firmware)}, "
+              f"unique id {printable(info.unique_id)}",
               file=out)
         print(f"sensor    {info.sensor} (WHO_AM_I 0x{extra.get('who_am_i', 0):02X}), "
               f"{info.odr_hz:g} Hz (label {info.odr_nominal_hz:g}), tick "
@@ -345,6 +348,7 @@ def check_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     from drivers import lsm6dsox
 
     out = sys.stdout if out is None else out
+    finite(args.seconds, "--seconds", positive=True, maximum=3600.0)
     rates = list(lsm6dsox.ODR_LABELS_HZ.values())
     if args.rates:
         try:

@@ -10,7 +10,11 @@ from __future__ import annotations
 import argparse
 import sys
 
+from app.cli_errors import finite
 from app.core.faults import FaultEvent
+
+MAX_SECONDS = 7 * 86400.0
+"""The longest ``--seconds`` (a week of device time)."""
 
 
 def add_diagnose_parser(commands: argparse._SubParsersAction) -> None:
@@ -41,9 +45,8 @@ def diagnose_command(args: argparse.Namespace) -> int:
     from app.services.diagnosis import Diagnosis, diagnose_events
     from drivers.errors import DeviceError
 
-    if args.seconds is not None and not args.seconds > 0:
-        print("inclinometer diagnose: --seconds must be positive", file=sys.stderr)
-        return 2
+    if args.seconds is not None:
+        finite(args.seconds, "--seconds", positive=True, maximum=MAX_SECONDS)
     result = Diagnosis()
     header_done = False
     try:

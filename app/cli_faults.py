@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from app.cli_errors import finite
 from app.core.safe_output import check_output, write_error_message, write_output
 
 if TYPE_CHECKING:
@@ -93,6 +94,10 @@ def add_evaluate_faults_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
 
 
+MAX_SECONDS = 86400.0
+"""The longest stream ``--seconds`` and ``--clean-seconds`` ask for (a day)."""
+
+
 def evaluate_faults_command(args: argparse.Namespace) -> int:
     """Run ``evaluate-faults``; returns the exit status."""
     from app.core.faults.events import CHANNELS
@@ -104,6 +109,11 @@ def evaluate_faults_command(args: argparse.Namespace) -> int:
     )
     from drivers.errors import DeviceError
 
+    for option, value in (("--seconds", args.seconds), ("--onset", args.onset),
+                          ("--clean-seconds", args.clean_seconds)):
+        finite(value, option, minimum=0.0, maximum=MAX_SECONDS)
+    for value in args.sigma:
+        finite(value, "--sigma", positive=True, maximum=1e6)
     settings = FaultEvaluationSettings(
         seconds=args.seconds, onset_s=args.onset, clean_seconds=args.clean_seconds,
         multiples=tuple(args.sigma), channels=tuple(args.channels or CHANNELS),

@@ -18,6 +18,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from app.cli_errors import finite
 from app.core.safe_output import OutputRefused, check_output, write_error_message, write_output
 
 EXIT_USAGE = 2
@@ -79,6 +80,7 @@ def record_arm_command(args: argparse.Namespace, out: TextIO | None = None) -> i
     from drivers.errors import DeviceError
 
     out = sys.stdout if out is None else out
+    finite(args.duration, "--duration", positive=True, maximum=86400.0)
     try:
         written = record_arm(args.url, args.duration, Path(args.directory),
                              overwrite=args.force)
@@ -123,6 +125,8 @@ def _vector(v: np.ndarray) -> str:
 
 
 def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    from app.cli_errors import one_line
+    from app.cli_recording import check_recorded_calibration
     from app.core.joint.alignment import align_to
     from app.core.joint.offline import joint_angle_offline
     from app.core.recording.errors import RecordingError
@@ -142,6 +146,10 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             first, second, config, time_map = session_joint_files(session)
         except RecordingError as exc:
             return _fail(str(exc))
+        except RecursionError:
+            return _fail(f"{args.first}: not a session manifest (its JSON is nested too deeply)")
+        except ValueError as exc:  # an integer of thousands of digits, a NUL in the name
+            return _fail(f"{args.first}: not a session manifest ({one_line(exc)})")
         manifest, args.first, args.second = args.first, str(first), str(second)
         if config.axes is not None and args.axis.strip().lower() == "auto":
             args.axis = ":".join(",".join(repr(v) for v in a) for a in config.axes)
@@ -167,6 +175,7 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             return _fail(f"{name}: cannot read the recording: {exc.strerror or exc}")
         if len(recording) < 2:
             return _fail(f"{name}: fewer than two samples")
+        check_recorded_calibration(recording.metadata, Path(name))
         calibration = recording.calibration
         blocks.append(recording.sample_block(calibration))
     if time_map is not None:  # B's clock onto A's, as the manifest maps them

@@ -155,6 +155,8 @@ def add_recording_parsers(commands: argparse._SubParsersAction) -> None:
     add_param_argument(replay)
 
 
+MAX_BLOCK = 1_000_000
+"""The largest ``replay --block`` (a block is held in memory whole)."""
 WHOLE_FILE_OFFLINE_BYTES = 64 << 20
 """From this size on, ``replay --filter all`` leaves the offline smoothers out (memory)."""
 
@@ -165,6 +167,7 @@ def _error(message: str) -> None:
 
 def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """The ``record`` sub-command."""
+    from app.cli_errors import one_line
     from app.core.alarms import AlarmMonitor, alarms_from_specs
     from app.core.calibration_procedures.profiles import ProfileError, read_profile_file
     from app.core.filters import FILTERS
@@ -203,6 +206,13 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             calibration = read_profile_file(Path(args.calibration)).calibration
         except ProfileError as exc:
             _error(str(exc))
+            return EXIT_USAGE
+        except RecursionError:
+            _error(f"{args.calibration}: not a valid calibration profile: its JSON is nested "
+                   "too deeply to read")
+            return EXIT_USAGE
+        except ValueError as exc:  # an integer of thousands of digits
+            _error(f"{args.calibration}: not a valid calibration profile ({one_line(exc)})")
             return EXIT_USAGE
     target = Path(args.out)
     if args.compress and target.suffix.lower() != ".gz":
@@ -297,6 +307,22 @@ def _data_rate(target: Path, odr_hz: float, reference: bool) -> str:
                                    free_bytes=free).text()
 
 
+def check_recorded_calibration(metadata: dict[str, Any], path: Path) -> None:
+    """CommandError when the recording's ``calibration`` is there but cannot be used: the
+    samples would silently go uncalibrated (``--raw`` says so on purpose)."""
+    from app.cli_errors import CommandError
+    from app.core.recording.format import KEY_CALIBRATION, calibration_from_json
+
+    value = metadata.get(KEY_CALIBRATION)
+    if value is None:
+        return
+    try:
+        calibration_from_json(value)
+    except (ValueError, TypeError, KeyError) as exc:
+        raise CommandError(f"{path}: the recorded calibration is invalid ({exc}); give --raw "
+                           "to use the samples uncalibrated") from None
+
+
 def _recording_path(source: str) -> Path:
     from drivers.replay import recording_path
 
@@ -317,6 +343,7 @@ def load_recording_for_cli(source: str) -> Any:
 
 def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """The ``replay`` sub-command."""
+    from app.cli_errors import check_output_folder, check_regular_file
     from app.core.evaluation import (
         DEFAULT_SKIP_S,
         error_statistics,
@@ -335,9 +362,10 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     from drivers.errors import DeviceUrlError
 
     out = sys.stdout if out is None else out
-    if args.block is not None and args.block < 1:
-        _error("--block must be at least 1")
+    if args.block is not None and not 1 <= args.block <= MAX_BLOCK:
+        _error(f"--block must be from 1 to {MAX_BLOCK}")
         return EXIT_USAGE
+    check_output_folder(args.out, "--out")
     try:
         cli_parameters = parse_filter_parameters(getattr(args, "params", None))
     except ValueError as exc:
@@ -345,6 +373,7 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
         return EXIT_USAGE
     try:
         source_path = _recording_path(args.source)
+        check_regular_file(source_path)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             head = RecordingStream(source_path)
@@ -354,6 +383,8 @@ def replay_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     for warning in caught:
         _error(f"warning: {warning.message}")
     with head:
+        if not args.raw:
+            check_recorded_calibration(head.metadata, source_path)
         recorded_name = Recording(head.metadata, head.header, {}).filter_name
         names = args.filters or [recorded_name or DEFAULT_FILTER]
         if "all" in names and head.file_size() >= WHOLE_FILE_OFFLINE_BYTES:

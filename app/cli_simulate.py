@@ -12,6 +12,8 @@ import sys
 import threading
 from typing import TextIO
 
+from app.cli_errors import CommandError
+
 
 def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
     simulate = commands.add_parser(
@@ -53,6 +55,20 @@ def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
                                "a LOG and a rise of STATUS's fifo_overruns")
 
 
+def check_arguments(args: argparse.Namespace) -> None:
+    """CommandError for a number no board has (before a port is opened)."""
+    from drivers import lsm6dsox
+
+    problem = lsm6dsox.odr_problem(args.odr)
+    if problem is not None:
+        raise CommandError(f"--odr {args.odr:g} {problem}")
+    for option, value, top in (("--baud", args.baud, 100_000_000),
+                               ("--i2c-khz", args.i2c_khz, 100_000),
+                               ("--seed", args.seed, 2**63 - 1)):
+        if not 0 <= value <= top:
+            raise CommandError(f"{option} must be from 0 to {top}")
+
+
 def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
                      stop: threading.Event | None = None) -> int:
     """Run the ``simulate`` sub-command; returns when ``stop`` is set or on Ctrl-C."""
@@ -60,6 +76,7 @@ def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
     if not args.pty:
         print("inclinometer: simulate needs --pty (the only transport so far)", file=sys.stderr)
         return 2
+    check_arguments(args)
     try:
         overruns = frozenset(int(seq) for seq in args.fifo_overrun.split(",") if seq.strip())
     except ValueError:

@@ -75,6 +75,24 @@ def odr_code_for(odr_hz: float) -> int:
     return min(ODR_LABELS_HZ, key=distance)
 
 
+ODR_SNAP_MIN_HZ = 1.0
+ODR_SNAP_MAX_HZ = 8000.0
+"""Requested rates from here to there snap to the nearest ODR; others are refused (1e9 Hz is
+a mistake, not a wish for 6667 Hz)."""
+
+
+def odr_problem(odr_hz: float) -> str | None:
+    """Why ``odr_hz`` cannot be asked of the chip (None when it snaps to an ODR)."""
+    if not math.isfinite(odr_hz):
+        return "is not a finite number"
+    if odr_hz <= 0.0:
+        return "must be positive (12.5 ... 6667 Hz)"
+    if not ODR_SNAP_MIN_HZ <= odr_hz <= ODR_SNAP_MAX_HZ:
+        return (f"is outside the LSM6DSOX's rates (12.5 ... 6667 Hz; from "
+                f"{ODR_SNAP_MIN_HZ:g} to {ODR_SNAP_MAX_HZ:g} Hz snap to the nearest)")
+    return None
+
+
 def real_odr_hz(odr_hz: float) -> float:
     """The untrimmed rate the chip runs at for a label or rate (12.5 -> 13.0208)."""
     return ODR_RATES_HZ[odr_code_for(odr_hz)]

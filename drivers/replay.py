@@ -118,6 +118,8 @@ def _split_url(url: str) -> tuple[Path, dict[str, str]]:
     path_text, _, query = rest.partition("?")
     if not path_text:
         raise DeviceUrlError(f"{url}: no file given; expected replay://PATH")
+    if "\0" in unquote(path_text):
+        raise DeviceUrlError(f"{url!r}: a file name cannot hold a NUL character (%00)")
     path = Path(unquote(path_text))
     if not path.exists() and Path(path_text).exists():
         path = Path(path_text)  # a literal '%' in the name
@@ -137,6 +139,8 @@ def recording_path(url: str) -> Path:
     """The file a ``replay://`` URL names; any other text is taken as a path."""
     if url.lower().startswith(f"{SCHEME}://"):
         return _split_url(url)[0]
+    if "\0" in url:
+        raise DeviceUrlError(f"{url!r}: a file name cannot hold a NUL character")
     return Path(url)
 
 

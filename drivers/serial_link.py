@@ -95,6 +95,8 @@ log = logging.getLogger(__name__)
 
 DEFAULT_HELLO_TIMEOUT_S = 2.0
 """How long the board has to answer HELLO before the port is declared the wrong protocol."""
+MAX_TIMEOUT_S = 3600.0
+"""The longest ``timeout=`` a URL may ask to wait for the board's HELLO."""
 HELLO_RESEND_S = 0.5
 COMMAND_TIMEOUT_S = 1.0
 SELF_TEST_TIMEOUT_S = 3.0
@@ -179,9 +181,9 @@ def parse_link_url(url: str, *, allow_other: bool = False) -> LinkOptions:
         try:
             value = float(text)
         except ValueError:
-            raise fail(f"{key}={text!r} is not a number") from None
+            raise fail(f"{key}={text[:40]!r} is not a number") from None
         if not value > 0 or value == float("inf"):
-            raise fail(f"{key}={text!r} must be a positive number")
+            raise fail(f"{key}={text[:40]!r} must be a positive finite number")
         return value
 
     def choice(key: str, text: str, allowed: list[int], unit: str) -> int:
@@ -210,13 +212,19 @@ def parse_link_url(url: str, *, allow_other: bool = False) -> LinkOptions:
                 raise fail(f"baud={text!r} must be a whole number")
             values["baud"] = int(baud)
         elif key == "odr":
-            values["odr_hz"] = lsm6dsox.odr_label_hz(number(key, text))
+            odr = number(key, text)
+            problem = lsm6dsox.odr_problem(odr)
+            if problem is not None:
+                raise fail(f"odr={text[:40]!r} {problem}")
+            values["odr_hz"] = lsm6dsox.odr_label_hz(odr)
         elif key == "accel_fs":
             values["accel_fs_g"] = choice(key, text, sorted(lsm6dsox.ACCEL_MG_PER_LSB), "g")
         elif key == "gyro_fs":
             values["gyro_fs_dps"] = choice(key, text, sorted(lsm6dsox.GYRO_MDPS_PER_LSB), "dps")
         elif key == "timeout":
             values["hello_timeout_s"] = number(key, text)
+            if values["hello_timeout_s"] > MAX_TIMEOUT_S:
+                raise fail(f"timeout={text[:40]!r} is more than {MAX_TIMEOUT_S:g} s")
         elif key == "sensor":
             if not text.strip().isdigit() or int(text) >= p.MAX_SENSORS:
                 raise fail(f"sensor={text!r}: use a sensor index 0..{p.MAX_SENSORS - 1}")

@@ -155,11 +155,18 @@ def test_every_odr_and_full_scale_opens() -> None:
                     assert block.scale.gyro_rad_s_per_lsb == lsm6dsox.gyro_rad_s_per_lsb(gyro_fs)
 
 
-@pytest.mark.parametrize("asked", [1.0, 100.0, 150.0, 3000.0, 7000.0, 1e6])
+@pytest.mark.parametrize("asked", [1.0, 100.0, 150.0, 3000.0, 7000.0, 8000.0])
 def test_odr_snaps_to_nearest_chip_rate(asked: float) -> None:
     rates = list(lsm6dsox.ODR_LABELS_HZ.values())
     nearest = min(rates, key=lambda r: abs(r - asked))
     assert SimulatedDevice(f"sim://static?odr={asked}").options.odr_nominal_hz == nearest
+
+
+@pytest.mark.parametrize("asked", ["0.5", "8001", "1e6", "1e9", "1e300", "9" * 400])
+def test_an_odr_far_from_any_chip_rate_is_refused_not_clamped(asked: str) -> None:
+    """Issue 36: odr=1e9 used to become 6667 Hz without a word."""
+    with pytest.raises(DeviceUrlError, match=r"odr=.*(outside the LSM6DSOX's rates|finite)"):
+        SimulatedDevice(f"sim://static?odr={asked}")
 
 
 @pytest.mark.parametrize(

@@ -47,6 +47,8 @@ from typing import Any
 
 import numpy as np
 
+from app.core.sample_checks import IMPLAUSIBLE_ABS, implausible_rows
+
 FLICKER_FACTOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
 """0.664: Allan deviation of flicker (bias instability) noise per unit of B."""
 POINTS_PER_DECADE = 10
@@ -332,6 +334,9 @@ def analyse_static(
         raise ValueError(f"{n} samples: record at least a few minutes at rest")
     if method not in METHODS:
         raise ValueError(f"method {method!r}: one of {', '.join(METHODS)}")
+    if np.any(implausible_rows(gyro, accel)):  # NaN, inf, 1e308: NaN figures or overflow
+        raise ValueError("the samples hold values that are not finite or beyond "
+                         f"{IMPLAUSIBLE_ABS:g}: not sensor readings")
     span = math.nan
     regressor = None
     gyro_slopes = accel_slopes = np.zeros(3)

@@ -351,12 +351,22 @@ def evaluate(
     ]
 
 
+def _median_rate(steps: np.ndarray) -> float:
+    """1 / the median time step; ValueError when time does not advance (every ``t`` equal,
+    or going backwards): no rate, no duration, nothing to score against."""
+    step = float(np.median(steps))
+    if not step > 0.0 or not math.isfinite(step):
+        raise ValueError(f"the time column does not advance (median step {step:g} s): the "
+                         "rate and the duration are undefined")
+    return 1.0 / step
+
+
 def stream_summary(stream: SampleBlock) -> dict[str, float]:
     """Duration (s), samples, median rate (Hz) and gaps of a stream."""
     n = len(stream)
     duration = float(stream.t_s[-1] - stream.t_s[0]) if n > 1 else 0.0
     steps = np.diff(stream.t_s)
-    rate = 1.0 / float(np.median(steps)) if len(steps) else math.nan
+    rate = _median_rate(steps) if len(steps) else math.nan
     return {"duration_s": duration, "samples": n, "rate_hz": rate,
             "gaps": int(np.count_nonzero(stream.gap))}
 
@@ -381,7 +391,10 @@ def evaluate_source(
     stream = concatenate_blocks(source.blocks())
     if stream.reference_quat is None:
         raise ValueError(f"{source.label}: the stream has no reference orientation")
-    info = stream_summary(stream)
+    try:
+        info = stream_summary(stream)
+    except ValueError as exc:
+        raise ValueError(f"{source.label}: {exc}") from None
     mask = source.score_mask
     rows = scoring_rows(stream.reference_quat, stream.t_s, skip_s, mask)
     if mask is not None:
@@ -505,7 +518,7 @@ class _StreamFigures:
             self.first = float(piece.t_s[0])
         self.last = float(piece.t_s[-1])
         if math.isnan(self.rate_hz) and len(piece) > 1:  # the first block's median step
-            self.rate_hz = 1.0 / float(np.median(np.diff(piece.t_s)))
+            self.rate_hz = _median_rate(np.diff(piece.t_s))
 
     @property
     def duration_s(self) -> float:

@@ -16,7 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from app.core.faults import FaultDetector, FaultEvent, SensorSpec
+from app.core.recording.errors import RecordingError
 from app.core.recording.reader import Recording, read_recording
+from app.core.sample_checks import implausible_message, implausible_rows
 from app.core.samples import RawBlock, convert_raw_block
 
 DEFAULT_DEVICE_SECONDS = 10.0
@@ -87,6 +89,7 @@ def diagnose_events(
     result.source = source
     if is_recording(source):
         recording = read_recording(source)
+        _refuse_implausible(recording)
         detector = FaultDetector(recording_spec(recording))
         result.detector = detector
         for raw in recording_blocks(recording, seconds):
@@ -99,6 +102,16 @@ def diagnose_events(
         return
     yield from _device_events(source, DEFAULT_DEVICE_SECONDS if seconds is None else seconds,
                               result)
+
+
+def _refuse_implausible(recording: Recording) -> None:
+    """RecordingError for NaN, infinite or absurd samples: the detector's running sums would
+    turn them into NaN statistics or an overflow instead of fault events."""
+    bad = implausible_rows(recording.accel_m_s2, recording.gyro_rad_s)
+    message = implausible_message(recording.t_s, bad, "the accelerometer or gyroscope")
+    if message is not None:
+        raise RecordingError(f"{recording.path or 'the recording'}: {message}",
+                             recording.path)
 
 
 def _is_counts(raw: RawBlock) -> bool:

@@ -87,7 +87,8 @@ class DirectOptions:
 
 
 def _fail(url: str, message: str) -> DeviceUrlError:
-    return DeviceUrlError(f"{url}: {message}")
+    shown = url if len(url) <= 120 else f"{url[:120]}... ({len(url)} chars)"
+    return DeviceUrlError(f"{shown}: {message}")
 
 
 def _int(url: str, key: str, text: str, low: int, high: int) -> int:
@@ -112,9 +113,9 @@ def _positive(url: str, key: str, text: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise _fail(url, f"{key}={text!r} is not a number") from None
+        raise _fail(url, f"{key}={text[:40]!r} is not a number") from None
     if not math.isfinite(value) or value <= 0.0:
-        raise _fail(url, f"{key}={text!r} must be a positive number")
+        raise _fail(url, f"{key}={text[:40]!r} must be a positive number")
     return value
 
 
@@ -141,6 +142,9 @@ def parse_lsm6dsox_url(url: str, overrides: dict[str, object] | None = None) -> 
     options: dict[str, object] = {"bus": bus}
     if "odr" in raw:
         odr = _positive(url, "odr", raw["odr"])
+        problem = lsm6dsox.odr_problem(odr)
+        if problem is not None:
+            raise _fail(url, f"odr={raw['odr'][:40]!r} {problem}")
         options["odr_nominal_hz"] = lsm6dsox.odr_label_hz(odr)
     if "accel_fs" in raw:
         value = _int(url, "accel_fs", raw["accel_fs"], 0, 10**6)

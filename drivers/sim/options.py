@@ -21,6 +21,8 @@ DEFAULT_SEED = 1
 DEFAULT_BLOCK = 256
 DEFAULT_WARMUP_TAU_S = 300.0
 MAX_BLOCK = 1_000_000
+MAX_CLOCK_OFFSET_S = 1e9
+"""31 years: a float64 timestamp still resolves 0.1 us."""
 
 GENERAL_OPTIONS: dict[str, str] = {
     "odr": "Hz, snapped to the nearest LSM6DSOX rate (12.5 ... 6667; 12.5 runs at 13.02)",
@@ -79,16 +81,21 @@ class SimOptions:
 
 
 def _fail(url: str, message: str) -> DeviceUrlError:
-    return DeviceUrlError(f"{url}: {message}")
+    return DeviceUrlError(f"{_shown(url, 120)}: {message}")
+
+
+def _shown(text: str, limit: int = 40) -> str:
+    """``text`` quoted for a message, cut to ``limit`` characters (a 400-digit number)."""
+    return repr(text) if len(text) <= limit else repr(text[:limit]) + f"... ({len(text)} chars)"
 
 
 def _number(url: str, key: str, text: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise _fail(url, f"{key}={text!r} is not a number") from None
+        raise _fail(url, f"{key}={_shown(text)} is not a number") from None
     if not math.isfinite(value):
-        raise _fail(url, f"{key}={text!r} is not a finite number")
+        raise _fail(url, f"{key}={_shown(text)} is not a finite number")
     return value
 
 
@@ -190,8 +197,9 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
     options: dict[str, object] = {"scenario": name}
     if "odr" in raw:
         odr = _number(url, "odr", raw["odr"])
-        if odr <= 0.0:
-            raise _fail(url, f"odr={raw['odr']!r} must be positive (12.5 ... 6667 Hz)")
+        problem = lsm6dsox.odr_problem(odr)
+        if problem is not None:
+            raise _fail(url, f"odr={_shown(raw['odr'])} {problem}")
         options["odr_nominal_hz"] = lsm6dsox.odr_label_hz(odr)
     if "accel_fs" in raw:
         allowed = sorted(lsm6dsox.ACCEL_MG_PER_LSB)
@@ -223,7 +231,12 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
     if "warmup" in raw:
         options["warmup"] = _warmup(url, raw["warmup"])
     if "clock_offset" in raw:
-        options["clock_offset_s"] = _number(url, "clock_offset", raw["clock_offset"])
+        offset = _number(url, "clock_offset", raw["clock_offset"])
+        if not -MAX_CLOCK_OFFSET_S <= offset <= MAX_CLOCK_OFFSET_S:
+            raise _fail(url, f"clock_offset={_shown(raw['clock_offset'])} is out of range "
+                             f"[-{MAX_CLOCK_OFFSET_S:g}, {MAX_CLOCK_OFFSET_S:g}] s (beyond it "
+                             "the timestamps lose the resolution of a sample period)")
+        options["clock_offset_s"] = offset
     if "clock_ppm" in raw:
         ppm = _number(url, "clock_ppm", raw["clock_ppm"])
         if not -10000.0 <= ppm <= 10000.0:
