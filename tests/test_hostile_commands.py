@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 from hostile_corpus import (
+    RATE_HZ,
     corpus_cases,
     pipe_path,
     recording_text,
@@ -116,8 +117,11 @@ def test_allan_json_writes_a_figure_it_cannot_give_as_null(corpus, monkeypatch, 
         return replace(result, gyro=gyro)
 
     monkeypatch.setattr(allan, "analyse_static", with_a_nan)
+    # Allan needs 30 s at rest for a noise density: a still board for 40 s.
+    still = corpus / "still-40s.csv"
+    still.write_text(recording_text(rows=int(40 * RATE_HZ)), encoding="utf-8")
     target = corpus / "allan.json"
-    code, err = run(["allan", str(corpus / "good.csv"), "--json", str(target)], capsys)
+    code, err = run(["allan", str(still), "--json", str(target)], capsys)
     assert code == 0, err
     document = json.loads(target.read_text(encoding="utf-8"))
     density = document["gyro"]["noise_density"]
