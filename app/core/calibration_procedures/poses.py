@@ -155,12 +155,12 @@ def face_tilts(poses: list[CapturedPose]) -> list[FaceTilt]:
 def tilt_reason(tilt: FaceTilt, earlier: bool = False) -> str:
     """The sentence for a pose rejected by :func:`face_tilts`: which face, by how much."""
     if tilt.offsets_known:
-        verb, limit = "is", f"at most {tilt.limit_deg:.1f} deg, the sensor's offsets taken out"
+        verb, limit = "is", f"at most {tilt.limit_deg:.1f}°, the sensor's offsets taken out"
     else:
-        verb, limit = "reads", (f"at most {tilt.limit_deg:.1f} deg while the sensor's offsets "
+        verb, limit = "reads", (f"at most {tilt.limit_deg:.1f}° while the sensor's offsets "
                                 "are not known")
-    head = (f"The {tilt.face} up pose captured earlier {verb} {tilt.tilt_deg:.1f} deg off its "
-            "axis" if earlier else f"{tilt.face} up {verb} {tilt.tilt_deg:.1f} deg off its axis")
+    head = (f"The {tilt.face} up pose captured earlier {verb} {tilt.tilt_deg:.1f}° off its "
+            "axis" if earlier else f"{tilt.face} up {verb} {tilt.tilt_deg:.1f}° off its axis")
     return (f"{head} ({limit}); it is removed. Place the board flat on a face of a box on a "
             f"level table and capture {tilt.face} up again.")
 
