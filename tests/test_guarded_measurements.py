@@ -139,7 +139,7 @@ def test_a_first_face_tilted_3_3_degrees_is_removed_once_its_offsets_are_known()
     assert len(rejected) == 1
     reason = rejected[0].reason
     assert "+z up" in reason and "off its axis" in reason and "captured earlier" in reason
-    angle = float(reason.split(" is ")[1].split(" deg")[0])
+    angle = float(reason.split(" is ")[1].split("°")[0])
     assert angle == pytest.approx(3.3, abs=0.4)
     assert capture.missing_faces == ["+z"] and not capture.enough
 
