@@ -26,7 +26,6 @@ import csv
 import itertools
 import json
 import math
-import mmap
 import os
 import re
 import threading
@@ -40,6 +39,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from app.core.bounded_input import open_regular
 from app.core.calibration import SensorCalibration
 from app.core.recording import fast_csv
 from app.core.recording.compressed import (
@@ -47,13 +47,13 @@ from app.core.recording.compressed import (
     GzipBytes,
     PlainBytes,
     byte_source,
-    decompress_file,
 )
 from app.core.recording.errors import (
     MissingColumnsError,
     NotARecordingError,
     RecordingCorruptError,
     RecordingError,
+    RecordingTooLargeError,
     RecordingVersionError,
     RecordingWarning,
 )
@@ -80,11 +80,17 @@ UNIT_SCALE = ScaleFactors(
 """Recorded values are already SI: ``x * 1.0 + 0.0`` gives each one back bit for bit."""
 PARALLEL_MIN_BYTES = 4 << 20
 """Bodies smaller than this are parsed on one thread."""
-MMAP_MIN_BYTES = 8 << 20
-"""Files at least this large are memory-mapped instead of read into memory."""
+CHUNKED_MIN_BYTES = 8 << 20
+"""Files at least this large (and every compressed one) are read in chunks, never mapped:
+another program may shorten a file while it is read, which a memory map turns into a bus
+error, and the text of a large file need not be in memory all at once."""
+MAX_LOAD_VALUES = 64 << 20
+"""Numbers :func:`read_recording` loads at most (512 MB as float64; an hour at 1 kHz with
+reference columns holds 50 M): a larger recording is refused with
+:class:`RecordingTooLargeError`, and is read in chunks instead by the commands that stream."""
 
-Buffer = bytes | mmap.mmap
-"""The file's bytes: ``bytes``, or a read-only memory map (no ``count``, ``startswith``)."""
+Buffer = bytes | bytearray
+"""The file's bytes."""
 
 OnCorrupt = Literal["raise", "truncate"]
 MAX_HEAD_BYTES = 16 << 20
@@ -301,44 +307,59 @@ class Recording:
 
 
 # -- reading ---------------------------------------------------------------------------------------
-def read_recording(path: str | os.PathLike[str], *, on_corrupt: OnCorrupt = "raise") -> Recording:
+def read_recording(
+    path: str | os.PathLike[str], *, on_corrupt: OnCorrupt = "raise",
+    max_bytes: int | None = None, max_values: int = MAX_LOAD_VALUES,
+) -> Recording:
     """Load a recording file.
 
     Parameters
     ----------
-    path : the CSV file.
+    path : the CSV file (a regular file: a FIFO or a device is refused, never waited on).
     on_corrupt : ``"raise"`` (default): a row that cannot be read raises
         :class:`RecordingCorruptError` (with the line number, and the rows before it in
         ``partial``); ``"truncate"``: keep the rows before it, warn, and set
         :attr:`Recording.corrupt_line`.
+    max_bytes : refuse (:class:`RecordingTooLargeError`) a recording whose text, decompressed,
+        is longer than this; None: no limit but ``max_values``.
+    max_values : refuse a recording of more numbers than this (rows times columns), so memory
+        stays bounded whatever the file (a small ``.csv.gz`` may expand a thousandfold).
 
     Raises
     ------
     RecordingError
-        Subclasses for a foreign file, another version, missing columns or a corrupt row;
-        a plain :class:`RecordingError` when the file cannot be read at all.
+        Subclasses for a foreign file, another version, missing columns, a corrupt row or a
+        recording over the limits; a plain :class:`RecordingError` when the file cannot be
+        read at all (or becomes shorter while it is read).
     """
     path = Path(path)
     try:
-        with open(path, "rb") as handle:
-            if handle.read(2) == GZIP_MAGIC:  # format v1 inside gzip
-                data, truncated = decompress_file(path)
-                recording = parse_recording(data, path, on_corrupt=on_corrupt)
-                if truncated:
-                    message = (f"{path}: the compressed file ends early (the recording was "
-                               "interrupted); everything up to its last complete write was read")
-                    recording.warnings.append(message)
-                    warnings.warn(message, RecordingWarning, stacklevel=2)
-                return recording
-            handle.seek(0)
-            if os.fstat(handle.fileno()).st_size < MMAP_MIN_BYTES:
-                return parse_recording(handle.read(), path, on_corrupt=on_corrupt)
-            # Large files are mapped, not copied: the parser reads the page cache directly.
-            with _map(handle.fileno()) as mapped:
-                return parse_recording(mapped, path, on_corrupt=on_corrupt)
+        with open_regular(path) as handle:
+            size = os.fstat(handle.fileno()).st_size
+            small = handle.read(2) != GZIP_MAGIC and size < CHUNKED_MIN_BYTES
+            if small:
+                handle.seek(0)
+                data = handle.read(CHUNKED_MIN_BYTES)
+                small = len(data) < CHUNKED_MIN_BYTES  # else it grew meanwhile: chunks
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read the recording: {exc.strerror or exc}",
                              path) from exc
+    if not small:
+        from app.core.recording.stream import read_stream  # the stream reads with this module
+
+        return read_stream(path, on_corrupt=on_corrupt, max_bytes=max_bytes,
+                           max_values=max_values)
+    if len(data) < size:
+        raise RecordingError(f"{path}: the file became shorter while it was read (another "
+                             "program is rewriting it); nothing was loaded", path)
+    if max_bytes is not None and len(data) > max_bytes:
+        raise RecordingTooLargeError(
+            f"{path}: the recording is larger than {max_bytes} bytes", path)
+    recording = parse_recording(data, path, on_corrupt=on_corrupt)
+    if len(recording) * len(recording.header) > max_values:
+        raise RecordingTooLargeError(
+            f"{path}: the recording holds more than {max_values} numbers", path)
+    return recording
 
 
 def read_metadata(path: str | os.PathLike[str]) -> tuple[dict[str, Any], tuple[str, ...]]:
@@ -349,7 +370,7 @@ def read_metadata(path: str | os.PathLike[str]) -> tuple[dict[str, Any], tuple[s
 
 def read_head(path: Path) -> tuple[RecordingHead, bytes]:
     """The parsed metadata and header, and the bytes read (at least up to the header)."""
-    with open(path, "rb") as handle:
+    with open_regular(path) as handle:
         return read_head_from(byte_source(handle, path), path)
 
 
@@ -510,7 +531,7 @@ def _bounded(problems: list[str], limit: int = MAX_WARNINGS) -> list[str]:
 def parse_recording(
     data: Buffer, path: Path | None = None, *, on_corrupt: OnCorrupt = "raise"
 ) -> Recording:
-    """:func:`read_recording` on bytes already in memory (or a read-only memory map)."""
+    """:func:`read_recording` on bytes already in memory."""
     if on_corrupt not in ("raise", "truncate"):
         raise ValueError(f"on_corrupt must be 'raise' or 'truncate', not {on_corrupt!r}")
     head = _parse_head(data, path)
@@ -550,14 +571,6 @@ def parse_recording(
 def _warn_all(messages: list[str]) -> None:
     for message in messages:
         warnings.warn(message, RecordingWarning, stacklevel=4)
-
-
-def _map(fileno: int) -> mmap.mmap:
-    """A read-only map of the whole file, its pages read in at once where the OS can."""
-    populate = getattr(mmap, "MAP_POPULATE", 0)
-    if populate and hasattr(mmap, "MAP_SHARED"):
-        return mmap.mmap(fileno, 0, flags=mmap.MAP_SHARED | populate, prot=mmap.PROT_READ)
-    return mmap.mmap(fileno, 0, access=mmap.ACCESS_READ)
 
 
 def _count_lines(data: Buffer, start: int, stop: int) -> int:
@@ -624,7 +637,7 @@ def _parse_fast(
     try:
         return _parse_pieces(data, buf, pieces, pool, header, kinds)
     finally:
-        del buf  # a memory map cannot close while an array points into it
+        del buf
 
 
 _POOL: ThreadPoolExecutor | None = None

@@ -31,10 +31,17 @@ from typing import Any, BinaryIO, TypeVar, overload
 
 import numpy as np
 
+from app.core.bounded_input import open_regular
 from app.core.recording.compressed import GzipBytes, PlainBytes, byte_source
-from app.core.recording.errors import RecordingCorruptError, RecordingError, RecordingWarning
+from app.core.recording.errors import (
+    RecordingCorruptError,
+    RecordingError,
+    RecordingTooLargeError,
+    RecordingWarning,
+)
 from app.core.recording.format import REFERENCE_COLUMNS
 from app.core.recording.reader import (
+    MAX_LOAD_VALUES,
     Recording,
     RecordingHead,
     _count_lines,
@@ -48,6 +55,9 @@ from app.core.samples import RawBlock
 T = TypeVar("T")
 CHUNK_BYTES = 8 << 20
 """Text read and parsed at a time (about 37 k rows of a 6667 Hz recording)."""
+MAX_LINE_BYTES = 16 << 20
+"""A line longer than this is refused (a row takes about 200 bytes): memory stays bounded
+whatever the file holds, ``/dev/zero``-like data or a line a gigabyte long."""
 
 
 @dataclass(slots=True)
@@ -56,13 +66,15 @@ class Chunk:
 
     ``rows`` is a :class:`Recording` of just these rows (the file's metadata and header);
     ``first_row`` the index of its first row in the file, ``offset`` the (decompressed) byte
-    offset where its first line starts and ``line`` that line's number.
+    offset where its first line starts, ``line`` that line's number and ``end`` the offset
+    just after its last line.
     """
 
     rows: Recording
     first_row: int
     offset: int
     line: int
+    end: int = 0
 
     def __len__(self) -> int:
         return len(self.rows)
@@ -81,7 +93,8 @@ class RecordingStream:
         self.path = Path(path)
         self.chunk_bytes = int(CHUNK_BYTES if chunk_bytes is None else chunk_bytes)
         try:
-            self._handle: BinaryIO = open(self.path, "rb")  # noqa: SIM115 (closed in close())
+            self._handle: BinaryIO = open_regular(self.path)  # closed in close()
+            self._size_at_open = os.fstat(self._handle.fileno()).st_size
         except OSError as exc:
             raise RecordingError(f"{self.path}: cannot read the recording: "
                                  f"{exc.strerror or exc}", self.path) from exc
@@ -152,6 +165,11 @@ class RecordingStream:
             more = self._bytes.read(self.chunk_bytes)
             if more and b"\n" not in more:
                 pending.append(more)  # a long line: gather it without copying it twice
+                if sum(len(p) for p in pending) > MAX_LINE_BYTES:
+                    raise RecordingCorruptError(
+                        f"{self.path}: line {line} is longer than {MAX_LINE_BYTES >> 20} MB "
+                        f"(a row takes about 200 bytes): this is not a recording's row; the "
+                        f"{row} row(s) before it are valid", self.path, line)
                 continue
             data = b"".join([*pending, more])
             pending = []
@@ -168,7 +186,7 @@ class RecordingStream:
             # so chunks join; whether any row knows it is for the whole file to say.
             recording._known_reference = self._has_reference_columns
             if rows:
-                yield Chunk(recording, row, offset, line)
+                yield Chunk(recording, row, offset, line, offset + cut)
             if error is not None:
                 bad, message = error
                 at = line + _count_lines(body, 0, bad)
@@ -186,6 +204,10 @@ class RecordingStream:
                 pending.append(tail)
 
     def _end(self, tail: bytes, line: int) -> None:
+        if not self.compressed and self._handle.tell() < self._size_at_open:
+            raise RecordingError(
+                f"{self.path}: the file became shorter while it was read (another program is "
+                f"rewriting it); reading stopped at line {line}", self.path)
         problems = []
         if tail.strip(b" \t\r\n\x00"):
             problems.append(f"{self.path}: line {line}: the last row is incomplete (the "
@@ -198,16 +220,33 @@ class RecordingStream:
             warnings.warn(message, RecordingWarning, stacklevel=3)
 
 
-def read_stream(path: str | os.PathLike[str], *, on_corrupt: str = "raise") -> Recording:
-    """A whole recording read through :class:`RecordingStream` (for compressed files).
+def read_stream(path: str | os.PathLike[str], *, on_corrupt: str = "raise",
+                max_bytes: int | None = None, max_values: int = MAX_LOAD_VALUES) -> Recording:
+    """A whole recording read through :class:`RecordingStream` (compressed or large files).
 
-    Same contract as :func:`~app.core.recording.reader.read_recording`.
+    Same contract as :func:`~app.core.recording.reader.read_recording` (``max_bytes`` counts
+    decompressed text, so a small ``.csv.gz`` that expands a thousandfold is stopped early).
+    Each chunk's columns are copied out of its parse buffers and joined column by column, so
+    memory peaks at the loaded numbers plus one column, not twice them.
     """
     with RecordingStream(path) as stream:
-        parts: list[Recording] = []
+        parts: list[dict[str, np.ndarray]] = []
         corrupt: RecordingCorruptError | None = None
+        values = 0
+        ncols = len(stream.header)
         try:
-            parts.extend(chunk.rows for chunk in stream.chunks())
+            for chunk in prefetched(stream.chunks()):
+                values += len(chunk) * ncols
+                if max_bytes is not None and chunk.end > max_bytes:
+                    raise RecordingTooLargeError(
+                        f"{stream.path}: the recording is larger than {max_bytes} bytes"
+                        + (" when decompressed" if stream.compressed else ""), stream.path)
+                if values > max_values:
+                    raise RecordingTooLargeError(
+                        f"{stream.path}: the recording holds more than {max_values} numbers "
+                        f"(over {chunk.first_row} rows): too large to load at once"
+                        + (" (decompressed)" if stream.compressed else ""), stream.path)
+                parts.append({k: v.copy() for k, v in chunk.rows.columns.items()})
         except RecordingCorruptError as exc:
             corrupt = exc
         recording = concatenate_recordings(stream, parts)
@@ -224,17 +263,22 @@ def read_stream(path: str | os.PathLike[str], *, on_corrupt: str = "raise") -> R
         return recording
 
 
-def concatenate_recordings(stream: RecordingStream, parts: list[Recording]) -> Recording:
-    """One :class:`Recording` of consecutive chunks."""
+def concatenate_recordings(stream: RecordingStream,
+                           parts: list[Recording] | list[dict[str, np.ndarray]]) -> Recording:
+    """One :class:`Recording` of consecutive chunks (:class:`Recording` s, or their columns:
+    those are emptied as they are joined, to free each piece once it is copied)."""
+    tables = [p.columns if isinstance(p, Recording) else p for p in parts]
+    owned = bool(parts) and not isinstance(parts[0], Recording)
     columns: dict[str, np.ndarray] = {}
     for name in stream.header:
-        pieces = [p.columns[name] for p in parts]
+        pieces = [t.pop(name) if owned else t[name] for t in tables]
         if not pieces:
             columns[name] = np.empty(0)
         elif any(p.dtype == object for p in pieces):
             columns[name] = np.concatenate([p.astype(object) for p in pieces])
         else:
             columns[name] = np.concatenate(pieces)
+        del pieces
     return Recording(metadata=stream.metadata, header=stream.header, columns=columns,
                      path=stream.path)
 
