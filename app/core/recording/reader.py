@@ -306,6 +306,98 @@ class Recording:
         return block if calibration is None else calibration.apply(block)
 
 
+# -- time order ------------------------------------------------------------------------------
+GAP_PERIODS = 5.0
+"""A step in ``t`` longer than this many sample periods is lost data: a gap."""
+MAX_JUMPS_NAMED = MAX_WARNINGS
+"""Unmarked jumps named one by one in the warnings (the rest are marked all the same)."""
+
+
+@dataclass(slots=True)
+class TimeCheck:
+    """The time-order rule of format v1, applied to rows as they are read (in chunks too).
+
+    ``t`` must be finite and increase from row to row: the first row that is not after the
+    row before it (NaN, a repeat, a step back) is refused, like a row that cannot be read.
+    A step longer than :data:`GAP_PERIODS` sample periods is lost data: when the file does
+    not mark it, the reader sets ``gap`` on that row (creating the column) and names the line.
+    The period is the recorded device's ``odr_hz``, else the median step of the first rows.
+
+    ``last_t`` carries the previous chunk's last time over; ``jumps`` counts the jumps marked.
+    """
+
+    period_s: float | None = None
+    last_t: float | None = None
+    jumps: int = 0
+
+    @classmethod
+    def for_metadata(cls, metadata: dict[str, Any]) -> TimeCheck:
+        device = metadata.get(KEY_DEVICE)
+        odr = device.get("odr_hz") if isinstance(device, dict) else None
+        if isinstance(odr, int | float) and not isinstance(odr, bool) and \
+                math.isfinite(odr) and odr > 0:
+            return cls(period_s=1.0 / float(odr))
+        return cls()
+
+    def first_out_of_order(self, t: np.ndarray) -> int | None:
+        """Index of the first row whose ``t`` is not finite or not after the row before it
+        (None: all in order). Remembers the last time when all are."""
+        if not len(t):
+            return None
+        before = np.empty_like(t)
+        before[0] = -math.inf if self.last_t is None else self.last_t
+        before[1:] = t[:-1]
+        wrong = np.flatnonzero(~(np.isfinite(t) & (t > before)))
+        if len(wrong):
+            return int(wrong[0])
+        self.last_t = float(t[-1])
+        return None
+
+    def disorder_text(self, t: np.ndarray, row: int) -> str:
+        """Why row ``row`` is refused (for a message that names its line)."""
+        value = float(t[row])
+        before = float(t[row - 1]) if row else self.last_t
+        if not math.isfinite(value):
+            return f"t is {value}: every sample needs a finite time"
+        if before is not None and value == before:
+            return f"t = {value:.9g} repeats the previous row's time (time must increase)"
+        return f"t = {value:.9g} is before the previous row's {before:.9g} (time must increase)"
+
+    def mark_jumps(self, columns: dict[str, np.ndarray],
+                   previous: float | None = None) -> list[tuple[int, str]]:
+        """Set ``gap`` on rows after an unmarked jump; (row, message) for the first few.
+
+        ``t`` must already be in order (:meth:`first_out_of_order`); ``previous`` is the time
+        before the first row (None: the first row starts the file or a seek).
+        """
+        t = columns["t"]
+        if self.period_s is None:
+            steps = np.diff(t[:20_000])
+            if len(steps):
+                self.period_s = float(np.median(steps))
+        if not len(t) or self.period_s is None or self.period_s <= 0:
+            return []
+        steps = np.diff(t, prepend=t[0] if previous is None else previous)
+        rows = np.flatnonzero(steps > GAP_PERIODS * self.period_s)
+        if not len(rows):
+            return []
+        gap = columns.get("gap")
+        if gap is not None and gap.dtype != object:
+            rows = rows[~(np.isfinite(gap[rows]) & (gap[rows] != 0.0))]
+        if not len(rows):
+            return []
+        if gap is None or gap.dtype == object:
+            gap = columns["gap"] = np.zeros(len(t))
+        gap[rows] = 1.0
+        named = []
+        for row in rows[:max(0, MAX_JUMPS_NAMED - self.jumps)].tolist():
+            step = float(steps[row])
+            named.append((row, f"t jumps by {step:.6g} s ({step / self.period_s:.0f} sample "
+                               "periods) with no gap mark; the row is marked as a gap"))
+        self.jumps += len(rows)
+        return named
+
+
 # -- reading ---------------------------------------------------------------------------------------
 def read_recording(
     path: str | os.PathLike[str], *, on_corrupt: OnCorrupt = "raise",
@@ -549,8 +641,19 @@ def parse_recording(
         dropped = True
     kinds = np.array([_kind(name) for name in head.header], dtype=np.int8)
     parse = _parse_slow if data.find(b'"', head.body_start, stop) >= 0 else _parse_fast
-    parsed = parse(data, head.body_start, stop, head.header, kinds)
-    columns, rows, error = parsed
+    columns, rows, error, offsets = parse(data, head.body_start, stop, head.header, kinds)
+    clock = TimeCheck.for_metadata(head.metadata)
+    bad = clock.first_out_of_order(columns["t"])
+    if bad is not None:  # before any row the parser could not read
+        error = (int(offsets[bad]), clock.disorder_text(columns["t"], bad))
+        columns = {name: values[:bad] for name, values in columns.items()}
+        rows = bad
+    named = clock.mark_jumps(columns)
+    for row, text in named:
+        line = _count_lines(data, 0, int(offsets[row])) + 1
+        problems.append(f"{where}line {line}: {text}")
+    if clock.jumps > len(named):
+        problems.append(f"{where}{clock.jumps} unmarked jumps in t in all were marked as gaps")
     recording = Recording(
         metadata=head.metadata, header=head.header, columns=columns, path=path,
         warnings=problems, dropped_partial_row=dropped, comments=head.comments,
@@ -595,8 +698,9 @@ _NUMBER = re.compile(
     r"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)", re.IGNORECASE
 )
 
-_Parsed = tuple[dict[str, np.ndarray], int, tuple[int, str] | None]
-"""(columns, rows kept, (byte offset of the bad line, message) or None)."""
+_Parsed = tuple[dict[str, np.ndarray], int, tuple[int, str] | None, np.ndarray]
+"""(columns, rows kept, (byte offset of the bad line, message) or None, each kept row's byte
+offset)."""
 
 
 def _error_text(fields: list[str], code: int, column: int, header: tuple[str, ...]) -> str:
@@ -707,7 +811,7 @@ def _parse_pieces(
                 [_line_fields(data, int(o))[col].strip() for o in offsets.tolist()], dtype=object)
         else:
             columns[name] = table[col]
-    return columns, int(offsets.shape[0]), error
+    return columns, int(offsets.shape[0]), error, offsets
 
 
 def _parse_slow(
@@ -720,6 +824,7 @@ def _parse_slow(
     error = None
     offset = start
     rows = 0
+    row_offsets: list[int] = []
     while offset < stop:
         end = data.find(b"\n", offset)
         line_offset, offset = offset, end + 1
@@ -757,6 +862,7 @@ def _parse_slow(
             break
         for col, value in enumerate(values):
             cells[col].append(value)
+        row_offsets.append(line_offset)
         rows += 1
     columns: dict[str, np.ndarray] = {}
     for col, name in enumerate(header):
@@ -764,4 +870,4 @@ def _parse_slow(
             columns[name] = np.array([str(v) for v in cells[col]], dtype=object)
         else:
             columns[name] = np.array(cells[col], dtype=np.float64)
-    return columns, rows, error
+    return columns, rows, error, np.array(row_offsets, dtype=np.int64)

@@ -41,9 +41,11 @@ from app.core.recording.errors import (
 )
 from app.core.recording.format import REFERENCE_COLUMNS
 from app.core.recording.reader import (
+    MAX_JUMPS_NAMED,
     MAX_LOAD_VALUES,
     Recording,
     RecordingHead,
+    TimeCheck,
     _count_lines,
     _kind,
     _parse_fast,
@@ -108,6 +110,7 @@ class RecordingStream:
         self._kinds = np.array([_kind(name) for name in self.head.header], dtype=np.int8)
         self.warnings: list[str] = list(self.head.warnings)
         self._has_reference_columns = all(c in self.head.header for c in REFERENCE_COLUMNS)
+        self._clock = TimeCheck.for_metadata(self.head.metadata)
 
     def _read_head(self) -> RecordingHead:
         head, data = read_head_from(self._bytes, self.path)
@@ -159,6 +162,9 @@ class RecordingStream:
             self._bytes.seek(offset)
             carry = b""
         line = self.head.header_line + 1 if line is None else line
+        clock = self._clock if first_row == 0 else TimeCheck(self._clock.period_s)
+        clock.last_t = None
+        clock.jumps = 0
         row = first_row
         pending: list[bytes] = [carry] if carry else []
         while True:
@@ -179,7 +185,21 @@ class RecordingStream:
                 return
             body = data[:cut]
             parse = _parse_slow if b'"' in body else _parse_fast
-            columns, rows, error = parse(body, 0, cut, self.head.header, self._kinds)
+            columns, rows, error, offsets = parse(body, 0, cut, self.head.header, self._kinds)
+            previous = clock.last_t
+            bad = clock.first_out_of_order(columns["t"])
+            if bad is not None:  # refused like a row that cannot be read, before any such
+                error = (int(offsets[bad]), clock.disorder_text(columns["t"], bad))
+                columns = {name: values[:bad] for name, values in columns.items()}
+                rows = bad
+            counted = clock.jumps
+            for at_row, text in clock.mark_jumps(columns, previous):
+                self._warn(f"{self.path}: line "
+                           f"{line + _count_lines(body, 0, int(offsets[at_row]))}: {text}")
+            if clock.jumps > counted and clock.jumps > MAX_JUMPS_NAMED and \
+                    counted <= MAX_JUMPS_NAMED:
+                self._warn(f"{self.path}: more unmarked jumps in t follow; each is marked as "
+                           "a gap")
             recording = Recording(metadata=self.head.metadata, header=self.head.header,
                                   columns=columns, path=self.path)
             # Every chunk carries the reference columns the header has (NaN where unknown),
@@ -202,6 +222,10 @@ class RecordingStream:
                 return
             if tail:
                 pending.append(tail)
+
+    def _warn(self, message: str) -> None:
+        self.warnings.append(message)
+        warnings.warn(message, RecordingWarning, stacklevel=4)
 
     def _end(self, tail: bytes, line: int) -> None:
         if not self.compressed and self._handle.tell() < self._size_at_open:
@@ -270,7 +294,12 @@ def concatenate_recordings(stream: RecordingStream,
     tables = [p.columns if isinstance(p, Recording) else p for p in parts]
     owned = bool(parts) and not isinstance(parts[0], Recording)
     columns: dict[str, np.ndarray] = {}
-    for name in stream.header:
+    names = list(stream.header)
+    if "gap" not in names and any("gap" in t for t in tables):  # marked by the time check
+        names.append("gap")
+        for t, part in zip(tables, parts, strict=True):
+            t.setdefault("gap", np.zeros(len(part["t"] if isinstance(part, dict) else part)))
+    for name in names:
         pieces = [t.pop(name) if owned else t[name] for t in tables]
         if not pieces:
             columns[name] = np.empty(0)
