@@ -31,7 +31,7 @@ import re
 import threading
 import warnings
 from collections import Counter
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -88,6 +88,11 @@ MAX_LOAD_VALUES = 64 << 20
 """Numbers :func:`read_recording` loads at most (512 MB as float64; an hour at 1 kHz with
 reference columns holds 50 M): a larger recording is refused with
 :class:`RecordingTooLargeError`, and is read in chunks instead by the commands that stream."""
+
+read_chunked: Callable[..., Recording] | None = None
+"""How :func:`read_recording` reads a large or compressed file:
+:func:`app.core.recording.stream.read_stream`, installed here when that module loads (the
+package imports it). The stream parses with this module, so this module cannot import it."""
 
 Buffer = bytes | bytearray
 """The file's bytes."""
@@ -437,10 +442,10 @@ def read_recording(
         raise RecordingError(f"{path}: cannot read the recording: {exc.strerror or exc}",
                              path) from exc
     if not small:
-        from app.core.recording.stream import read_stream  # the stream reads with this module
-
-        return read_stream(path, on_corrupt=on_corrupt, max_bytes=max_bytes,
-                           max_values=max_values)
+        if read_chunked is None:  # pragma: no cover (the package installs it)
+            raise RuntimeError("app.core.recording.stream was not imported")
+        return read_chunked(path, on_corrupt=on_corrupt, max_bytes=max_bytes,
+                            max_values=max_values)
     if len(data) < size:
         raise RecordingError(f"{path}: the file became shorter while it was read (another "
                              "program is rewriting it); nothing was loaded", path)

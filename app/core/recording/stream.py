@@ -32,6 +32,7 @@ from typing import Any, BinaryIO, TypeVar, overload
 import numpy as np
 
 from app.core.bounded_input import open_regular
+from app.core.recording import reader as _reader
 from app.core.recording.compressed import GzipBytes, PlainBytes, byte_source
 from app.core.recording.errors import (
     RecordingCorruptError,
@@ -285,6 +286,9 @@ def read_stream(path: str | os.PathLike[str], *, on_corrupt: str = "raise",
         recording.dropped_partial_row = any("incomplete" in w for w in recording.warnings)
         recording.comments = list(stream.head.comments)
         return recording
+
+
+_reader.read_chunked = read_stream  # read_recording's path for large and compressed files
 
 
 def concatenate_recordings(stream: RecordingStream,
