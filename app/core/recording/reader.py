@@ -94,6 +94,10 @@ read_chunked: Callable[..., Recording] | None = None
 :func:`app.core.recording.stream.read_stream`, installed here when that module loads (the
 package imports it). The stream parses with this module, so this module cannot import it."""
 
+MAX_LOAD_BYTES = 2 << 30
+"""Text (decompressed) :func:`read_recording` reads at most: ``max_values`` stops real rows
+earlier; this stops a file of blank lines."""
+
 Buffer = bytes | bytearray
 """The file's bytes."""
 
@@ -406,7 +410,7 @@ class TimeCheck:
 # -- reading ---------------------------------------------------------------------------------------
 def read_recording(
     path: str | os.PathLike[str], *, on_corrupt: OnCorrupt = "raise",
-    max_bytes: int | None = None, max_values: int = MAX_LOAD_VALUES,
+    max_bytes: int | None = MAX_LOAD_BYTES, max_values: int = MAX_LOAD_VALUES,
 ) -> Recording:
     """Load a recording file.
 
@@ -418,7 +422,7 @@ def read_recording(
         ``partial``); ``"truncate"``: keep the rows before it, warn, and set
         :attr:`Recording.corrupt_line`.
     max_bytes : refuse (:class:`RecordingTooLargeError`) a recording whose text, decompressed,
-        is longer than this; None: no limit but ``max_values``.
+        is longer than this (None: no limit but ``max_values``; blank lines count here only).
     max_values : refuse a recording of more numbers than this (rows times columns), so memory
         stays bounded whatever the file (a small ``.csv.gz`` may expand a thousandfold).
 
@@ -771,7 +775,11 @@ def _parse_pieces(
     ncols = len(kinds)
 
     def lines(piece: tuple[int, int]) -> int:
-        return int(fast_csv.count_lines(buf, piece[0], piece[1]))
+        # Room for the lines that are not blank, and never more than the bytes can hold: a
+        # kept row has its required fields, ncols - 1 commas and a line end (room for every
+        # line asked 700 MB for 8 MB of line ends).
+        return min(int(fast_csv.count_rows(buf, piece[0], piece[1])),
+                   (piece[1] - piece[0]) // (ncols + len(REQUIRED_COLUMNS)) + 1)
 
     counts = list(pool.map(lines, pieces)) if pool is not None else [lines(p) for p in pieces]
     first_rows = [0, *itertools.accumulate(counts)]

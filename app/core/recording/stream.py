@@ -43,6 +43,7 @@ from app.core.recording.errors import (
 from app.core.recording.format import REFERENCE_COLUMNS
 from app.core.recording.reader import (
     MAX_JUMPS_NAMED,
+    MAX_LOAD_BYTES,
     MAX_LOAD_VALUES,
     Recording,
     RecordingHead,
@@ -69,15 +70,13 @@ class Chunk:
 
     ``rows`` is a :class:`Recording` of just these rows (the file's metadata and header);
     ``first_row`` the index of its first row in the file, ``offset`` the (decompressed) byte
-    offset where its first line starts, ``line`` that line's number and ``end`` the offset
-    just after its last line.
+    offset where its first line starts and ``line`` that line's number.
     """
 
     rows: Recording
     first_row: int
     offset: int
     line: int
-    end: int = 0
 
     def __len__(self) -> int:
         return len(self.rows)
@@ -150,10 +149,11 @@ class RecordingStream:
         self.close()
 
     def chunks(self, offset: int | None = None, first_row: int = 0,
-               line: int | None = None) -> Iterator[Chunk]:
+               line: int | None = None, max_bytes: int | None = None) -> Iterator[Chunk]:
         """The rows from the body's start, or from a line start at ``offset`` (decompressed
         bytes, as :attr:`Chunk.offset` gives; ``first_row`` and ``line`` then say which row
-        and line that is). Warns (:class:`RecordingWarning`) for an incomplete last row."""
+        and line that is). Warns (:class:`RecordingWarning`) for an incomplete last row.
+        With ``max_bytes``, raises :class:`RecordingTooLargeError` past that offset."""
         if offset is None or offset == self.head.body_start:
             offset = self.head.body_start
             line = self.head.header_line + 1
@@ -170,18 +170,21 @@ class RecordingStream:
         pending: list[bytes] = [carry] if carry else []
         while True:
             more = self._bytes.read(self.chunk_bytes)
+            ended = not more
             if more and b"\n" not in more:
                 pending.append(more)  # a long line: gather it without copying it twice
-                if sum(len(p) for p in pending) > MAX_LINE_BYTES:
+                if sum(len(p) for p in pending) <= MAX_LINE_BYTES:
+                    continue
+                if b"\n" not in pending[0]:  # bounded memory, whatever the file holds
                     raise RecordingCorruptError(
                         f"{self.path}: line {line} is longer than {MAX_LINE_BYTES >> 20} MB "
                         f"(a row takes about 200 bytes): this is not a recording's row; the "
                         f"{row} row(s) before it are valid", self.path, line)
-                continue
+                more = b""  # in pending already: parse the lines before the long one first
             data = b"".join([*pending, more])
             pending = []
             cut = data.rfind(b"\n") + 1
-            if not more and not cut:  # the end: only an unfinished row, if anything, is left
+            if ended and not cut:  # the end: only an unfinished row, if anything, is left
                 self._end(data, line)
                 return
             body = data[:cut]
@@ -207,7 +210,7 @@ class RecordingStream:
             # so chunks join; whether any row knows it is for the whole file to say.
             recording._known_reference = self._has_reference_columns
             if rows:
-                yield Chunk(recording, row, offset, line, offset + cut)
+                yield Chunk(recording, row, offset, line)
             if error is not None:
                 bad, message = error
                 at = line + _count_lines(body, 0, bad)
@@ -217,8 +220,12 @@ class RecordingStream:
             line += _count_lines(body, 0, cut)
             row += rows
             offset += cut
+            if max_bytes is not None and offset > max_bytes:
+                raise RecordingTooLargeError(
+                    f"{self.path}: the recording is larger than {max_bytes} bytes"
+                    + (" when decompressed" if self.compressed else ""), self.path)
             tail = data[cut:]
-            if not more:
+            if ended:
                 self._end(tail, line)
                 return
             if tail:
@@ -246,7 +253,8 @@ class RecordingStream:
 
 
 def read_stream(path: str | os.PathLike[str], *, on_corrupt: str = "raise",
-                max_bytes: int | None = None, max_values: int = MAX_LOAD_VALUES) -> Recording:
+                max_bytes: int | None = MAX_LOAD_BYTES,
+                max_values: int = MAX_LOAD_VALUES) -> Recording:
     """A whole recording read through :class:`RecordingStream` (compressed or large files).
 
     Same contract as :func:`~app.core.recording.reader.read_recording` (``max_bytes`` counts
@@ -260,12 +268,8 @@ def read_stream(path: str | os.PathLike[str], *, on_corrupt: str = "raise",
         values = 0
         ncols = len(stream.header)
         try:
-            for chunk in prefetched(stream.chunks()):
+            for chunk in prefetched(stream.chunks(max_bytes=max_bytes)):
                 values += len(chunk) * ncols
-                if max_bytes is not None and chunk.end > max_bytes:
-                    raise RecordingTooLargeError(
-                        f"{stream.path}: the recording is larger than {max_bytes} bytes"
-                        + (" when decompressed" if stream.compressed else ""), stream.path)
                 if values > max_values:
                     raise RecordingTooLargeError(
                         f"{stream.path}: the recording holds more than {max_values} numbers "
