@@ -114,6 +114,7 @@ class RecordingStream:
         self.warnings: list[str] = list(self.head.warnings)
         self._has_reference_columns = all(c in self.head.header for c in REFERENCE_COLUMNS)
         self._clock = TimeCheck.for_metadata(self.head.metadata)
+        self._told: set[str] = set()
 
     def _read_head(self) -> RecordingHead:
         head, data = read_head_from(self._bytes, self.path)
@@ -235,6 +236,10 @@ class RecordingStream:
                 pending.append(tail)
 
     def _warn(self, message: str) -> None:
+        """Warn once per stream (a replay reads its file again on every loop and seek)."""
+        if message in self._told or len(self._told) > 2 * MAX_JUMPS_NAMED:
+            return
+        self._told.add(message)
         self.warnings.append(message)
         warnings.warn(message, RecordingWarning, stacklevel=4)
 
