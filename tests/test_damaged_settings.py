@@ -156,3 +156,26 @@ def test_the_window_starts_on_a_damaged_measurement_log(qtbot, tmp_path, monkeyp
         assert not log_path.exists() and len(window.log_panel.log) == 0
     finally:
         window.close()
+
+
+@pytest.mark.parametrize("damage", ["nested 100000 deep", "an integer of 5000 digits"])
+def test_the_window_connects_with_a_damaged_calibration_profile(qtbot, tmp_path, damage):
+    """A profile is left where it is (profiles are never changed by reading: the message says
+    so); the device runs uncalibrated and the window says why."""
+    from app.core.calibration_procedures.profiles import ProfileStore
+    from drivers.sim.error_model import unique_id_for_seed
+
+    path = ProfileStore().path_for(unique_id_for_seed(1))  # the device DEVICE opens
+    assert str(tmp_path) in str(path)
+    path.parent.mkdir(parents=True)
+    path.write_bytes(LOG_DAMAGE[damage])
+    window = start(qtbot, tmp_path / "settings.ini")
+    try:
+        qtbot.waitUntil(lambda: "Calibration profile not loaded" in window.messages.toPlainText(),
+                        timeout=TIMEOUT_MS)
+        text = window.messages.toPlainText()
+        assert ("nested more than" in text) if "nested" in damage else ("5000 digits" in text)
+        assert "left untouched" in text and path.read_bytes() == LOG_DAMAGE[damage]
+        assert window.status_calibration.text() == "Uncalibrated"
+    finally:
+        window.close()
