@@ -778,8 +778,9 @@ def _parse_pieces(
         # Room for the lines that are not blank, and never more than the bytes can hold: a
         # kept row has its required fields, ncols - 1 commas and a line end (room for every
         # line asked 700 MB for 8 MB of line ends).
-        return min(int(fast_csv.count_rows(buf, piece[0], piece[1])),
-                   (piece[1] - piece[0]) // (ncols + len(REQUIRED_COLUMNS)) + 1)
+        most = (piece[1] - piece[0]) // (ncols + len(REQUIRED_COLUMNS)) + 1
+        lines = int(fast_csv.count_lines(buf, piece[0], piece[1]))  # the fast count first
+        return lines if lines <= most else min(most, int(fast_csv.count_rows(buf, *piece)))
 
     counts = list(pool.map(lines, pieces)) if pool is not None else [lines(p) for p in pieces]
     first_rows = [0, *itertools.accumulate(counts)]

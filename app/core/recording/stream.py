@@ -267,26 +267,18 @@ def read_stream(path: str | os.PathLike[str], *, on_corrupt: str = "raise",
 
     Same contract as :func:`~app.core.recording.reader.read_recording` (``max_bytes`` counts
     decompressed text, so a small ``.csv.gz`` that expands a thousandfold is stopped early).
-    Each chunk's columns are copied out of its parse buffers and joined column by column, so
-    memory peaks at the loaded numbers plus one column, not twice them.
+    Each chunk's numbers go straight into one table reserved for ``max_values`` numbers: only
+    the pages written become memory, so memory is the numbers loaded plus one chunk.
     """
     with RecordingStream(path, chunk_bytes=WHOLE_CHUNK_BYTES) as stream:
-        parts: list[dict[str, np.ndarray]] = []
+        loaded = _Loaded(stream, max_values)
         corrupt: RecordingCorruptError | None = None
-        values = 0
-        ncols = len(stream.header)
         try:
-            for chunk in stream.chunks(max_bytes=max_bytes):
-                values += len(chunk) * ncols
-                if values > max_values:
-                    raise RecordingTooLargeError(
-                        f"{stream.path}: the recording holds more than {max_values} numbers "
-                        f"(over {chunk.first_row} rows): too large to load at once"
-                        + (" (decompressed)" if stream.compressed else ""), stream.path)
-                parts.append({k: v.copy() for k, v in chunk.rows.columns.items()})
+            for chunk in prefetched(stream.chunks(max_bytes=max_bytes)):
+                loaded.add(chunk)
         except RecordingCorruptError as exc:
             corrupt = exc
-        recording = concatenate_recordings(stream, parts)
+        recording = loaded.recording()
         recording.warnings = list(stream.warnings)
         if corrupt is not None:
             if on_corrupt == "raise":
@@ -303,29 +295,58 @@ def read_stream(path: str | os.PathLike[str], *, on_corrupt: str = "raise",
 _reader.read_chunked = read_stream  # read_recording's path for large and compressed files
 
 
-def concatenate_recordings(stream: RecordingStream,
-                           parts: list[Recording] | list[dict[str, np.ndarray]]) -> Recording:
-    """One :class:`Recording` of consecutive chunks (:class:`Recording` s, or their columns:
-    those are emptied as they are joined, to free each piece once it is copied)."""
-    tables = [p.columns if isinstance(p, Recording) else p for p in parts]
-    owned = bool(parts) and not isinstance(parts[0], Recording)
-    columns: dict[str, np.ndarray] = {}
-    names = list(stream.header)
-    if "gap" not in names and any("gap" in t for t in tables):  # marked by the time check
-        names.append("gap")
-        for t, part in zip(tables, parts, strict=True):
-            t.setdefault("gap", np.zeros(len(part["t"] if isinstance(part, dict) else part)))
-    for name in names:
-        pieces = [t.pop(name) if owned else t[name] for t in tables]
-        if not pieces:
-            columns[name] = np.empty(0)
-        elif any(p.dtype == object for p in pieces):
-            columns[name] = np.concatenate([p.astype(object) for p in pieces])
-        else:
-            columns[name] = np.concatenate(pieces)
-        del pieces
-    return Recording(metadata=stream.metadata, header=stream.header, columns=columns,
-                     path=stream.path)
+class _Loaded:
+    """The rows of consecutive chunks, gathered for one :class:`Recording`.
+
+    Numbers go into a (columns, rows) table reserved at once for ``max_values`` (virtual
+    memory: pages never written cost nothing), so nothing is copied twice and the heap does
+    not keep the pieces of a join. Text cells (unknown columns) and a ``gap`` column the time
+    check added are kept per chunk and placed at the end.
+    """
+
+    def __init__(self, stream: RecordingStream, max_values: int) -> None:
+        self.stream = stream
+        self.names = list(stream.header)
+        self.max_values = max_values
+        self.capacity = max_values // max(len(self.names), 1)
+        self.table = np.empty((len(self.names), self.capacity))
+        self.texts: dict[int, list[tuple[int, np.ndarray]]] = {}
+        self.gaps: list[tuple[int, np.ndarray]] = []
+        self.rows = 0
+
+    def add(self, chunk: Chunk) -> None:
+        n = len(chunk)
+        if self.rows + n > self.capacity:
+            raise RecordingTooLargeError(
+                f"{self.stream.path}: the recording holds more than {self.max_values} numbers "
+                f"(over {self.rows} rows): too large to load at once"
+                + (" (decompressed)" if self.stream.compressed else ""), self.stream.path)
+        columns = chunk.rows.columns
+        for index, name in enumerate(self.names):
+            if columns[name].dtype == object:
+                self.texts.setdefault(index, []).append((self.rows, columns[name]))
+            else:
+                self.table[index, self.rows:self.rows + n] = columns[name]
+        if "gap" not in self.names and "gap" in columns:
+            self.gaps.append((self.rows, columns["gap"]))
+        self.rows += n
+
+    def recording(self) -> Recording:
+        rows = self.rows
+        columns: dict[str, np.ndarray] = {}
+        for index, name in enumerate(self.names):
+            column = self.table[index, :rows]
+            if index in self.texts:
+                column = column.astype(object)
+                for start, values in self.texts[index]:
+                    column[start:start + len(values)] = values
+            columns[name] = column
+        if self.gaps:
+            gap = columns["gap"] = np.zeros(rows)
+            for start, values in self.gaps:
+                gap[start:start + len(values)] = values
+        return Recording(metadata=self.stream.metadata, header=self.stream.header,
+                         columns=columns, path=self.stream.path)
 
 
 # -- reading ahead ----------------------------------------------------------------------------
