@@ -349,8 +349,9 @@ def read_profile_file(path: Path, expected_unique_id: str | None = None) -> Cali
         raise ProfileNotFoundError(f"{path}: no such profile file", path) from None
     except InputTooLargeError:
         raise ProfileCorruptError(
-            f"{path}: not a calibration profile: the file is larger than {MAX_PROFILE_BYTES} "
-            "bytes (a profile takes a few kB). The file was left untouched.", path) from None
+            f"{path}: not a calibration profile: the file is too large (more than "
+            f"{MAX_PROFILE_BYTES} bytes; a profile takes a few kB). The file was left "
+            "untouched.", path) from None
     except OSError as exc:  # also a FIFO or a device: refused, never waited on
         raise ProfileError(f"{path}: cannot read the profile: {exc.strerror or exc}", path) from exc
     try:
