@@ -9,6 +9,8 @@ NaN, a file too large), as found by issue 36 (``geometry=hello`` aborted the app
 from __future__ import annotations
 
 import json
+import os
+import stat
 from pathlib import Path
 
 import pytest
@@ -179,3 +181,23 @@ def test_the_window_connects_with_a_damaged_calibration_profile(qtbot, tmp_path,
         assert window.status_calibration.text() == "Uncalibrated"
     finally:
         window.close()
+
+
+@pytest.mark.timeout(60)
+def test_a_fifo_in_place_of_the_settings_file_is_moved_aside(qtbot, tmp_path, monkeypatch):
+    """QSettings reads its file when constructed: a FIFO there blocked the start for ever."""
+    from app.gui.user_settings import SETTINGS_ENV, create_settings
+
+    path = tmp_path / "settings.ini"
+    os.mkfifo(path)
+    monkeypatch.setenv(SETTINGS_ENV, str(path))
+    window = MainWindow(DeviceSession(), create_settings(), DEVICE)
+    qtbot.addWidget(window)
+    try:
+        assert "not a regular file" in window.banner.label.text()
+        kept = list(tmp_path.glob("settings.ini.corrupt-*"))
+        assert len(kept) == 1 and stat.S_ISFIFO(kept[0].stat().st_mode)
+        assert str(kept[0]) in window.messages.toPlainText()
+    finally:
+        window.close()
+    assert ini_problem(path.read_bytes()) is None  # a new, regular file

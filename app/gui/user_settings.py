@@ -21,6 +21,7 @@ import math
 import os
 import re
 import shutil
+import stat
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -56,12 +57,45 @@ JSON_PREFIXES = ("sections/", "filter_parameters/")
 
 
 def create_settings(path: str | os.PathLike[str] | None = None) -> QSettings:
-    """The settings: ``path``, else ``$INCLINOMETER_SETTINGS``, else the user's INI file."""
+    """The settings: ``path``, else ``$INCLINOMETER_SETTINGS``, else the user's INI file.
+
+    A FIFO or a device in the file's place would block QSettings for ever (it reads the file
+    when constructed): it is moved aside first, and :func:`check_settings` reports it.
+    """
     chosen = path or os.environ.get(SETTINGS_ENV)
+    problem = _move_aside_if_special(Path(chosen) if chosen else _default_ini_path())
     if chosen:
-        return QSettings(str(chosen), QSettings.Format.IniFormat)
-    ini, user = QSettings.Format.IniFormat, QSettings.Scope.UserScope
-    return QSettings(ini, user, ORGANIZATION, APPLICATION)
+        settings = QSettings(str(chosen), QSettings.Format.IniFormat)
+    else:
+        ini, user = QSettings.Format.IniFormat, QSettings.Scope.UserScope
+        settings = QSettings(ini, user, ORGANIZATION, APPLICATION)
+    if problem:
+        settings.setProperty(_PROBLEM, problem)
+    return settings
+
+
+_PROBLEM = "inclinometer_settings_problem"
+"""QSettings property: what :func:`create_settings` found, for :func:`check_settings`."""
+
+
+def _default_ini_path() -> Path | None:
+    """Where QSettings keeps the user's INI file on Unix (None elsewhere: no FIFOs there)."""
+    if os.name != "posix":
+        return None
+    base = os.environ.get("XDG_CONFIG_HOME") or os.path.join(os.path.expanduser("~"), ".config")
+    return Path(base) / ORGANIZATION / f"{APPLICATION}.ini"
+
+
+def _move_aside_if_special(path: Path | None) -> str | None:
+    """Move a settings "file" that is a FIFO, a device or a folder aside; a message, or None."""
+    try:
+        if path is None or stat.S_ISREG(os.stat(path).st_mode):
+            return None
+    except OSError:
+        return None  # absent (QSettings creates it) or unreadable (reported later)
+    aside = move_aside(path)
+    kept = f"it was moved to {aside}" if aside else "it could not be moved aside"
+    return f"The settings file {path} is not a regular file; {kept}. The defaults are used."
 
 
 def ini_problem(data: bytes) -> str | None:
@@ -112,6 +146,9 @@ def value_problem(key: str, value: Any) -> str | None:
 def check_settings(settings: QSettings) -> str | None:
     """Make sure ``settings`` reads a sound file; a damaged one is moved aside and the
     settings start empty (the defaults). Returns a message for the user, or None."""
+    found = settings.property(_PROBLEM)
+    if found:
+        return str(found)
     path = Path(settings.fileName())
     try:
         data = read_bounded(path, MAX_SETTINGS_BYTES)
