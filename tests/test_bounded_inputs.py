@@ -108,10 +108,11 @@ def test_a_fifo_is_refused_at_once_by_every_reader(fifo, tmp_path):
         load_session(fifo)
     with pytest.raises(OSError, match="FIFO"):
         ArmLayout.load(fifo)
-    log, message = MeasurementLog.load(fifo)
-    assert "FIFO" in message and len(log) == 0 and fifo.exists()  # left where it is
     with pytest.raises(DeviceOpenError, match="FIFO"):
         ReplayDevice(replay_url(fifo)).open()
+    log, message = MeasurementLog.load(fifo)  # the log is kept aside, as a damaged one
+    assert "FIFO" in message and len(log) == 0 and not fifo.exists()
+    assert len(list(tmp_path.glob("pipe.csv.corrupt-*"))) == 1
     assert time.perf_counter() - start < BOUND_S / 2
 
 

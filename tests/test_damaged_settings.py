@@ -136,6 +136,7 @@ LOG_DAMAGE = {
                                               "version": 1, "entries": [[[]]]}).encode(),
     "too large": b" " * 5000 + b"{}",
 }
+"""(The log's limit is lowered to 4 kB for "too large".)"""
 
 
 @pytest.mark.parametrize("damage", list(LOG_DAMAGE))

@@ -27,7 +27,12 @@ from typing import Any
 
 import numpy as np
 
-from app.core.bounded_input import InputTooLargeError, loads_json, read_bounded
+from app.core.bounded_input import (
+    InputTooLargeError,
+    NotRegularFileError,
+    loads_json,
+    read_bounded,
+)
 from app.core.orientation import angles_from_up, up_in_sensor_frame
 from app.core.readout import averaged_angles, slope_from_angle
 
@@ -148,12 +153,16 @@ class MeasurementLog:
         ("" when all is well). A file that cannot be read is moved aside, never overwritten,
         and the log starts empty."""
         path = Path(path)
+        refused = ""
         try:
             text = read_bounded(path, MAX_LOG_BYTES)
         except FileNotFoundError:
             return cls(path), ""
-        except InputTooLargeError:
-            text = b""  # damaged: moved aside below
+        except (InputTooLargeError, NotRegularFileError) as exc:
+            if path.is_dir():  # left alone, as an unreadable file
+                return cls(None), (f"The measurement log {path} cannot be read ({exc}); "
+                                   "this session's readings will not be saved.")
+            text, refused = b"", str(exc)  # a FIFO, a device, too large: moved aside below
         except OSError as exc:
             # Unreadable (permissions...): keep it where it is; the log does not save over it.
             log = cls(None)
@@ -161,8 +170,7 @@ class MeasurementLog:
                          "this session's readings will not be saved.")
         try:
             if not text:
-                raise ValueError(f"it is larger than {MAX_LOG_BYTES >> 20} MB" if
-                                 path.stat().st_size else "the file is empty")
+                raise ValueError(refused or "the file is empty")
             entries = _parse_log(text)
         except (ValueError, KeyError, TypeError, OSError) as exc:
             aside = _move_aside(path)
