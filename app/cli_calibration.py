@@ -614,14 +614,15 @@ MDPS_PER_RAD_S = 180.0 / math.pi * 1e3
 
 def _read_base(path: str):
     """(calibration, its temperature or None) from a calibration JSON file."""
+    from app.core.bounded_input import load_json
     from app.core.recording.format import calibration_from_json
 
     file = Path(path)
     try:
-        document = json.loads(file.read_text(encoding="utf-8"))
+        document = load_json(file, max_bytes=1 << 20)
     except FileNotFoundError:
         raise _Usage(f"--base {path}: no such file") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError) as exc:  # also a FIFO, a device, JSON out of bounds
         raise _Usage(f"--base {path}: not a calibration JSON file ({exc})") from None
     except RecursionError:
         raise _Usage(f"--base {path}: not a calibration JSON file (nested too deeply)") from None

@@ -57,7 +57,7 @@ from urllib.parse import parse_qsl, unquote
 import numpy as np
 
 from app.core.calibration import SensorCalibration
-from app.core.recording.errors import RecordingError
+from app.core.recording.errors import RecordingError, RecordingTooLargeError
 from app.core.recording.format import KEY_BOOKMARKS
 from app.core.recording.index import Overview
 from app.core.recording.reader import (
@@ -88,7 +88,8 @@ MIN_BLOCK_S = 0.020
 MAX_BLOCK_S = 1.0
 """A reader that fell behind gets at most this much recorded time per block."""
 STREAMED_MIN_BYTES = 64 << 20
-"""Recordings at least this large are replayed a chunk at a time, the rest from memory."""
+"""Recordings at least this large (decompressed) are replayed a chunk at a time, the rest from
+memory."""
 HOLE_LIMIT_S = 1.0
 """A hole in the recorded time is waited for at most this long (at speed 1)."""
 _OPTIONS = ("speed", "loop", "start", "paused", "exact", "block")
@@ -255,9 +256,13 @@ class ReplayDevice(Device):
             if recording is None:
                 stream = RecordingStream(self.path)
                 if stream.file_size() < STREAMED_MIN_BYTES:  # small: all of it in memory
-                    stream.close()
-                    stream = None
-                    recording = read_recording(self.path)
+                    try:  # ... counting decompressed bytes: a small .csv.gz may be huge
+                        recording = read_recording(self.path, max_bytes=STREAMED_MIN_BYTES)
+                    except RecordingTooLargeError:
+                        recording = None  # it expands beyond: a chunk at a time
+                    else:
+                        stream.close()
+                        stream = None
             if recording is not None and len(recording) == 0:
                 raise DeviceOpenError(f"{self.path}: the recording holds no samples")
             with self._cond:

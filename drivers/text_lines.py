@@ -58,7 +58,8 @@ With a time column, ``t_s`` is that column from its first value, 32-bit ``millis
 ``micros()`` wrap-arounds unwrapped; a restart of the sketch (time going back) continues the
 time axis and marks a gap; a step over 1.5 sample periods marks a gap with the samples it held.
 Without one, ``t_s`` is the host's ``time.monotonic()`` at arrival, spread back by the sample
-period over lines that arrived together, strictly increasing.
+period over lines that arrived together, strictly increasing; a silence of more than five
+sample periods (and 0.1 s) marks a gap on the sample after it.
 
 Robustness: lines split across reads are joined; garbage lines (and ``nan``/``ovf`` values) are
 counted and skipped, never raised; a garbled line that looked like data counts as a lost
@@ -900,6 +901,10 @@ class _Timeline:
 
     GAP_FACTOR = 1.5
     MIN_STEP_S = 1e-6
+    SILENCE_PERIODS = 5.0
+    """On the host's clock, a silence longer than this many sample periods is a gap ..."""
+    MIN_SILENCE_S = 0.1
+    """... and than this (lines arrive in bursts: a USB serial port delivers every few ms)."""
 
     def __init__(self) -> None:
         self.origin_s: float | None = None
@@ -923,7 +928,7 @@ class _Timeline:
         if layout.time_unit != "host":
             t, restarted = self._from_column(records["t_raw"] * TIME_UNITS[layout.time_unit], lost)
         else:
-            t, restarted = self._from_arrivals(records["arrival"]), np.zeros(len(lost), bool)
+            t, restarted = self._from_arrivals(records["arrival"])  # a silence: a gap
         self._learn_rate(t, lost | restarted)
         self.last_t_s = float(t[-1])
         return t, lost, (lost > 0) | restarted
@@ -955,9 +960,11 @@ class _Timeline:
         )
         return t, restarted
 
-    def _from_arrivals(self, arrival_s: np.ndarray) -> np.ndarray:
+    def _from_arrivals(self, arrival_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Arrival times, spread back by the period over lines that came together; t = 0 at
-        the first sample; strictly increasing."""
+        the first sample; strictly increasing. With them, True on each sample after a silence
+        of more than :data:`SILENCE_PERIODS` sample periods (and :data:`MIN_SILENCE_S`): the
+        samples are not known to be lost, but nothing may integrate across the hole."""
         n = len(arrival_s)
         last_in_group = np.searchsorted(arrival_s, arrival_s, side="right") - 1
         t = arrival_s - (last_in_group - np.arange(n)) * self.period_s
@@ -968,12 +975,14 @@ class _Timeline:
         t = np.maximum(t, floor)
         ramp = np.arange(n) * self.MIN_STEP_S
         t = np.maximum.accumulate(t - ramp) + ramp
+        steps = np.diff(t, prepend=t[0] if self.last_t_s is None else self.last_t_s)
+        silent = steps > max(self.SILENCE_PERIODS * self.period_s, self.MIN_SILENCE_S)
         if self.last_arrival_s is not None and arrival_s[-1] > self.last_arrival_s:
             period = (arrival_s[-1] - self.last_arrival_s) / n
             if period < 4.0 * self.period_s:
                 self.period_s = min(1.0, max(1e-4, 0.8 * self.period_s + 0.2 * period))
         self.last_arrival_s = float(arrival_s[-1])
-        return t
+        return t, silent
 
     def _learn_rate(self, t: np.ndarray, broken: np.ndarray) -> None:
         if self.layout.time_unit == "host":

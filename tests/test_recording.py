@@ -247,7 +247,7 @@ def test_large_file_paths_parallel_and_memory_mapped_read_the_same(tmp_path, mon
     path.write_bytes(b"\n".join(lines))
     simple = read_recording(path)
     monkeypatch.setattr(reader, "PARALLEL_MIN_BYTES", 1)
-    monkeypatch.setattr(reader, "MMAP_MIN_BYTES", 0)
+    monkeypatch.setattr(reader, "CHUNKED_MIN_BYTES", 0)
     monkeypatch.setattr(os, "cpu_count", lambda: 5)
     assert len(reader._chunks(path.read_bytes(), 0, path.stat().st_size)) == 5
     mapped = read_recording(path)

@@ -202,6 +202,7 @@ def recording_source(
     When the recording has a ``movement`` column (:data:`SCORE_COLUMN`), its rows with
     ``movement == 1`` are the ones scored (:func:`recording_score_mask`).
     """
+    from app.core.recording.errors import RecordingTooLargeError
     from app.core.recording.reader import Recording, read_recording
     from app.core.recording.stream import RecordingStream, prefetched
 
@@ -209,7 +210,11 @@ def recording_source(
         head = Recording(stream.metadata, stream.header, {}, Path(path))
         streamed = stream.file_size() >= STREAM_MIN_BYTES  # else read it whole, as before
     if not streamed:
-        recording = read_recording(path)
+        try:  # decompressed bytes count: a small .csv.gz may expand a thousandfold
+            recording = read_recording(path, max_bytes=STREAM_MIN_BYTES)
+        except RecordingTooLargeError:
+            streamed = True
+    if not streamed:
         if not recording.has_reference:
             raise ValueError(f"{path}: the recording has no reference orientation (columns qw, "
                              "qx, qy, qz) to compare the filters with")

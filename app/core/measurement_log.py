@@ -31,12 +31,20 @@ from typing import Any
 
 import numpy as np
 
+from app.core.bounded_input import (
+    InputTooLargeError,
+    NotRegularFileError,
+    loads_json,
+    read_bounded,
+)
 from app.core.orientation import angles_from_up, up_in_sensor_frame
 from app.core.readout import averaged_angles, slope_from_angle
 
 LOG_FORMAT = "inclinometer-measurement-log"
 LOG_VERSION = 1
 LOG_FILE_NAME = "measurements.json"
+MAX_LOG_BYTES = 64 << 20
+"""A larger log file is treated as damaged (an entry takes about 400 bytes)."""
 COLUMNS: tuple[str, ...] = (
     "time", "label", "roll", "roll_std", "pitch", "pitch_std", "tilt", "tilt_std",
     "direction_deg", "unit", "window_s", "samples", "filter", "calibration", "device",
@@ -97,13 +105,13 @@ class Measurement:
                 if value is None:  # NaN is stored as null (JSON has no NaN)
                     value = math.nan
                 if isinstance(value, bool) or not isinstance(value, int | float):
-                    raise ValueError(f"{spec.name} must be a number, got {value!r}")
+                    raise ValueError(f"{spec.name} must be a number, got {_short(value)}")
                 value = float(value)
             elif spec.type == "int":
                 if isinstance(value, bool) or not isinstance(value, int):
-                    raise ValueError(f"{spec.name} must be a whole number, got {value!r}")
+                    raise ValueError(f"{spec.name} must be a whole number, got {_short(value)}")
             elif not isinstance(value, str):
-                raise ValueError(f"{spec.name} must be text, got {value!r}")
+                raise ValueError(f"{spec.name} must be text, got {_short(value)}")
             values[spec.name] = value
         return cls(**values)
 
@@ -182,18 +190,26 @@ class MeasurementLog:
         ("" when all is well). A file that cannot be read is moved aside, never overwritten,
         and the log starts empty."""
         path = Path(path)
+        refused = ""
         try:
-            text = path.read_text(encoding="utf-8")
+            text = read_bounded(path, MAX_LOG_BYTES)
         except FileNotFoundError:
             return cls(path), ""
+        except (InputTooLargeError, NotRegularFileError) as exc:
+            if path.is_dir():  # left alone, as an unreadable file
+                return cls(None), (f"The measurement log {path} cannot be read ({exc}); "
+                                   "this session's readings will not be saved.")
+            text, refused = b"", str(exc)  # a FIFO, a device, too large: moved aside below
         except OSError as exc:
             # Unreadable (permissions...): keep it where it is; the log does not save over it.
             log = cls(None)
             return log, (f"The measurement log {path} cannot be read ({exc.strerror or exc}); "
                          "this session's readings will not be saved.")
         try:
+            if not text:
+                raise ValueError(refused or "the file is empty")
             entries = _parse_log(text)
-        except (ValueError, KeyError, TypeError) as exc:
+        except (ValueError, KeyError, TypeError, OSError) as exc:
             aside = _move_aside(path)
             where = f"moved to {aside}" if aside else "left in place (it could not be moved)"
             log = cls(path if aside else None)
@@ -265,8 +281,14 @@ def _json_safe(data: dict[str, Any]) -> dict[str, Any]:
             for k, v in data.items()}
 
 
-def _parse_log(text: str) -> list[Measurement]:
-    document = json.loads(text)
+def _short(value: Any) -> str:
+    """``repr`` of a value for a one-line message, cut to 40 characters."""
+    text = repr(value) if not isinstance(value, list | dict) else type(value).__name__
+    return text if len(text) <= 40 else text[:40] + "..."
+
+
+def _parse_log(text: bytes) -> list[Measurement]:
+    document = loads_json(text, max_bytes=MAX_LOG_BYTES)
     if not isinstance(document, dict) or document.get("format") != LOG_FORMAT:
         raise ValueError("not a measurement log")
     if document.get("version") != LOG_VERSION:

@@ -460,7 +460,7 @@ class ArmPanel(QWidget):
             if not path:
                 return False
         try:
-            layout = ArmLayout.from_json(Path(path).read_text(encoding="utf-8"))
+            layout = ArmLayout.load(path)
         except (OSError, UnicodeDecodeError, ArmLayoutError) as exc:
             self.message.setText(f"Layout not loaded: {exc}")
             return False

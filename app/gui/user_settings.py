@@ -3,8 +3,11 @@
 Settings are a QSettings INI file in the user's configuration directory
 (``~/.config/Inclinometer/Inclinometer.ini`` on Linux), or the file named by the environment
 variable ``INCLINOMETER_SETTINGS``. QSettings reads almost anything as INI, so the file is
-checked first: if it is not text made of ``[section]`` and ``key=value`` lines, it is moved
-aside (``NAME.corrupt-YYYYmmdd-HHMMSS``), the defaults are used and the caller gets a message.
+checked first: if it is not text made of ``[section]`` and ``key=value`` lines, is larger than
+:data:`MAX_SETTINGS_BYTES`, or holds a value of the wrong type (:data:`VALUE_KINDS`: the window
+geometry must be bytes, a display setting a number, a section bounded JSON of an object,
+:mod:`app.core.bounded_input`), it is moved aside (``NAME.corrupt-YYYYmmdd-HHMMSS``, never over
+an earlier one), the defaults are used and the caller gets a message.
 
 Parts of the app that keep their own configuration as a dict (the alarms, for instance)
 register a section with :class:`SettingsSections`; it is stored as JSON under
@@ -14,14 +17,25 @@ register a section with :class:`SettingsSections`; it is stored as JSON under
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
+import shutil
+import stat
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from PySide6.QtCore import QSettings
+from PySide6.QtCore import QByteArray, QSettings
+
+from app.core.bounded_input import (
+    InputTooLargeError,
+    JsonInputError,
+    NotRegularFileError,
+    loads_json,
+    read_bounded,
+)
 
 ORGANIZATION = "Inclinometer"
 APPLICATION = "Inclinometer"
@@ -29,15 +43,59 @@ SETTINGS_ENV = "INCLINOMETER_SETTINGS"
 """Environment variable: the settings file to use instead of the user's."""
 
 _LINE = re.compile(r"^\s*(\[[^\]]*\]|[^=\[\]][^=]*=.*|[;#].*)?\s*$")
+MAX_SETTINGS_BYTES = 4 << 20
+"""A settings file takes a few kB; a larger one is treated as damaged."""
+VALUE_KINDS: dict[str, str] = {
+    "geometry": "bytes", "window_state": "bytes",
+    "filter": "text", "device_url": "text", "comparisons": "text", "unit": "text",
+    "theme": "text",
+    "averaging_s": "number", "range_deg": "number", "plot_window_s": "number",
+}
+"""The type each key the window reads must have; keys not listed are not read by it."""
+JSON_PREFIXES = ("sections/", "filter_parameters/")
+"""Keys under these hold JSON text of an object."""
 
 
 def create_settings(path: str | os.PathLike[str] | None = None) -> QSettings:
-    """The settings: ``path``, else ``$INCLINOMETER_SETTINGS``, else the user's INI file."""
+    """The settings: ``path``, else ``$INCLINOMETER_SETTINGS``, else the user's INI file.
+
+    A FIFO or a device in the file's place would block QSettings for ever (it reads the file
+    when constructed): it is moved aside first, and :func:`check_settings` reports it.
+    """
     chosen = path or os.environ.get(SETTINGS_ENV)
+    problem = _move_aside_if_special(Path(chosen) if chosen else _default_ini_path())
     if chosen:
-        return QSettings(str(chosen), QSettings.Format.IniFormat)
-    ini, user = QSettings.Format.IniFormat, QSettings.Scope.UserScope
-    return QSettings(ini, user, ORGANIZATION, APPLICATION)
+        settings = QSettings(str(chosen), QSettings.Format.IniFormat)
+    else:
+        ini, user = QSettings.Format.IniFormat, QSettings.Scope.UserScope
+        settings = QSettings(ini, user, ORGANIZATION, APPLICATION)
+    if problem:
+        settings.setProperty(_PROBLEM, problem)
+    return settings
+
+
+_PROBLEM = "inclinometer_settings_problem"
+"""QSettings property: what :func:`create_settings` found, for :func:`check_settings`."""
+
+
+def _default_ini_path() -> Path | None:
+    """Where QSettings keeps the user's INI file on Unix (None elsewhere: no FIFOs there)."""
+    if os.name != "posix":
+        return None
+    base = os.environ.get("XDG_CONFIG_HOME") or os.path.join(os.path.expanduser("~"), ".config")
+    return Path(base) / ORGANIZATION / f"{APPLICATION}.ini"
+
+
+def _move_aside_if_special(path: Path | None) -> str | None:
+    """Move a settings "file" that is a FIFO, a device or a folder aside; a message, or None."""
+    try:
+        if path is None or stat.S_ISREG(os.stat(path).st_mode):
+            return None
+    except OSError:
+        return None  # absent (QSettings creates it) or unreadable (reported later)
+    aside = move_aside(path)
+    kept = f"it was moved to {aside}" if aside else "it could not be moved aside"
+    return f"The settings file {path} is not a regular file; {kept}. The defaults are used."
 
 
 def ini_problem(data: bytes) -> str | None:
@@ -55,30 +113,107 @@ def ini_problem(data: bytes) -> str | None:
     return None
 
 
+def value_problem(key: str, value: Any) -> str | None:
+    """Why ``value`` cannot be the setting ``key`` (None: it can, or the key is not read)."""
+    kind = VALUE_KINDS.get(key)
+    if key.startswith(JSON_PREFIXES):
+        kind = "json"
+    if kind is None:
+        return None
+    if kind == "bytes":
+        return None if isinstance(value, QByteArray | bytes) else "is not saved window data"
+    if kind == "text":  # an unquoted "a,b" reads as a list of texts: harmless
+        parts = value if isinstance(value, list) else [value]
+        ok = all(isinstance(p, str) for p in parts) and sum(map(len, parts)) <= 4096
+        return None if ok else "is not a short text"
+    if kind == "number":
+        try:
+            number = float(value) if isinstance(value, str | int | float) else math.nan
+        except ValueError:
+            number = math.nan
+        ok = (math.isfinite(number) and not isinstance(value, bool)
+              and len(str(value)) <= 40)
+        return None if ok else "is not a number"
+    if not isinstance(value, str):
+        return "is not JSON text"
+    try:
+        decoded = loads_json(value)
+    except JsonInputError as exc:
+        return str(exc)
+    return None if isinstance(decoded, dict) else "is not a JSON object"
+
+
 def check_settings(settings: QSettings) -> str | None:
     """Make sure ``settings`` reads a sound file; a damaged one is moved aside and the
     settings start empty (the defaults). Returns a message for the user, or None."""
+    found = settings.property(_PROBLEM)
+    if found:
+        return str(found)
     path = Path(settings.fileName())
     try:
-        data = path.read_bytes()
+        data = read_bounded(path, MAX_SETTINGS_BYTES)
     except FileNotFoundError:
         return None
+    except InputTooLargeError:
+        data, problem = b"", f"it is larger than {MAX_SETTINGS_BYTES >> 20} MB"
+    except NotRegularFileError as exc:
+        return f"The settings file {path} cannot be used ({exc}); the defaults are used."
     except OSError as exc:
         return f"The settings file {path} could not be read ({exc}); the defaults are used."
-    problem = ini_problem(data)
+    else:
+        problem = ini_problem(data)
     if problem is None and settings.status() == QSettings.Status.FormatError:
         problem = "Qt could not parse it"
     if problem is None:
+        problem = _values_problem(settings)
+    if problem is None:
         return None
-    aside = path.with_name(f"{path.name}.corrupt-{time.strftime('%Y%m%d-%H%M%S')}")
-    try:
-        os.replace(path, aside)
-        kept = f"it was kept as {aside}"
-    except OSError as exc:
-        kept = f"it could not be moved aside ({exc}) and will be overwritten"
+    aside = move_aside(path)
+    kept = (f"it was kept as {aside}" if aside is not None
+            else "it could not be moved aside and will be overwritten")
     settings.clear()
     settings.sync()
     return f"The settings file {path} was damaged ({problem}); {kept}. The defaults are used."
+
+
+def _values_problem(settings: QSettings) -> str | None:
+    """The first stored value of the wrong type, as a reason (None: all are sound)."""
+    for key in settings.allKeys():
+        try:
+            value = settings.value(key)
+        except (RuntimeError, TypeError, ValueError) as exc:  # a value Qt cannot convert
+            return f"{_shown(key)} cannot be read ({exc})"
+        reason = value_problem(key, value)
+        if reason is not None:
+            return f"{_shown(key)} {reason}"
+    return None
+
+
+def _shown(key: str) -> str:
+    return repr(key if len(key) <= 40 else key[:40] + "…")
+
+
+def move_aside(path: Path, *, copy: bool = False) -> Path | None:
+    """Rename (or copy) ``path`` to ``NAME.corrupt-<time>``, never over an existing file;
+    the new name, or None when that fails."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    for attempt in range(100):
+        target = path.with_name(f"{path.name}.corrupt-{stamp}" + (f"-{attempt}" if attempt
+                                                                   else ""))
+        try:
+            if copy:
+                with open(path, "rb") as source, open(target, "xb") as out:
+                    shutil.copyfileobj(source, out)
+            else:
+                if target.exists():
+                    continue
+                os.rename(path, target)
+        except FileExistsError:
+            continue
+        except OSError:
+            return None
+        return target
+    return None
 
 
 def read_json(settings: QSettings, key: str) -> Any:
@@ -87,7 +222,7 @@ def read_json(settings: QSettings, key: str) -> Any:
     if not isinstance(text, str) or not text:
         return None
     try:
-        return json.loads(text)
+        return loads_json(text)
     except ValueError:
         return None
 
@@ -123,15 +258,26 @@ class SettingsSections:
         if stored is None:
             return False
         if not isinstance(stored, dict):
-            self.report(f"Remembered {name} settings are not valid; the defaults are used.")
+            self.report(f"Remembered {name} settings are not valid; the defaults are "
+                        f"used{self._kept()}.")
             return False
         try:
             load(stored)
-        except (ValueError, KeyError, TypeError) as exc:
-            self.report(f"Remembered {name} settings are not valid ({exc}); the defaults "
-                        "are used.")
+        except (ValueError, KeyError, TypeError, RecursionError) as exc:
+            self.report(f"Remembered {name} settings are not valid ({str(exc)[:200]}); the "
+                        f"defaults are used{self._kept()}.")
             return False
         return True
+
+    def _kept(self) -> str:
+        """A copy of the settings file beside it, before the defaults are saved over the bad
+        section (nothing is lost): ``"; a copy ... was kept as NAME"``."""
+        self.settings.sync()
+        path = Path(self.settings.fileName())
+        if not path.is_file():
+            return ""
+        copy = move_aside(path, copy=True)
+        return f"; a copy of the settings file was kept as {copy}" if copy else ""
 
     def names(self) -> list[str]:
         """The registered sections."""

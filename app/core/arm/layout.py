@@ -18,9 +18,12 @@ helpers) round-trip it, and bad input raises :class:`ArmLayoutError` with the re
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from app.core.bounded_input import JsonInputError, loads_json, read_bounded
 
 LAYOUT_FORMAT = "inclinometer-arm-layout"
 LAYOUT_VERSION = 1
@@ -170,10 +173,16 @@ class ArmLayout:
     @classmethod
     def from_json(cls, text: str) -> ArmLayout:
         try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise ArmLayoutError(f"not JSON: {exc}") from exc
+            data = loads_json(text)
+        except JsonInputError as exc:
+            raise ArmLayoutError(f"not a layout: {exc}") from exc
         return cls.from_dict(data)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> ArmLayout:
+        """A layout file (a regular file of at most 1 MB); ``OSError`` when it cannot be
+        read, :class:`ArmLayoutError` when it is not a layout."""
+        return cls.from_json(read_bounded(path, 1 << 20).decode("utf-8", errors="replace"))
 
 
 def jamris_layout(

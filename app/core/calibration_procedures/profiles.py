@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from app.core.bounded_input import InputTooLargeError, JsonInputError, loads_json, read_bounded
 from app.core.calibration import SensorCalibration, temperature_from_json, temperature_to_json
 from app.core.calibration_procedures.level_reference import TareReference
 from app.core.version import __version__
@@ -343,28 +344,23 @@ def read_profile_file(path: Path, expected_unique_id: str | None = None) -> Cali
     """
     path = Path(path)
     try:
-        if path.stat().st_size > MAX_PROFILE_BYTES:
-            raise ProfileCorruptError(
-                f"{path}: not a calibration profile: the file is too large "
-                f"({path.stat().st_size} bytes; a profile takes a few kB). The file was left "
-                "untouched.", path)
-        raw = path.read_bytes()
+        raw = read_bounded(path, MAX_PROFILE_BYTES)
     except FileNotFoundError:
         raise ProfileNotFoundError(f"{path}: no such profile file", path) from None
-    except OSError as exc:
+    except InputTooLargeError:
+        raise ProfileCorruptError(
+            f"{path}: not a calibration profile: the file is too large (more than "
+            f"{MAX_PROFILE_BYTES} bytes; a profile takes a few kB). The file was left "
+            "untouched.", path) from None
+    except OSError as exc:  # also a FIFO or a device: refused, never waited on
         raise ProfileError(f"{path}: cannot read the profile: {exc.strerror or exc}", path) from exc
     try:
-        data = json.loads(raw.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        data = loads_json(raw, max_bytes=MAX_PROFILE_BYTES)
+    except JsonInputError as exc:
         raise ProfileCorruptError(
-            f"{path}: not a valid calibration profile: the file is not valid JSON ({exc}). "
-            "The file was left untouched.",
+            f"{path}: not a valid calibration profile: {exc}. The file was left untouched.",
             path,
         ) from None
-    except RecursionError:
-        raise ProfileCorruptError(
-            f"{path}: not a valid calibration profile: its JSON is nested too deeply to "
-            "read. The file was left untouched.", path) from None
     profile = CalibrationProfile.from_json_dict(data, path)
     if expected_unique_id is not None and profile.device_unique_id != expected_unique_id:
         raise ProfileDeviceMismatchError(

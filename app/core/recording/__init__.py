@@ -38,12 +38,14 @@ from app.core.recording.reader import (
     read_recording,
 )
 from app.core.recording.samples import sample_recording, sample_recordings
+from app.core.recording.stream import RecordingStream  # also installs the chunked reader
 from app.core.recording.writer import RecordingWriter, WriterStatus, format_rows
 
 __all__ = [
     "FORMAT_VERSION", "OPTIONAL_COLUMNS", "REQUIRED_COLUMNS", "UNIT_SCALE", "Bookmark",
     "FilterOutput", "MissingColumnsError", "NotARecordingError", "Recording",
-    "RecordingCorruptError", "RecordingError", "RecordingVersionError", "RecordingWarning",
+    "RecordingCorruptError", "RecordingError", "RecordingStream", "RecordingVersionError",
+    "RecordingWarning",
     "RecordingWriteError", "RecordingWriter", "WriterStatus", "format_rows", "parse_recording",
     "read_metadata", "read_recording", "recording_metadata", "rewrite_metadata",
     "run_filters", "sample_recording", "sample_recordings", "save_bookmarks",

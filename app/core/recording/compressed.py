@@ -18,6 +18,8 @@ from app.core.recording.errors import RecordingCorruptError
 READ_BYTES = 1 << 20
 """Compressed bytes read from the file at a time."""
 GZIP_MAGIC = b"\x1f\x8b"
+OUTPUT_BYTES = 4 << 20
+"""Decompressed bytes produced at a time (memory stays bounded whatever the ratio)."""
 
 
 def is_compressed(path: str | os.PathLike[str]) -> bool:
@@ -81,6 +83,8 @@ class GzipBytes:
                     self.members.append((start, self._produced))
                 self._decompressor = zlib.decompressobj(31)
                 data = rest
+            elif self._decompressor.unconsumed_tail:  # input held back by the bound below
+                data = self._decompressor.unconsumed_tail
             else:
                 data = self._handle.read(READ_BYTES)
                 if not data:
@@ -89,7 +93,8 @@ class GzipBytes:
                     return False
                 self._consumed += len(data)
             try:
-                self._pending = self._decompressor.decompress(data)
+                # At most this much output per call: 1 MB of gzip can expand to 1 GB.
+                self._pending = self._decompressor.decompress(data, OUTPUT_BYTES)
             except zlib.error as exc:
                 raise RecordingCorruptError(
                     f"{self._path}: the compressed data is damaged near byte "

@@ -55,6 +55,11 @@ class RecordingCorruptError(RecordingError):
         self.partial = partial
 
 
+class RecordingTooLargeError(RecordingError):
+    """The recording holds more than the reader was asked to load at once (it can still be
+    read in chunks, :class:`~app.core.recording.stream.RecordingStream`)."""
+
+
 class RecordingWriteError(RecordingError):
     """A recording could not be started (the file exists, the folder is missing, ...)."""
 

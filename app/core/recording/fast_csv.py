@@ -371,3 +371,19 @@ def count_lines(buf: np.ndarray, start: int, stop: int) -> int:
     for i in range(start, stop):
         count += buf[i] == 10
     return count
+
+
+@numba.njit(cache=True, nogil=True)
+def count_rows(buf: np.ndarray, start: int, stop: int) -> int:
+    """Number of lines in ``buf[start:stop]`` that hold more than blanks (rows to make room
+    for: a file of blank lines needs none)."""
+    count = 0
+    filled = False
+    for i in range(start, stop):
+        c = buf[i]
+        if c == 10:
+            count += filled
+            filled = False
+        elif not (c == 32 or c == 9 or c == 13):
+            filled = True
+    return count + filled

@@ -26,13 +26,12 @@ import csv
 import itertools
 import json
 import math
-import mmap
 import os
 import re
 import threading
 import warnings
 from collections import Counter
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +39,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from app.core.bounded_input import open_regular
 from app.core.calibration import SensorCalibration
 from app.core.recording import fast_csv
 from app.core.recording.compressed import (
@@ -47,13 +47,13 @@ from app.core.recording.compressed import (
     GzipBytes,
     PlainBytes,
     byte_source,
-    decompress_file,
 )
 from app.core.recording.errors import (
     MissingColumnsError,
     NotARecordingError,
     RecordingCorruptError,
     RecordingError,
+    RecordingTooLargeError,
     RecordingVersionError,
     RecordingWarning,
 )
@@ -80,11 +80,26 @@ UNIT_SCALE = ScaleFactors(
 """Recorded values are already SI: ``x * 1.0 + 0.0`` gives each one back bit for bit."""
 PARALLEL_MIN_BYTES = 4 << 20
 """Bodies smaller than this are parsed on one thread."""
-MMAP_MIN_BYTES = 8 << 20
-"""Files at least this large are memory-mapped instead of read into memory."""
+CHUNKED_MIN_BYTES = 8 << 20
+"""Files at least this large (and every compressed one) are read in chunks, never mapped:
+another program may shorten a file while it is read, which a memory map turns into a bus
+error, and the text of a large file need not be in memory all at once."""
+MAX_LOAD_VALUES = 64 << 20
+"""Numbers :func:`read_recording` loads at most (512 MB as float64; an hour at 1 kHz with
+reference columns holds 50 M): a larger recording is refused with
+:class:`RecordingTooLargeError`, and is read in chunks instead by the commands that stream."""
 
-Buffer = bytes | mmap.mmap
-"""The file's bytes: ``bytes``, or a read-only memory map (no ``count``, ``startswith``)."""
+read_chunked: Callable[..., Recording] | None = None
+"""How :func:`read_recording` reads a large or compressed file:
+:func:`app.core.recording.stream.read_stream`, installed here when that module loads (the
+package imports it). The stream parses with this module, so this module cannot import it."""
+
+MAX_LOAD_BYTES = 2 << 30
+"""Text (decompressed) :func:`read_recording` reads at most: ``max_values`` stops real rows
+earlier; this stops a file of blank lines."""
+
+Buffer = bytes | bytearray
+"""The file's bytes."""
 
 OnCorrupt = Literal["raise", "truncate"]
 MAX_HEAD_BYTES = 16 << 20
@@ -300,45 +315,152 @@ class Recording:
         return block if calibration is None else calibration.apply(block)
 
 
+# -- time order ------------------------------------------------------------------------------
+GAP_PERIODS = 5.0
+"""A step in ``t`` longer than this many sample periods is lost data: a gap."""
+MAX_JUMPS_NAMED = MAX_WARNINGS
+"""Unmarked jumps named one by one in the warnings (the rest are marked all the same)."""
+
+
+@dataclass(slots=True)
+class TimeCheck:
+    """The time-order rule of format v1, applied to rows as they are read (in chunks too).
+
+    ``t`` must be finite and increase from row to row: the first row that is not after the
+    row before it (NaN, a repeat, a step back) is refused, like a row that cannot be read.
+    A step longer than :data:`GAP_PERIODS` sample periods is lost data: when the file does
+    not mark it, the reader sets ``gap`` on that row (creating the column) and names the line.
+    The period is the recorded device's ``odr_hz``, else the median step of the first rows.
+
+    ``last_t`` carries the previous chunk's last time over; ``jumps`` counts the jumps marked.
+    """
+
+    period_s: float | None = None
+    last_t: float | None = None
+    jumps: int = 0
+
+    @classmethod
+    def for_metadata(cls, metadata: dict[str, Any]) -> TimeCheck:
+        device = metadata.get(KEY_DEVICE)
+        odr = device.get("odr_hz") if isinstance(device, dict) else None
+        if isinstance(odr, int | float) and not isinstance(odr, bool) and \
+                math.isfinite(odr) and odr > 0:
+            return cls(period_s=1.0 / float(odr))
+        return cls()
+
+    def first_out_of_order(self, t: np.ndarray) -> int | None:
+        """Index of the first row whose ``t`` is not finite or not after the row before it
+        (None: all in order). Remembers the last time when all are."""
+        if not len(t):
+            return None
+        before = np.empty_like(t)
+        before[0] = -math.inf if self.last_t is None else self.last_t
+        before[1:] = t[:-1]
+        wrong = np.flatnonzero(~(np.isfinite(t) & (t > before)))
+        if len(wrong):
+            return int(wrong[0])
+        self.last_t = float(t[-1])
+        return None
+
+    def disorder_text(self, t: np.ndarray, row: int) -> str:
+        """Why row ``row`` is refused (for a message that names its line)."""
+        value = float(t[row])
+        before = float(t[row - 1]) if row else self.last_t
+        if not math.isfinite(value):
+            return f"t is {value}: every sample needs a finite time"
+        if before is not None and value == before:
+            return f"t = {value:.9g} repeats the previous row's time (time must increase)"
+        return f"t = {value:.9g} is before the previous row's {before:.9g} (time must increase)"
+
+    def mark_jumps(self, columns: dict[str, np.ndarray],
+                   previous: float | None = None) -> list[tuple[int, str]]:
+        """Set ``gap`` on rows after an unmarked jump; (row, message) for the first few.
+
+        ``t`` must already be in order (:meth:`first_out_of_order`); ``previous`` is the time
+        before the first row (None: the first row starts the file or a seek).
+        """
+        t = columns["t"]
+        if self.period_s is None:
+            steps = np.diff(t[:20_000])
+            if len(steps):
+                self.period_s = float(np.median(steps))
+        if not len(t) or self.period_s is None or self.period_s <= 0:
+            return []
+        steps = np.diff(t, prepend=t[0] if previous is None else previous)
+        rows = np.flatnonzero(steps > GAP_PERIODS * self.period_s)
+        if not len(rows):
+            return []
+        gap = columns.get("gap")
+        if gap is not None and gap.dtype != object:
+            rows = rows[~(np.isfinite(gap[rows]) & (gap[rows] != 0.0))]
+        if not len(rows):
+            return []
+        if gap is None or gap.dtype == object:
+            gap = columns["gap"] = np.zeros(len(t))
+        gap[rows] = 1.0
+        named = []
+        for row in rows[:max(0, MAX_JUMPS_NAMED - self.jumps)].tolist():
+            step = float(steps[row])
+            named.append((row, f"t jumps by {step:.6g} s ({step / self.period_s:.0f} sample "
+                               "periods) with no gap mark; the row is marked as a gap"))
+        self.jumps += len(rows)
+        return named
+
+
 # -- reading ---------------------------------------------------------------------------------------
-def read_recording(path: str | os.PathLike[str], *, on_corrupt: OnCorrupt = "raise") -> Recording:
+def read_recording(
+    path: str | os.PathLike[str], *, on_corrupt: OnCorrupt = "raise",
+    max_bytes: int | None = MAX_LOAD_BYTES, max_values: int = MAX_LOAD_VALUES,
+) -> Recording:
     """Load a recording file.
 
     Parameters
     ----------
-    path : the CSV file.
+    path : the CSV file (a regular file: a FIFO or a device is refused, never waited on).
     on_corrupt : ``"raise"`` (default): a row that cannot be read raises
         :class:`RecordingCorruptError` (with the line number, and the rows before it in
         ``partial``); ``"truncate"``: keep the rows before it, warn, and set
         :attr:`Recording.corrupt_line`.
+    max_bytes : refuse (:class:`RecordingTooLargeError`) a recording whose text, decompressed,
+        is longer than this (None: no limit but ``max_values``; blank lines count here only).
+    max_values : refuse a recording of more numbers than this (rows times columns), so memory
+        stays bounded whatever the file (a small ``.csv.gz`` may expand a thousandfold).
 
     Raises
     ------
     RecordingError
-        Subclasses for a foreign file, another version, missing columns or a corrupt row;
-        a plain :class:`RecordingError` when the file cannot be read at all.
+        Subclasses for a foreign file, another version, missing columns, a corrupt row or a
+        recording over the limits; a plain :class:`RecordingError` when the file cannot be
+        read at all (or becomes shorter while it is read).
     """
     path = Path(path)
     try:
-        with open(path, "rb") as handle:
-            if handle.read(2) == GZIP_MAGIC:  # format v1 inside gzip
-                data, truncated = decompress_file(path)
-                recording = parse_recording(data, path, on_corrupt=on_corrupt)
-                if truncated:
-                    message = (f"{path}: the compressed file ends early (the recording was "
-                               "interrupted); everything up to its last complete write was read")
-                    recording.warnings.append(message)
-                    warnings.warn(message, RecordingWarning, stacklevel=2)
-                return recording
-            handle.seek(0)
-            if os.fstat(handle.fileno()).st_size < MMAP_MIN_BYTES:
-                return parse_recording(handle.read(), path, on_corrupt=on_corrupt)
-            # Large files are mapped, not copied: the parser reads the page cache directly.
-            with _map(handle.fileno()) as mapped:
-                return parse_recording(mapped, path, on_corrupt=on_corrupt)
+        with open_regular(path) as handle:
+            size = os.fstat(handle.fileno()).st_size
+            small = handle.read(2) != GZIP_MAGIC and size < CHUNKED_MIN_BYTES
+            if small:
+                handle.seek(0)
+                data = handle.read(CHUNKED_MIN_BYTES)
+                small = len(data) < CHUNKED_MIN_BYTES  # else it grew meanwhile: chunks
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read the recording: {exc.strerror or exc}",
                              path) from exc
+    if not small:
+        if read_chunked is None:  # pragma: no cover (the package installs it)
+            raise RuntimeError("app.core.recording.stream was not imported")
+        return read_chunked(path, on_corrupt=on_corrupt, max_bytes=max_bytes,
+                            max_values=max_values)
+    if len(data) < size:
+        raise RecordingError(f"{path}: the file became shorter while it was read (another "
+                             "program is rewriting it); nothing was loaded", path)
+    if max_bytes is not None and len(data) > max_bytes:
+        raise RecordingTooLargeError(
+            f"{path}: the recording is larger than {max_bytes} bytes", path)
+    recording = parse_recording(data, path, on_corrupt=on_corrupt)
+    if len(recording) * len(recording.header) > max_values:
+        raise RecordingTooLargeError(
+            f"{path}: the recording holds more than {max_values} numbers", path)
+    return recording
 
 
 def read_metadata(path: str | os.PathLike[str]) -> tuple[dict[str, Any], tuple[str, ...]]:
@@ -349,7 +471,7 @@ def read_metadata(path: str | os.PathLike[str]) -> tuple[dict[str, Any], tuple[s
 
 def read_head(path: Path) -> tuple[RecordingHead, bytes]:
     """The parsed metadata and header, and the bytes read (at least up to the header)."""
-    with open(path, "rb") as handle:
+    with open_regular(path) as handle:
         return read_head_from(byte_source(handle, path), path)
 
 
@@ -517,7 +639,7 @@ def _bounded(problems: list[str], limit: int = MAX_WARNINGS) -> list[str]:
 def parse_recording(
     data: Buffer, path: Path | None = None, *, on_corrupt: OnCorrupt = "raise"
 ) -> Recording:
-    """:func:`read_recording` on bytes already in memory (or a read-only memory map)."""
+    """:func:`read_recording` on bytes already in memory."""
     if on_corrupt not in ("raise", "truncate"):
         raise ValueError(f"on_corrupt must be 'raise' or 'truncate', not {on_corrupt!r}")
     head = _parse_head(data, path)
@@ -535,8 +657,19 @@ def parse_recording(
         dropped = True
     kinds = np.array([_kind(name) for name in head.header], dtype=np.int8)
     parse = _parse_slow if data.find(b'"', head.body_start, stop) >= 0 else _parse_fast
-    parsed = parse(data, head.body_start, stop, head.header, kinds)
-    columns, rows, error = parsed
+    columns, rows, error, offsets = parse(data, head.body_start, stop, head.header, kinds)
+    clock = TimeCheck.for_metadata(head.metadata)
+    bad = clock.first_out_of_order(columns["t"])
+    if bad is not None:  # before any row the parser could not read
+        error = (int(offsets[bad]), clock.disorder_text(columns["t"], bad))
+        columns = {name: values[:bad] for name, values in columns.items()}
+        rows = bad
+    named = clock.mark_jumps(columns)
+    for row, text in named:
+        line = _count_lines(data, 0, int(offsets[row])) + 1
+        problems.append(f"{where}line {line}: {text}")
+    if clock.jumps > len(named):
+        problems.append(f"{where}{clock.jumps} unmarked jumps in t in all were marked as gaps")
     recording = Recording(
         metadata=head.metadata, header=head.header, columns=columns, path=path,
         warnings=problems, dropped_partial_row=dropped, comments=head.comments,
@@ -557,14 +690,6 @@ def parse_recording(
 def _warn_all(messages: list[str]) -> None:
     for message in messages:
         warnings.warn(message, RecordingWarning, stacklevel=4)
-
-
-def _map(fileno: int) -> mmap.mmap:
-    """A read-only map of the whole file, its pages read in at once where the OS can."""
-    populate = getattr(mmap, "MAP_POPULATE", 0)
-    if populate and hasattr(mmap, "MAP_SHARED"):
-        return mmap.mmap(fileno, 0, flags=mmap.MAP_SHARED | populate, prot=mmap.PROT_READ)
-    return mmap.mmap(fileno, 0, access=mmap.ACCESS_READ)
 
 
 def _count_lines(data: Buffer, start: int, stop: int) -> int:
@@ -589,8 +714,9 @@ _NUMBER = re.compile(
     r"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)", re.IGNORECASE
 )
 
-_Parsed = tuple[dict[str, np.ndarray], int, tuple[int, str] | None]
-"""(columns, rows kept, (byte offset of the bad line, message) or None)."""
+_Parsed = tuple[dict[str, np.ndarray], int, tuple[int, str] | None, np.ndarray]
+"""(columns, rows kept, (byte offset of the bad line, message) or None, each kept row's byte
+offset)."""
 
 
 def _error_text(fields: list[str], code: int, column: int, header: tuple[str, ...]) -> str:
@@ -631,7 +757,7 @@ def _parse_fast(
     try:
         return _parse_pieces(data, buf, pieces, pool, header, kinds)
     finally:
-        del buf  # a memory map cannot close while an array points into it
+        del buf
 
 
 _POOL: ThreadPoolExecutor | None = None
@@ -656,7 +782,12 @@ def _parse_pieces(
     ncols = len(kinds)
 
     def lines(piece: tuple[int, int]) -> int:
-        return int(fast_csv.count_lines(buf, piece[0], piece[1]))
+        # Room for the lines that are not blank, and never more than the bytes can hold: a
+        # kept row has its required fields, ncols - 1 commas and a line end (room for every
+        # line asked 700 MB for 8 MB of line ends).
+        most = (piece[1] - piece[0]) // (ncols + len(REQUIRED_COLUMNS)) + 1
+        lines = int(fast_csv.count_lines(buf, piece[0], piece[1]))  # the fast count first
+        return lines if lines <= most else min(most, int(fast_csv.count_rows(buf, *piece)))
 
     counts = list(pool.map(lines, pieces)) if pool is not None else [lines(p) for p in pieces]
     first_rows = [0, *itertools.accumulate(counts)]
@@ -701,7 +832,7 @@ def _parse_pieces(
                 [_line_fields(data, int(o))[col].strip() for o in offsets.tolist()], dtype=object)
         else:
             columns[name] = table[col]
-    return columns, int(offsets.shape[0]), error
+    return columns, int(offsets.shape[0]), error, offsets
 
 
 def _parse_slow(
@@ -714,6 +845,7 @@ def _parse_slow(
     error = None
     offset = start
     rows = 0
+    row_offsets: list[int] = []
     while offset < stop:
         end = data.find(b"\n", offset)
         line_offset, offset = offset, end + 1
@@ -751,6 +883,7 @@ def _parse_slow(
             break
         for col, value in enumerate(values):
             cells[col].append(value)
+        row_offsets.append(line_offset)
         rows += 1
     columns: dict[str, np.ndarray] = {}
     for col, name in enumerate(header):
@@ -758,4 +891,4 @@ def _parse_slow(
             columns[name] = np.array([str(v) for v in cells[col]], dtype=object)
         else:
             columns[name] = np.array(cells[col], dtype=np.float64)
-    return columns, rows, error
+    return columns, rows, error, np.array(row_offsets, dtype=np.int64)

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from app.core.bounded_input import JsonInputError, load_json
 from app.core.recording.errors import RecordingError
 from app.core.safe_output import write_output
 from app.core.version import __version__
@@ -28,6 +29,8 @@ from app.core.version import __version__
 MANIFEST_FORMAT = "inclinometer-session"
 MANIFEST_VERSION = 1
 MANIFEST_SUFFIX = ".session.json"
+MAX_MANIFEST_BYTES = 1 << 20
+"""A manifest lists a few files; a larger one is refused."""
 
 
 class SessionManifestError(RecordingError):
@@ -179,11 +182,11 @@ def load_session(manifest_path: str | os.PathLike[str], *,
     """
     path = Path(manifest_path)
     try:
-        document = json.loads(path.read_text(encoding="utf-8"))
+        document = load_json(path, max_bytes=MAX_MANIFEST_BYTES)
     except OSError as exc:
         raise SessionManifestError(f"{path}: cannot read the manifest: "
                                    f"{exc.strerror or exc}", path) from exc
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except JsonInputError as exc:
         raise SessionManifestError(f"{path}: not a session manifest (not JSON: {exc})",
                                    path) from exc
     if not isinstance(document, dict) or document.get("format") != MANIFEST_FORMAT:

@@ -31,12 +31,23 @@ from typing import Any, BinaryIO, TypeVar, overload
 
 import numpy as np
 
+from app.core.bounded_input import open_regular
+from app.core.recording import reader as _reader
 from app.core.recording.compressed import GzipBytes, PlainBytes, byte_source
-from app.core.recording.errors import RecordingCorruptError, RecordingError, RecordingWarning
+from app.core.recording.errors import (
+    RecordingCorruptError,
+    RecordingError,
+    RecordingTooLargeError,
+    RecordingWarning,
+)
 from app.core.recording.format import REFERENCE_COLUMNS
 from app.core.recording.reader import (
+    MAX_JUMPS_NAMED,
+    MAX_LOAD_BYTES,
+    MAX_LOAD_VALUES,
     Recording,
     RecordingHead,
+    TimeCheck,
     _count_lines,
     _kind,
     _parse_fast,
@@ -48,6 +59,12 @@ from app.core.samples import RawBlock
 T = TypeVar("T")
 CHUNK_BYTES = 8 << 20
 """Text read and parsed at a time (about 37 k rows of a 6667 Hz recording)."""
+WHOLE_CHUNK_BYTES = 32 << 20
+"""Chunks of :func:`read_stream`, which keeps every row anyway: larger pieces for the parser
+threads, fewer waits for the slowest of them."""
+MAX_LINE_BYTES = 16 << 20
+"""A line longer than this is refused (a row takes about 200 bytes): memory stays bounded
+whatever the file holds, ``/dev/zero``-like data or a line a gigabyte long."""
 
 
 @dataclass(slots=True)
@@ -81,7 +98,8 @@ class RecordingStream:
         self.path = Path(path)
         self.chunk_bytes = int(CHUNK_BYTES if chunk_bytes is None else chunk_bytes)
         try:
-            self._handle: BinaryIO = open(self.path, "rb")  # noqa: SIM115 (closed in close())
+            self._handle: BinaryIO = open_regular(self.path)  # closed in close()
+            self._size_at_open = os.fstat(self._handle.fileno()).st_size
         except OSError as exc:
             raise RecordingError(f"{self.path}: cannot read the recording: "
                                  f"{exc.strerror or exc}", self.path) from exc
@@ -95,6 +113,8 @@ class RecordingStream:
         self._kinds = np.array([_kind(name) for name in self.head.header], dtype=np.int8)
         self.warnings: list[str] = list(self.head.warnings)
         self._has_reference_columns = all(c in self.head.header for c in REFERENCE_COLUMNS)
+        self._clock = TimeCheck.for_metadata(self.head.metadata)
+        self._told: set[str] = set()
 
     def _read_head(self) -> RecordingHead:
         head, data = read_head_from(self._bytes, self.path)
@@ -133,10 +153,11 @@ class RecordingStream:
         self.close()
 
     def chunks(self, offset: int | None = None, first_row: int = 0,
-               line: int | None = None) -> Iterator[Chunk]:
+               line: int | None = None, max_bytes: int | None = None) -> Iterator[Chunk]:
         """The rows from the body's start, or from a line start at ``offset`` (decompressed
         bytes, as :attr:`Chunk.offset` gives; ``first_row`` and ``line`` then say which row
-        and line that is). Warns (:class:`RecordingWarning`) for an incomplete last row."""
+        and line that is). Warns (:class:`RecordingWarning`) for an incomplete last row.
+        With ``max_bytes``, raises :class:`RecordingTooLargeError` past that offset."""
         if offset is None or offset == self.head.body_start:
             offset = self.head.body_start
             line = self.head.header_line + 1
@@ -146,22 +167,47 @@ class RecordingStream:
             self._bytes.seek(offset)
             carry = b""
         line = self.head.header_line + 1 if line is None else line
+        clock = self._clock if first_row == 0 else TimeCheck(self._clock.period_s)
+        clock.last_t = None
+        clock.jumps = 0
         row = first_row
         pending: list[bytes] = [carry] if carry else []
         while True:
             more = self._bytes.read(self.chunk_bytes)
+            ended = not more
             if more and b"\n" not in more:
                 pending.append(more)  # a long line: gather it without copying it twice
-                continue
+                if sum(len(p) for p in pending) <= MAX_LINE_BYTES:
+                    continue
+                if b"\n" not in pending[0]:  # bounded memory, whatever the file holds
+                    raise RecordingCorruptError(
+                        f"{self.path}: line {line} is longer than {MAX_LINE_BYTES >> 20} MB "
+                        f"(a row takes about 200 bytes): this is not a recording's row; the "
+                        f"{row} row(s) before it are valid", self.path, line)
+                more = b""  # in pending already: parse the lines before the long one first
             data = b"".join([*pending, more])
             pending = []
             cut = data.rfind(b"\n") + 1
-            if not more and not cut:  # the end: only an unfinished row, if anything, is left
+            if ended and not cut:  # the end: only an unfinished row, if anything, is left
                 self._end(data, line)
                 return
-            body = data[:cut]
-            parse = _parse_slow if b'"' in body else _parse_fast
-            columns, rows, error = parse(body, 0, cut, self.head.header, self._kinds)
+            body = data  # its lines up to ``cut`` (a slice would copy them)
+            parse = _parse_slow if body.find(b'"', 0, cut) >= 0 else _parse_fast
+            columns, rows, error, offsets = parse(body, 0, cut, self.head.header, self._kinds)
+            previous = clock.last_t
+            bad = clock.first_out_of_order(columns["t"])
+            if bad is not None:  # refused like a row that cannot be read, before any such
+                error = (int(offsets[bad]), clock.disorder_text(columns["t"], bad))
+                columns = {name: values[:bad] for name, values in columns.items()}
+                rows = bad
+            counted = clock.jumps
+            for at_row, text in clock.mark_jumps(columns, previous):
+                self._warn(f"{self.path}: line "
+                           f"{line + _count_lines(body, 0, int(offsets[at_row]))}: {text}")
+            if clock.jumps > counted and clock.jumps > MAX_JUMPS_NAMED and \
+                    counted <= MAX_JUMPS_NAMED:
+                self._warn(f"{self.path}: more unmarked jumps in t follow; each is marked as "
+                           "a gap")
             recording = Recording(metadata=self.head.metadata, header=self.head.header,
                                   columns=columns, path=self.path)
             # Every chunk carries the reference columns the header has (NaN where unknown),
@@ -178,14 +224,30 @@ class RecordingStream:
             line += _count_lines(body, 0, cut)
             row += rows
             offset += cut
+            if max_bytes is not None and offset > max_bytes:
+                raise RecordingTooLargeError(
+                    f"{self.path}: the recording is larger than {max_bytes} bytes"
+                    + (" when decompressed" if self.compressed else ""), self.path)
             tail = data[cut:]
-            if not more:
+            if ended:
                 self._end(tail, line)
                 return
             if tail:
                 pending.append(tail)
 
+    def _warn(self, message: str) -> None:
+        """Warn once per stream (a replay reads its file again on every loop and seek)."""
+        if message in self._told or len(self._told) > 2 * MAX_JUMPS_NAMED:
+            return
+        self._told.add(message)
+        self.warnings.append(message)
+        warnings.warn(message, RecordingWarning, stacklevel=4)
+
     def _end(self, tail: bytes, line: int) -> None:
+        if not self.compressed and self._handle.tell() < self._size_at_open:
+            raise RecordingError(
+                f"{self.path}: the file became shorter while it was read (another program is "
+                f"rewriting it); reading stopped at line {line}", self.path)
         problems = []
         if tail.strip(b" \t\r\n\x00"):
             problems.append(f"{self.path}: line {line}: the last row is incomplete (the "
@@ -198,19 +260,25 @@ class RecordingStream:
             warnings.warn(message, RecordingWarning, stacklevel=3)
 
 
-def read_stream(path: str | os.PathLike[str], *, on_corrupt: str = "raise") -> Recording:
-    """A whole recording read through :class:`RecordingStream` (for compressed files).
+def read_stream(path: str | os.PathLike[str], *, on_corrupt: str = "raise",
+                max_bytes: int | None = MAX_LOAD_BYTES,
+                max_values: int = MAX_LOAD_VALUES) -> Recording:
+    """A whole recording read through :class:`RecordingStream` (compressed or large files).
 
-    Same contract as :func:`~app.core.recording.reader.read_recording`.
+    Same contract as :func:`~app.core.recording.reader.read_recording` (``max_bytes`` counts
+    decompressed text, so a small ``.csv.gz`` that expands a thousandfold is stopped early).
+    Each chunk's numbers go straight into one table reserved for ``max_values`` numbers: only
+    the pages written become memory, so memory is the numbers loaded plus one chunk.
     """
-    with RecordingStream(path) as stream:
-        parts: list[Recording] = []
+    with RecordingStream(path, chunk_bytes=WHOLE_CHUNK_BYTES) as stream:
+        loaded = _Loaded(stream, max_values)
         corrupt: RecordingCorruptError | None = None
         try:
-            parts.extend(chunk.rows for chunk in stream.chunks())
+            for chunk in prefetched(stream.chunks(max_bytes=max_bytes)):
+                loaded.add(chunk)
         except RecordingCorruptError as exc:
             corrupt = exc
-        recording = concatenate_recordings(stream, parts)
+        recording = loaded.recording()
         recording.warnings = list(stream.warnings)
         if corrupt is not None:
             if on_corrupt == "raise":
@@ -224,19 +292,61 @@ def read_stream(path: str | os.PathLike[str], *, on_corrupt: str = "raise") -> R
         return recording
 
 
-def concatenate_recordings(stream: RecordingStream, parts: list[Recording]) -> Recording:
-    """One :class:`Recording` of consecutive chunks."""
-    columns: dict[str, np.ndarray] = {}
-    for name in stream.header:
-        pieces = [p.columns[name] for p in parts]
-        if not pieces:
-            columns[name] = np.empty(0)
-        elif any(p.dtype == object for p in pieces):
-            columns[name] = np.concatenate([p.astype(object) for p in pieces])
-        else:
-            columns[name] = np.concatenate(pieces)
-    return Recording(metadata=stream.metadata, header=stream.header, columns=columns,
-                     path=stream.path)
+_reader.read_chunked = read_stream  # read_recording's path for large and compressed files
+
+
+class _Loaded:
+    """The rows of consecutive chunks, gathered for one :class:`Recording`.
+
+    Numbers go into a (columns, rows) table reserved at once for ``max_values`` (virtual
+    memory: pages never written cost nothing), so nothing is copied twice and the heap does
+    not keep the pieces of a join. Text cells (unknown columns) and a ``gap`` column the time
+    check added are kept per chunk and placed at the end.
+    """
+
+    def __init__(self, stream: RecordingStream, max_values: int) -> None:
+        self.stream = stream
+        self.names = list(stream.header)
+        self.max_values = max_values
+        self.capacity = max_values // max(len(self.names), 1)
+        self.table = np.empty((len(self.names), self.capacity))
+        self.texts: dict[int, list[tuple[int, np.ndarray]]] = {}
+        self.gaps: list[tuple[int, np.ndarray]] = []
+        self.rows = 0
+
+    def add(self, chunk: Chunk) -> None:
+        n = len(chunk)
+        if self.rows + n > self.capacity:
+            raise RecordingTooLargeError(
+                f"{self.stream.path}: the recording holds more than {self.max_values} numbers "
+                f"(over {self.rows} rows): too large to load at once"
+                + (" (decompressed)" if self.stream.compressed else ""), self.stream.path)
+        columns = chunk.rows.columns
+        for index, name in enumerate(self.names):
+            if columns[name].dtype == object:
+                self.texts.setdefault(index, []).append((self.rows, columns[name]))
+            else:
+                self.table[index, self.rows:self.rows + n] = columns[name]
+        if "gap" not in self.names and "gap" in columns:
+            self.gaps.append((self.rows, columns["gap"]))
+        self.rows += n
+
+    def recording(self) -> Recording:
+        rows = self.rows
+        columns: dict[str, np.ndarray] = {}
+        for index, name in enumerate(self.names):
+            column = self.table[index, :rows]
+            if index in self.texts:
+                column = column.astype(object)
+                for start, values in self.texts[index]:
+                    column[start:start + len(values)] = values
+            columns[name] = column
+        if self.gaps:
+            gap = columns["gap"] = np.zeros(rows)
+            for start, values in self.gaps:
+                gap[start:start + len(values)] = values
+        return Recording(metadata=self.stream.metadata, header=self.stream.header,
+                         columns=columns, path=self.stream.path)
 
 
 # -- reading ahead ----------------------------------------------------------------------------
