@@ -622,11 +622,9 @@ def _read_base(path: str):
         document = load_json(file, max_bytes=1 << 20)
     except FileNotFoundError:
         raise _Usage(f"--base {path}: no such file") from None
-    except (OSError, ValueError) as exc:  # also a FIFO, a device, JSON out of bounds
-        raise _Usage(f"--base {path}: not a calibration JSON file ({exc})") from None
     except RecursionError:
         raise _Usage(f"--base {path}: not a calibration JSON file (nested too deeply)") from None
-    except ValueError as exc:  # an integer of thousands of digits
+    except (OSError, ValueError) as exc:  # a FIFO, a device, JSON out of bounds, huge integers
         raise _Usage(f"--base {path}: not a calibration JSON file ({one_line(exc)})") from None
     try:
         calibration = calibration_from_json(document)
