@@ -419,9 +419,11 @@ class MainWindow(QMainWindow):
         if key not in FILLING_DOCKS:
             # Panels scroll rather than forcing their full size on the window (the Arm panel
             # alone wants 812 px of height, the Joint panel 1079 px of width): the window
-            # fits a 1366x768 screen whatever is open. The right docks scroll only down.
-            widget = PanelScroller(
-                widget, sideways=area != Qt.DockWidgetArea.RightDockWidgetArea)
+            # fits a 1366x768 screen whatever is open, and a narrow dock cuts nothing off.
+            widget = PanelScroller(widget)
+            if area == Qt.DockWidgetArea.RightDockWidgetArea:
+                widget.wantsWidth.connect(lambda width, d=dock: self.resizeDocks(
+                    [d], [width], Qt.Orientation.Horizontal))
         dock.setWidget(widget)
         self.addDockWidget(area, dock)
         self.docks[key] = dock
@@ -457,8 +459,9 @@ class MainWindow(QMainWindow):
         self.restoreState(self._default_state)
         self.docks["plots"].raise_()
         self.docks["filter"].raise_()
-        self._apply_default_layout()
         self.tidy_tab_bars()
+        # Dock sizes stick only once the restored layout is in place (as at the first show).
+        QTimer.singleShot(0, self, self._apply_default_layout)
 
     def _build_menus(self) -> None:
         file_menu = self.menuBar().addMenu("&File")
@@ -1144,15 +1147,20 @@ class MainWindow(QMainWindow):
             self._default_layout_pending = False
             self.level.setFocus(Qt.FocusReason.OtherFocusReason)
             if self.settings.value("geometry") is None:
-                QTimer.singleShot(0, self._fit_with_frame)  # the frame is known after show
+                QTimer.singleShot(0, self, self._fit_with_frame)  # the frame is known after show
             if self.settings.value("window_state") is None:
                 # Dock sizes only stick once the window has its final size.
-                QTimer.singleShot(0, self._apply_default_layout)
+                QTimer.singleShot(0, self, self._apply_default_layout)
 
     def _apply_default_layout(self) -> None:
         height = max(300, int(self.height() * 0.45))
-        # The panels take at most a third of a narrow window (1024 px: the level keeps room).
-        width = min(400, int(self.width() * 0.3))
+        # The panels take at most a third of a narrow window (1024 px: the level keeps room),
+        # but never so little that they scroll sideways.
+        fitting = max((dock.widget().fitting_width() for dock in self.docks.values()
+                       if isinstance(dock.widget(), PanelScroller)
+                       and self.dockWidgetArea(dock) == Qt.DockWidgetArea.RightDockWidgetArea),
+                      default=0)
+        width = max(min(400, int(self.width() * 0.3)), fitting)
         self.resizeDocks([self.docks["filter"]], [width], Qt.Orientation.Horizontal)
         self.resizeDocks([self.docks["plots"]], [height], Qt.Orientation.Vertical)
 

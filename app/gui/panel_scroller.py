@@ -1,45 +1,44 @@
-"""A dock panel that scrolls down, never sideways, and is never narrower than its panel.
+"""A dock panel that scrolls rather than make the window larger, and is never cut.
 
-A plain ``QScrollArea`` with its horizontal scroll bar off lets the dock shrink below the
-panel's minimum width, and the panel is then cut at the right (the Filter dock's combo box
-lost half its width at 1366x768). This one asks for the panel's minimum width (plus the
-vertical scroll bar) and only a little height: the panel scrolls down instead.
+A plain ``QScrollArea`` with its horizontal scroll bar off let a dock shrink below its
+panel's minimum width, and the panel was then cut at the right (the Filter dock's combo box
+lost half its width at 1366x768). This one scrolls both ways as needed, so a narrow dock still
+reaches all of its panel, and tells the window how wide the dock must be to show the panel
+without a sideways scroll bar (:meth:`fitting_width`, used for the default layout).
 """
 
 from __future__ import annotations
 
-from PySide6.QtCore import QEvent, QObject, QSize, Qt
+from PySide6.QtCore import QEvent, QObject, Signal
 from PySide6.QtWidgets import QFrame, QScrollArea, QStyle, QWidget
-
-MINIMUM_HEIGHT_PX = 80
 
 
 class PanelScroller(QScrollArea):
-    """Holds a dock's panel: scrolls it vertically (and sideways only if ``sideways``)."""
+    """Holds a dock's panel; it scrolls when the dock is smaller than the panel.
 
-    def __init__(self, panel: QWidget, sideways: bool = False) -> None:
+    ``wantsWidth(int)`` is emitted when the panel grew wider than the room it has (a form
+    rebuilt for another filter, say): the window may widen the dock."""
+
+    wantsWidth = Signal(int)
+
+    def __init__(self, panel: QWidget) -> None:
         super().__init__()
-        self.sideways = sideways
         self.setWidgetResizable(True)
         self.setFrameShape(QFrame.Shape.NoFrame)
-        if not sideways:
-            self.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         self.setWidget(panel)
         panel.installEventFilter(self)
 
     def eventFilter(self, watched: QObject, event: QEvent) -> bool:
-        """The panel's minimum width changed (a rebuilt form): the dock follows it."""
         if watched is self.widget() and event.type() == QEvent.Type.LayoutRequest:
-            self.updateGeometry()
+            wanted = self.fitting_width()
+            if self.isVisible() and wanted > self.width():
+                self.wantsWidth.emit(wanted)
         return super().eventFilter(watched, event)
 
-    def minimumSizeHint(self) -> QSize:
-        hint = super().minimumSizeHint()
+    def fitting_width(self) -> int:
+        """The width that shows the whole panel beside a vertical scroll bar."""
         panel = self.widget()
-        if self.sideways or panel is None:
-            return hint
         scroll_bar = self.style().pixelMetric(QStyle.PixelMetric.PM_ScrollBarExtent, None, self)
         margins = self.contentsMargins()
-        width = (panel.minimumSizeHint().expandedTo(panel.minimumSize()).width() + scroll_bar
-                 + margins.left() + margins.right())
-        return QSize(width, min(hint.height(), MINIMUM_HEIGHT_PX))
+        wanted = panel.minimumSizeHint().expandedTo(panel.minimumSize()).width()
+        return wanted + scroll_bar + margins.left() + margins.right()
