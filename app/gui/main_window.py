@@ -14,6 +14,7 @@ from PySide6.QtGui import (
     QCloseEvent,
     QGuiApplication,
     QKeySequence,
+    QResizeEvent,
     QShowEvent,
 )
 from PySide6.QtWidgets import (
@@ -420,8 +421,9 @@ class MainWindow(QMainWindow):
             # Panels scroll rather than forcing their full size on the window (the Arm panel
             # alone wants 812 px of height, the Joint panel 1079 px of width): the window
             # fits a 1366x768 screen whatever is open, and a narrow dock cuts nothing off.
-            widget = PanelScroller(widget)
-            if area == Qt.DockWidgetArea.RightDockWidgetArea:
+            right = area == Qt.DockWidgetArea.RightDockWidgetArea
+            widget = PanelScroller(widget, keeps_width=right)
+            if right:
                 widget.wantsWidth.connect(lambda width, d=dock: self.resizeDocks(
                     [d], [width], Qt.Orientation.Horizontal))
         dock.setWidget(widget)
@@ -1151,6 +1153,13 @@ class MainWindow(QMainWindow):
             if self.settings.value("window_state") is None:
                 # Dock sizes only stick once the window has its final size.
                 QTimer.singleShot(0, self, self._apply_default_layout)
+
+    def resizeEvent(self, event: QResizeEvent) -> None:
+        super().resizeEvent(event)
+        threshold = PanelScroller.KEEP_WIDTH_FROM_PX
+        if (event.oldSize().width() >= threshold) != (event.size().width() >= threshold):
+            for dock in self.docks.values():  # their minimum width changes at the threshold
+                dock.widget().updateGeometry()
 
     def _apply_default_layout(self) -> None:
         height = max(300, int(self.height() * 0.45))

@@ -9,7 +9,7 @@ without a sideways scroll bar (:meth:`fitting_width`, used for the default layou
 
 from __future__ import annotations
 
-from PySide6.QtCore import QEvent, QObject, Signal
+from PySide6.QtCore import QEvent, QObject, QSize, Signal
 from PySide6.QtWidgets import QFrame, QScrollArea, QStyle, QWidget
 
 
@@ -21,8 +21,13 @@ class PanelScroller(QScrollArea):
 
     wantsWidth = Signal(int)
 
-    def __init__(self, panel: QWidget) -> None:
+    KEEP_WIDTH_FROM_PX = 1200
+    """In a window at least this wide, a panel that ``keeps_width`` is never narrower than
+    its contents (the central view cannot take its room); a narrower window lets it scroll."""
+
+    def __init__(self, panel: QWidget, keeps_width: bool = False) -> None:
         super().__init__()
+        self.keeps_width = keeps_width
         self.setWidgetResizable(True)
         self.setFrameShape(QFrame.Shape.NoFrame)
         self.setWidget(panel)
@@ -31,9 +36,17 @@ class PanelScroller(QScrollArea):
     def eventFilter(self, watched: QObject, event: QEvent) -> bool:
         if watched is self.widget() and event.type() == QEvent.Type.LayoutRequest:
             wanted = self.fitting_width()
+            if self.keeps_width:
+                self.updateGeometry()  # a new minimum width
             if self.isVisible() and wanted > self.width():
                 self.wantsWidth.emit(wanted)
         return super().eventFilter(watched, event)
+
+    def minimumSizeHint(self) -> QSize:
+        hint = super().minimumSizeHint()
+        if self.keeps_width and self.window().width() >= self.KEEP_WIDTH_FROM_PX:
+            return QSize(max(hint.width(), self.fitting_width()), hint.height())
+        return hint
 
     def fitting_width(self) -> int:
         """The width that shows the whole panel beside a vertical scroll bar."""
