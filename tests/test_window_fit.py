@@ -30,12 +30,14 @@ from PySide6.QtWidgets import (
 
 from app import cli
 from app.core.alarms import alarms_from_specs
+from app.core.recording import sample_recordings
 from app.core.screen_fit import Rect, fields_that_fit, first_window_rect
 from app.gui import file_dialogs, help_dialogs, theme
 from app.gui.elided_label import ElidedLabel
 from app.gui.main_window import MainWindow
 from app.gui.panel_scroller import PanelScroller
 from app.gui.text_fit import clipped_texts
+from app.services.devices import replay_url
 from app.services.session import DeviceSession
 
 TIMEOUT_MS = 15_000
@@ -242,6 +244,34 @@ def test_no_text_is_clipped_in_any_dock_or_dialog_at_either_size_in_any_theme(
     failing = sorted(set(problems) - set(known))
     assert all(count > 100 for count in counts.values()), counts
     assert not failing, "\n".join(failing[:40])
+    assert not warnings, warnings
+
+
+def test_no_text_is_clipped_on_the_bars_of_a_replay(qtbot, tmp_path):
+    recording = sample_recordings()[0]
+    window = open_window(qtbot, tmp_path, url=replay_url(str(recording)))
+    problems: list[str] = []
+    checked = 0
+    with qt_messages() as warnings:
+        try:
+            window.show()
+            qtbot.waitUntil(window.replay_bar.isVisible, timeout=TIMEOUT_MS)
+            qtbot.waitUntil(lambda: "samples" in window.status_rate.text(), timeout=TIMEOUT_MS)
+            for name in THEMES:
+                window.set_theme(name)
+                for width, height in SIZES:
+                    window.fit_to_screen(QRect(0, 0, width, height))
+                    qtbot.waitUntil(lambda w=width: window.width() == w, timeout=TIMEOUT_MS)
+                    QApplication.processEvents()
+                    for bar in (window.replay_bar, window.device_bar, window.statusBar()):
+                        report = clipped_texts(bar)
+                        checked += report.checked
+                        problems.extend(f"{width}x{height} {name}: {p}" for p in report.problems)
+        finally:
+            window.close()
+    known = [p for p in problems if any(key in p for key in KNOWN_CLIPPING)]
+    assert checked > 6 * 10
+    assert not sorted(set(problems) - set(known)), "\n".join(problems[:20])
     assert not warnings, warnings
 
 

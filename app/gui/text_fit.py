@@ -151,8 +151,8 @@ def _combo_problem(combo: QComboBox) -> str | None:
         needed += combo.iconSize().width() + 4
     if needed > room.width():
         return f"{text[:40]!r} needs {needed} px, has {room.width()}"
-    if combo.height() < combo.minimumSizeHint().height():
-        return f"{text[:40]!r} squeezed to {combo.height()} px of height"
+    if room.height() < combo.fontMetrics().height():
+        return f"{text[:40]!r} squeezed to {room.height()} px of height"
     return None
 
 
@@ -165,9 +165,9 @@ def _spin_problem(spin: QAbstractSpinBox) -> str | None:
     room = edit.contentsRect().width()
     if needed > room:
         return f"{text!r} needs {needed} px, has {room}"
-    if spin.height() < spin.minimumSizeHint().height() - 1:
-        return f"{text!r} squeezed to {spin.height()} px of height (needs " \
-               f"{spin.minimumSizeHint().height()})"
+    if edit.contentsRect().height() < spin.fontMetrics().height():
+        return f"{text!r} squeezed to {edit.contentsRect().height()} px of height (needs " \
+               f"{spin.fontMetrics().height()})"
     return None
 
 
