@@ -16,7 +16,7 @@ from PySide6.QtWidgets import QStatusBar, QWidget
 from app.core.screen_fit import fields_that_fit
 from app.gui.elided_label import ElidedLabel
 
-SAFETY_PX = 8
+SAFETY_PX = 16
 """Room kept free so that a field shown never ends up squeezed by rounding."""
 
 
@@ -29,9 +29,12 @@ class StatusField(ElidedLabel):
         super().__init__(text, parent)
 
     def setText(self, text: str) -> None:  # type: ignore[override]
-        was_empty = not self.text()
+        was_empty, width = not self.text(), self.sizeHint().width()
         super().setText(text)
-        if self.changed is not None and (was_empty != (not self.text()) or self.isHidden()):
+        grew = self.sizeHint().width() > width
+        if self.changed is not None and (
+            grew or was_empty != (not self.text()) or self.isHidden()
+        ):
             self.changed()
 
 
@@ -74,22 +77,26 @@ class StatusFields(QObject):
         layout = bar.layout()
         spacing = max(0, layout.spacing()) if layout is not None else 6
         margins = bar.contentsMargins()
-        permanent = sum(w.sizeHint().width() + spacing for w in self.permanent
-                        if not w.isHidden())
+        permanent = sum(max(w.sizeHint().width(), w.minimumWidth(), w.width()) + spacing
+                        for w in self.permanent if not w.isHidden())
         available = (bar.width() - margins.left() - margins.right() - permanent
                      - 2 * spacing - SAFETY_PX)
         widths = [self.text_width(label) for label in self.fields]
         shown = fields_that_fit(widths, available, spacing)
         hidden: list[str] = []
+        resized = False
         for label, width, show in zip(self.fields, widths, shown, strict=True):
             if show:
                 # Never narrower than the whole text: the layout cannot squeeze it.
                 if label.minimumWidth() != width:
                     label.setMinimumWidth(width)
+                    resized = True
             elif width:
                 hidden.append(label.text())
             if label.isHidden() == show:
                 label.setVisible(show)
+        if resized and layout is not None and bar.isVisible():
+            layout.activate()  # now, not at the next pass: a grown text is never cut
         if hidden != self.hidden_texts:
             self.hidden_texts = hidden
             bar.setToolTip("\n".join(hidden))
