@@ -2,6 +2,7 @@
 
 ``inclinometer``                    the GUI on the simulated device
 ``inclinometer --device URL``       the GUI on another device
+``inclinometer --alarm SPEC ...``   the GUI with these alarms (as ``record --alarm``)
 ``inclinometer devices``            list what can be connected
 ``inclinometer evaluate SOURCE...`` score the orientation filters against a known truth
 ``inclinometer record ... OUT.csv`` record a device headless (see app/cli_recording.py)
@@ -74,6 +75,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="device to connect at start (default: the last one used, or sim://interactive)",
     )
     parser.add_argument("--filter", metavar="NAME", help="orientation filter to start with")
+    parser.add_argument(
+        "--alarm", dest="gui_alarms", metavar="SPEC", action="append", default=[],
+        help="start the window with this alarm (repeatable; it replaces the remembered "
+             "alarms). SPEC as for 'record --alarm', e.g. --alarm 'tilt>2.0,hyst=0.2,delay=0.5' "
+             "--alarm '|roll|>1'",
+    )
     parser.add_argument(
         "--smoke-test", nargs="?", const="", metavar="PNG",
         help="check the GUI end to end (simulator, views, a sample replay, the compiled "
@@ -518,9 +525,18 @@ def _start_gui(args: argparse.Namespace) -> int:
         except DeviceUrlError as exc:
             print(f"inclinometer: {exc}", file=sys.stderr)
             return 2
+    alarms = None
+    if args.gui_alarms:
+        from app.core.alarms import alarms_from_specs
+
+        try:
+            alarms = alarms_from_specs(args.gui_alarms)
+        except ValueError as exc:
+            print(f"inclinometer: --alarm: {exc}", file=sys.stderr)
+            return 2
     from app.gui.application import run_gui
 
-    return run_gui(args.device, args.filter)
+    return run_gui(args.device, args.filter, alarms)
 
 
 _COMMANDS: dict[str | None, Callable[[argparse.Namespace], int]] = {

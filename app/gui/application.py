@@ -7,6 +7,7 @@ import sys
 from PySide6.QtWidgets import QApplication
 
 from app import __version__
+from app.core.alarms import AlarmConfig
 from app.gui import theme
 from app.gui.main_window import MainWindow
 from app.gui.user_settings import APPLICATION, ORGANIZATION, create_settings
@@ -15,8 +16,13 @@ from app.services.session import DeviceSession
 __all__ = ["APPLICATION", "ORGANIZATION", "create_settings", "run_gui"]
 
 
-def run_gui(device_url: str | None = None, filter_name: str | None = None) -> int:
-    """Show the main window and run the event loop; returns the exit code."""
+def run_gui(
+    device_url: str | None = None,
+    filter_name: str | None = None,
+    alarms: AlarmConfig | None = None,
+) -> int:
+    """Show the main window (with ``alarms``, if given, instead of the remembered ones) and
+    run the event loop; returns the exit code."""
     app = QApplication.instance() or QApplication(sys.argv)
     app.setOrganizationName(ORGANIZATION)
     app.setApplicationName(APPLICATION)
@@ -24,6 +30,6 @@ def run_gui(device_url: str | None = None, filter_name: str | None = None) -> in
     app.setDesktopFileName("org.inclinometer.Inclinometer")  # Wayland finds the icon by it
     theme.apply_theme(app)  # the window then applies the remembered theme
     session = DeviceSession()
-    window = MainWindow(session, create_settings(), device_url, filter_name)
+    window = MainWindow(session, create_settings(), device_url, filter_name, alarms)
     window.show()
     return app.exec()

@@ -22,7 +22,6 @@ from PySide6.QtGui import QFont
 from PySide6.QtWidgets import (
     QComboBox,
     QDoubleSpinBox,
-    QFileDialog,
     QFormLayout,
     QFrame,
     QGridLayout,
@@ -50,6 +49,7 @@ from app.core.arm import (
     pose_from_link_quaternions,
 )
 from app.core.arm.layout import ALONG_X, PITCH_UP, VERTICAL
+from app.gui import file_dialogs
 
 JOINT_KINDS = {
     "column (vertical)": (VERTICAL, VERTICAL),
@@ -425,10 +425,8 @@ class ArmPanel(QWidget):
         if not len(self.placements):
             return False
         if path is None:
-            path, _ = QFileDialog.getSaveFileName(
-                self, "Export repeatability", str(Path.home() / "arm-repeatability.csv"),
-                "CSV (*.csv)",
-            )
+            path, _ = file_dialogs.save_file_name(
+                self, "Export repeatability", "arm-repeatability.csv", "CSV (*.csv)")
             if not path:
                 return False
         try:
@@ -441,9 +439,8 @@ class ArmPanel(QWidget):
 
     def save_layout(self, path: str | None = None) -> bool:
         if path is None:
-            path, _ = QFileDialog.getSaveFileName(
-                self, "Save arm layout", str(Path.home() / "arm-layout.json"), "JSON (*.json)"
-            )
+            path, _ = file_dialogs.save_file_name(
+                self, "Save arm layout", "arm-layout.json", "JSON (*.json)")
             if not path:
                 return False
         try:
@@ -456,7 +453,7 @@ class ArmPanel(QWidget):
 
     def load_layout(self, path: str | None = None) -> bool:
         if path is None:
-            path, _ = QFileDialog.getOpenFileName(self, "Load arm layout", "", "JSON (*.json)")
+            path = file_dialogs.open_file_name(self, "Load arm layout", "JSON (*.json)")
             if not path:
                 return False
         try:

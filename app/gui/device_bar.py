@@ -113,6 +113,11 @@ class DeviceBar(QToolBar):
         if self.connect_button.text() != label:
             self.connect_button.setText(label)
         self.status_label.setText(text or state.capitalize())
+        # Never elided: the toolbar gives it at least its widest text so far (also after a
+        # theme changed its font).
+        widest = self.status_label.sizeHint().width()
+        if self.status_label.minimumWidth() < widest:
+            self.status_label.setMinimumWidth(widest)
 
     def _on_connect_clicked(self) -> None:
         if self.connect_button.text() == "Disconnect" and self.sender() is self.connect_button:

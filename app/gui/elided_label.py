@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 
 from PySide6.QtCore import QEvent, QSize, Qt
-from PySide6.QtGui import QPainter, QPaintEvent
+from PySide6.QtGui import QFontMetricsF, QPainter, QPaintEvent
 from PySide6.QtWidgets import QLabel, QStyle, QStyleOption, QWidget
 
 
@@ -39,7 +39,7 @@ class ElidedLabel(QLabel):
             return
         self._text = text
         self.setToolTip(text)
-        width = self.fontMetrics().horizontalAdvance(text)
+        width = self._advance(text)
         if width > self._widest:
             self._widest = width
             self.updateGeometry()
@@ -51,14 +51,19 @@ class ElidedLabel(QLabel):
     def changeEvent(self, event: QEvent) -> None:
         """A new font or style: measure the text again."""
         if event.type() in (QEvent.Type.FontChange, QEvent.Type.StyleChange):
-            self._widest = self.fontMetrics().horizontalAdvance(self._text)
+            self._widest = self._advance(self._text)
             self.updateGeometry()
         super().changeEvent(event)
+
+    def _advance(self, text: str) -> float:
+        """The text's exact width: whole pixels (``QFontMetrics``) can be a fraction short,
+        and the end of a text given exactly that room was cut to "…"."""
+        return QFontMetricsF(self.font()).horizontalAdvance(text)
 
     def sizeHint(self) -> QSize:
         margins = self.contentsMargins()
         return QSize(
-            math.ceil(self._widest) + margins.left() + margins.right() + 2 * self.margin(),
+            math.ceil(self._widest) + 1 + margins.left() + margins.right() + 2 * self.margin(),
             self.fontMetrics().height() + margins.top() + margins.bottom() + 2 * self.margin(),
         )
 
@@ -68,7 +73,9 @@ class ElidedLabel(QLabel):
 
     def isElided(self) -> bool:
         """Whether the text is cut short now."""
-        return self.fontMetrics().horizontalAdvance(self._text) > self.contentsRect().width()
+        shown = self.fontMetrics().elidedText(self._text, Qt.TextElideMode.ElideRight,
+                                              self.contentsRect().width())
+        return shown != self._text
 
     def paintEvent(self, event: QPaintEvent) -> None:
         painter = QPainter(self)

@@ -20,7 +20,6 @@ from PySide6.QtCore import Qt, QTimer, Signal
 from PySide6.QtGui import QFont
 from PySide6.QtWidgets import (
     QComboBox,
-    QFileDialog,
     QFormLayout,
     QGroupBox,
     QHBoxLayout,
@@ -36,7 +35,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.core.readout import averaged_angle_deg
-from app.gui import theme
+from app.gui import file_dialogs, theme
 from app.services.group_attitudes import GroupAttitudes
 from app.services.joint_stream import JointStream
 from app.services.sensor_group import SensorGroup
@@ -415,7 +414,7 @@ class JointPanel(QWidget):
         if not checked:
             self.group.stop_recording()
             return
-        path, _ = QFileDialog.getSaveFileName(self, "Record session", "",
+        path, _ = file_dialogs.save_file_name(self, "Record session", "",
                                               "Session manifest (*.session.json)")
         started = None
         if path:
@@ -429,8 +428,8 @@ class JointPanel(QWidget):
         self.quality.setText(f"Session recorded: {manifest}")
 
     def ask_open_session(self) -> None:
-        path, _ = QFileDialog.getOpenFileName(self, "Replay session", "",
-                                              "Session manifest (*.session.json)")
+        path = file_dialogs.open_file_name(self, "Replay session",
+                                           "Session manifest (*.session.json)")
         if path:
             self.open_session(path)
 

@@ -7,35 +7,33 @@ from datetime import timedelta
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from PySide6.QtCore import QSettings, Qt, QTimer
+from PySide6.QtCore import QRect, QSettings, Qt, QTimer
 from PySide6.QtGui import (
     QAction,
     QActionGroup,
     QCloseEvent,
     QGuiApplication,
     QKeySequence,
+    QResizeEvent,
     QShowEvent,
 )
 from PySide6.QtWidgets import (
     QApplication,
     QCheckBox,
     QComboBox,
+    QDialog,
     QDockWidget,
-    QFileDialog,
-    QFrame,
     QHBoxLayout,
     QLabel,
     QMainWindow,
-    QMessageBox,
     QPlainTextEdit,
     QPushButton,
-    QScrollArea,
     QSizePolicy,
+    QTabBar,
     QVBoxLayout,
     QWidget,
 )
 
-from app import __version__
 from app.core.alarms import READOUT_OF, AlarmConfig, parse_alarm
 from app.core.calibration_procedures import CalibrationProfile, ProfileError
 from app.core.calibration_procedures.profiles import read_profile_file
@@ -44,8 +42,9 @@ from app.core.filters import DEFAULT_FILTER, FILTERS, ONLINE_FILTERS
 from app.core.measurement_log import MeasurementLog, default_log_path
 from app.core.readout import SLOPE_UNITS
 from app.core.recording import sample_recordings
+from app.core.screen_fit import Rect, first_window_rect
 from app.core.self_test import SelfTestReport
-from app.gui import theme
+from app.gui import file_dialogs, help_dialogs, theme, wheel_guard
 from app.gui.alarm_panel import AlarmPanel
 from app.gui.arm_panel import ArmPanel
 from app.gui.attitude_view import AttitudeView
@@ -60,11 +59,13 @@ from app.gui.health_lights import HealthLights
 from app.gui.joint_panel import JointPanel
 from app.gui.measure_panel import MeasurePanel
 from app.gui.measurement_log_panel import MeasurementLogPanel
+from app.gui.panel_scroller import PanelScroller
 from app.gui.plots import LivePlots
-from app.gui.presenter import UNIT_LABELS, LivePresenter
+from app.gui.presenter import LivePresenter
 from app.gui.readouts import TiltReadouts
 from app.gui.replay_bar import ReplayBar
 from app.gui.simulator_panel import SimulatorPanel
+from app.gui.status_fields import StatusField, StatusFields
 from app.gui.user_settings import SettingsSections, check_settings, read_json, write_json
 from app.services.devices import (
     DEFAULT_DEVICE_URL,
@@ -84,6 +85,8 @@ INSTRUMENT_MAX_PX = 400
 """Largest digits in the full-screen instrument mode (they fill the half screen)."""
 AVERAGING_S = (0.05, 0.2, 0.5, 1.0, 2.0, 5.0)
 LEVEL_RANGES_DEG = (0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 90.0)
+FILLING_DOCKS = frozenset({"plots", "messages", "attitude3d"})
+"""Docks whose contents fill any size (the others scroll inside their dock)."""
 DEVICE_MESSAGE_WARNING = 2
 DEVICE_MESSAGE_ERROR = 3
 """Levels of a device's own messages (the link protocol's LOG levels)."""
@@ -119,15 +122,22 @@ class MainWindow(QMainWindow):
         settings: QSettings,
         device_url: str | None = None,
         filter_name: str | None = None,
+        alarms: AlarmConfig | None = None,
     ) -> None:
         super().__init__()
         self.session = session
         self.settings = settings
         settings_problem = check_settings(settings)
+        app = QApplication.instance()
+        if isinstance(app, QApplication):
+            wheel_guard.install(app)  # the wheel scrolls panels, never an unfocused field
+        file_dialogs.use_settings(settings)
+        self._start_alarms = alarms
         self.sections = SettingsSections(settings, self.show_error)
         """Components that keep a dict of settings register here (e.g. the alarms:
         ``window.sections.register("alarms", config.to_dict, load)``)."""
         self._instrument_mode = False
+        self._help_dialogs: dict[str, QDialog] = {}
         self._layout_before_instrument: dict | None = None
         self._calibration_profile: CalibrationProfile | None = None
         self.setWindowTitle("Inclinometer")
@@ -173,44 +183,49 @@ class MainWindow(QMainWindow):
         self.measure_panel.tareRequested.connect(session.requestTareReference)
         right = Qt.DockWidgetArea.RightDockWidgetArea
         self._add_dock("measure", "Measure", self.measure_panel, right)
-        self.attitude_view = AttitudeView()
-        self._add_dock("attitude3d", "3D view", self.attitude_view, right)
-        self.arm_panel = ArmPanel()
-        self._add_dock("arm", "Arm", self.arm_panel, right)
+        # The 3D view and the arm want width: they join the wide bottom group, which keeps
+        # the right group to five short titles.
         bottom = Qt.DockWidgetArea.BottomDockWidgetArea
+        self.attitude_view = AttitudeView()
+        self._add_dock("attitude3d", "3D view", self.attitude_view, bottom)
+        self.arm_panel = ArmPanel()
+        self._add_dock("arm", "Arm", self.arm_panel, bottom)
         self._add_dock("messages", "Messages", self.messages, bottom)
         self.tabifyDockWidget(self.docks["filter"], self.docks["simulator"])
         self.tabifyDockWidget(self.docks["simulator"], self.docks["device"])
         self.tabifyDockWidget(self.docks["device"], self.docks["measure"])
-        self.tabifyDockWidget(self.docks["measure"], self.docks["attitude3d"])
-        self.tabifyDockWidget(self.docks["attitude3d"], self.docks["arm"])
-        self.docks["attitude3d"].hide()  # opened from the View menu (then in this tab group)
-        self.docks["arm"].hide()
         self.tabifyDockWidget(self.docks["plots"], self.docks["messages"])
         self._build_alarms_and_log()
         self._build_joint_dock()
+        self.tabifyDockWidget(self.docks["joint"], self.docks["attitude3d"])
+        self.tabifyDockWidget(self.docks["attitude3d"], self.docks["arm"])
+        self.docks["attitude3d"].hide()  # opened from the View menu (then in this tab group)
+        self.docks["arm"].hide()
         self.docks["plots"].raise_()
         self.docks["filter"].raise_()
+        self._default_state = self.saveState()
+        """The docks as first built, for View ▸ Reset layout."""
         self._default_layout_pending = True
 
-        # Status bar.
-        self.status_device = ElidedLabel("No device")
-        self.status_rate = ElidedLabel()
-        self.status_filter = ElidedLabel()
-        self.status_fps = ElidedLabel()
-        self.status_calibration = ElidedLabel()
+        # Status bar: fields most important first; those that do not fit are hidden whole.
+        self.status_device = StatusField("No device")
+        self.status_rate = StatusField()
+        self.status_filter = StatusField()
+        self.status_fps = ElidedLabel("999 fps")
+        self.status_fps.setMinimumWidth(self.status_fps.sizeHint().width())  # never cut
+        self.status_fps.setText("")
+        self.status_calibration = StatusField()
         self.status_calibration.setObjectName("calibrationStatus")
-        self.status_tare = QLabel()
-        self.status_recording = QLabel()
-        for widget in (
-            self.status_device, self.status_rate, self.status_filter, self.status_calibration,
-            self.status_tare, self.status_recording,
-        ):
-            self.statusBar().addWidget(widget)
+        self.status_tare = StatusField()
+        self.status_recording = StatusField()
         self.health_lights = HealthLights()
         self.health_lights.resetRequested.connect(self._reset_health)
-        self.statusBar().addPermanentWidget(self.health_lights)
-        self.statusBar().addPermanentWidget(self.status_fps)
+        self.status_fields = StatusFields(
+            self.statusBar(),
+            [self.status_recording, self.status_tare, self.status_calibration,
+             self.status_device, self.status_filter, self.status_rate],
+            [self.health_lights, self.status_fps],
+        )
         self._fault_shown = ""
 
         self._build_menus()
@@ -293,6 +308,10 @@ class MainWindow(QMainWindow):
         theme.notifier().changed.connect(self._on_theme_changed)
         if settings_problem:
             self.show_error(settings_problem)
+        # The keys (H, Space, ...) go to the instrument from the start, not to the device
+        # field (H typed "h" into the URL there, and Enter then connected to it).
+        self.level.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
+        self.level.setFocus(Qt.FocusReason.OtherFocusReason)
 
     # -- construction -----------------------------------------------------------------------
     def _build_level_view(self) -> QWidget:
@@ -367,17 +386,53 @@ class MainWindow(QMainWindow):
     def _add_dock(self, key: str, title: str, widget: QWidget, area: Qt.DockWidgetArea) -> None:
         dock = QDockWidget(title, self)
         dock.setObjectName(f"dock-{key}")
-        if area == Qt.DockWidgetArea.RightDockWidgetArea and not isinstance(widget, QPlainTextEdit):
-            # Panels scroll rather than forcing their full height on the window.
-            scroller = QScrollArea()
-            scroller.setWidgetResizable(True)
-            scroller.setFrameShape(QFrame.Shape.NoFrame)
-            scroller.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
-            scroller.setWidget(widget)
-            widget = scroller
+        if key not in FILLING_DOCKS:
+            # Panels scroll rather than forcing their full size on the window (the Arm panel
+            # alone wants 812 px of height, the Joint panel 1079 px of width): the window
+            # fits a 1366x768 screen whatever is open, and a narrow dock cuts nothing off.
+            right = area == Qt.DockWidgetArea.RightDockWidgetArea
+            widget = PanelScroller(widget, keeps_width=right)
+            if right:
+                widget.wantsWidth.connect(lambda width, d=dock: self.resizeDocks(
+                    [d], [width], Qt.Orientation.Horizontal))
         dock.setWidget(widget)
         self.addDockWidget(area, dock)
         self.docks[key] = dock
+        # Opened from the View menu: in front of its tab group, not behind another tab.
+        dock.toggleViewAction().triggered.connect(
+            lambda checked, d=dock: checked and self.raise_dock(d))
+        dock.dockLocationChanged.connect(lambda _area: self.tidy_tab_bars())
+        dock.topLevelChanged.connect(lambda _floating: self.tidy_tab_bars())
+
+    def raise_dock(self, dock: QDockWidget) -> None:
+        """Show ``dock`` in front of its tab group."""
+        dock.show()
+        dock.raise_()
+        self.tidy_tab_bars()
+
+    def tidy_tab_bars(self) -> None:
+        """The docks' tab bars show whole titles and scroll (arrows) when they do not fit.
+        Qt makes these bars as docks are tabbed, so this runs after every change."""
+        for bar in self.findChildren(QTabBar):
+            if bar.parent() is not self:  # only the main window's dock tab bars
+                continue
+            if bar.elideMode() != Qt.TextElideMode.ElideNone:
+                bar.setElideMode(Qt.TextElideMode.ElideNone)
+            if not bar.usesScrollButtons():
+                bar.setUsesScrollButtons(True)
+
+    def reset_layout(self) -> None:
+        """View ▸ Reset layout: every dock where and as large as at the first start."""
+        if self._instrument_mode:
+            self.set_instrument_mode(False)
+        for dock in self.docks.values():
+            dock.setFloating(False)
+        self.restoreState(self._default_state)
+        self.docks["plots"].raise_()
+        self.docks["filter"].raise_()
+        self.tidy_tab_bars()
+        # Dock sizes stick only once the restored layout is in place (as at the first show).
+        QTimer.singleShot(0, self, self._apply_default_layout)
 
     def _build_menus(self) -> None:
         file_menu = self.menuBar().addMenu("&File")
@@ -444,10 +499,18 @@ class MainWindow(QMainWindow):
         self.copy_action.setToolTip("Copy roll, pitch and tilt as text, in the chosen units")
         self.copy_action.triggered.connect(self.copy_reading)
         edit_menu.addAction(self.copy_action)
+        self.hold_action.setText("&Hold readouts")
+        edit_menu.addAction(self.hold_action)
+        self.store_action.setText("&Store reading")
+        edit_menu.addAction(self.store_action)
         self._build_sensors_menu()
         view_menu = self.menuBar().addMenu("&View")
         for dock in self.docks.values():
             view_menu.addAction(dock.toggleViewAction())
+        self.reset_layout_action = QAction("&Reset layout", self)
+        self.reset_layout_action.setToolTip("Every dock back where it was at the first start")
+        self.reset_layout_action.triggered.connect(self.reset_layout)
+        view_menu.addAction(self.reset_layout_action)
         view_menu.addSeparator()
         self.instrument_action = QAction("&Full-screen instrument", self)
         self.instrument_action.setCheckable(True)
@@ -455,10 +518,11 @@ class MainWindow(QMainWindow):
         self.instrument_action.setToolTip("Big digits and the bubble only (F11 or Esc leaves)")
         self.instrument_action.toggled.connect(self.set_instrument_mode)
         view_menu.addAction(self.instrument_action)
-        self.leave_instrument_action = QAction("Leave full screen", self)
+        self.leave_instrument_action = QAction("&Leave full screen", self)
         self.leave_instrument_action.setShortcut(QKeySequence(Qt.Key.Key_Escape))
         self.leave_instrument_action.setEnabled(False)
         self.leave_instrument_action.triggered.connect(lambda: self.set_instrument_mode(False))
+        view_menu.addAction(self.leave_instrument_action)
         theme_menu = view_menu.addMenu("&Theme")
         self.theme_actions: dict[str, QAction] = {}
         group = QActionGroup(self)
@@ -473,9 +537,15 @@ class MainWindow(QMainWindow):
         for action in (self.copy_action, self.instrument_action, self.leave_instrument_action):
             self.addAction(action)
         help_menu = self.menuBar().addMenu("&Help")
+        self.guide_action = QAction("&User guide", self)
+        self.guide_action.setShortcut(QKeySequence.StandardKey.HelpContents)
+        self.guide_action.triggered.connect(self.show_user_guide)
+        self.shortcuts_action = QAction("&Keyboard shortcuts", self)
+        self.shortcuts_action.triggered.connect(self.show_shortcut_sheet)
         about = QAction("&About Inclinometer", self)
-        about.triggered.connect(self._show_about)
-        help_menu.addAction(about)
+        about.triggered.connect(self.show_about)
+        for action in (self.guide_action, self.shortcuts_action, about):
+            help_menu.addAction(action)
 
     # -- actions ----------------------------------------------------------------------------
     def connect_device(self, url: str) -> None:
@@ -532,10 +602,9 @@ class MainWindow(QMainWindow):
     def open_recording(self, path: str | None = None) -> None:
         """Replay a recording through the whole pipeline (it becomes the device)."""
         if path is None:
-            path, _ = QFileDialog.getOpenFileName(
-                self, "Open recording", str(recordings_dir()),
-                "Recordings (*.csv *.csv.gz);;All files (*)"
-            )
+            path = file_dialogs.open_file_name(
+                self, "Open recording", "Recordings (*.csv *.csv.gz);;All files (*)",
+                recordings_dir())
             if not path:
                 return
         self.connect_device(replay_url(path))
@@ -543,9 +612,9 @@ class MainWindow(QMainWindow):
     def export_plots(self, path: str | None = None) -> None:
         """Save the plots as they are shown: PNG (raster) or SVG (vector), by file suffix."""
         if path is None:
-            path, _ = QFileDialog.getSaveFileName(
-                self, "Export plots", str(Path.home() / "inclinometer-plots.png"),
-                "PNG image (*.png);;SVG drawing (*.svg)",
+            path, _ = file_dialogs.save_file_name(
+                self, "Export plots", "inclinometer-plots.png",
+                "PNG image (*.png);;SVG drawing (*.svg)", recordings_dir(),
             )
             if not path:
                 return
@@ -572,9 +641,9 @@ class MainWindow(QMainWindow):
         name = time.strftime("inclinometer-%Y%m%d-%H%M%S.csv")
         info = self.session.device_info
         cost = recording_cost(folder, info.odr_hz, reference=info.url.startswith("sim:"))
-        path, chosen = QFileDialog.getSaveFileName(
-            self, f"Record to ({cost})", str(folder / name),
-            f"{RECORDING_FILTER};;{COMPRESSED_RECORDING_FILTER}",
+        path, chosen = file_dialogs.save_file_name(
+            self, f"Record to ({cost})", name,
+            f"{RECORDING_FILTER};;{COMPRESSED_RECORDING_FILTER}", folder,
         )
         if not path:
             return
@@ -726,7 +795,9 @@ class MainWindow(QMainWindow):
         remembered = self.sections.register(
             "alarms", lambda: self.alarm_panel.config().to_dict(),
             lambda stored: self.apply_alarms(AlarmConfig.from_dict(stored)))
-        if not remembered:
+        if self._start_alarms is not None:  # inclinometer --alarm SPEC ...
+            self.apply_alarms(self._start_alarms)
+        elif not remembered:
             self.apply_alarms(self.alarm_panel.config())
 
     def apply_alarms(self, config: AlarmConfig) -> None:
@@ -812,9 +883,8 @@ class MainWindow(QMainWindow):
             self.show_error("Connect the device the profile belongs to first.")
             return
         if path is None:
-            path, _ = QFileDialog.getOpenFileName(
-                self, "Import calibration profile", "", "Calibration profiles (*.json)"
-            )
+            path = file_dialogs.open_file_name(
+                self, "Import calibration profile", "Calibration profiles (*.json)")
             if not path:
                 return
         try:
@@ -831,7 +901,7 @@ class MainWindow(QMainWindow):
             self.show_error("Connect a device to export its profile.")
             return
         if path is None:
-            path, _ = QFileDialog.getSaveFileName(
+            path, _ = file_dialogs.save_file_name(
                 self, "Export calibration profile", f"{info.unique_id}.json",
                 "Calibration profiles (*.json)",
             )
@@ -974,20 +1044,72 @@ class MainWindow(QMainWindow):
         self.settings.setValue("averaging_s", self.presenter.settings.averaging_s)
         self.settings.setValue("range_deg", self.range_combo.currentData())
 
-    def _show_about(self) -> None:
-        QMessageBox.about(
-            self, "About Inclinometer",
-            f"<b>Inclinometer {__version__}</b><br>LSM6DSOX tilt meter and IMU workbench.<br>"
-            f"Units: {', '.join(UNIT_LABELS.values())}.",
-        )
+    # -- help ---------------------------------------------------------------------------------
+    def file_paths(self) -> dict[str, str]:
+        """Where the app keeps its files (shown in About)."""
+        return {
+            "Settings": self.settings.fileName(),
+            "Calibration profiles": str(self.session.profile_store.base_dir),
+            "Measurement log": str(default_log_path()),
+            "Recordings": str(recordings_dir()),
+            "Last folder of a file dialog": str(file_dialogs.last_folder() or "(none yet)"),
+        }
+
+    def _show_dialog(self, name: str, build) -> QDialog:
+        """Show one of Help's dialogs (made once, then brought to the front)."""
+        dialog = self._help_dialogs.get(name)
+        if dialog is None:
+            dialog = build()
+            self._help_dialogs[name] = dialog
+        dialog.show()
+        dialog.raise_()
+        return dialog
+
+    def show_user_guide(self) -> QDialog:
+        return self._show_dialog("guide", lambda: help_dialogs.user_guide(self))
+
+    def show_shortcut_sheet(self) -> QDialog:
+        return self._show_dialog(
+            "shortcuts", lambda: help_dialogs.ShortcutSheet(self.menuBar(), self))
+
+    def show_about(self) -> QDialog:
+        old = self._help_dialogs.pop("about", None)  # the paths may have changed
+        if old is not None:
+            old.close()
+            old.deleteLater()
+        return self._show_dialog(
+            "about", lambda: help_dialogs.about_dialog(self.file_paths(), self))
 
     # -- settings ---------------------------------------------------------------------------
+    def fit_to_screen(self, available: QRect | None = None) -> None:
+        """Take the screen's available area (the first start, or a remembered size that no
+        longer fits): never larger than it."""
+        if available is None:
+            screen = self.screen() or QGuiApplication.primaryScreen()
+            if screen is None:
+                return
+            available = screen.availableGeometry()
+        rect = first_window_rect(
+            Rect(available.x(), available.y(), available.width(), available.height()))
+        self.setGeometry(rect.x, rect.y, rect.width, rect.height)
+
+    def _fit_with_frame(self) -> None:
+        """Once the window manager has framed the window: the frame fits the screen too."""
+        frame, inner = self.frameGeometry(), self.geometry()
+        margins = (inner.left() - frame.left(), inner.top() - frame.top(),
+                   frame.right() - inner.right(), frame.bottom() - inner.bottom())
+        screen = self.screen()
+        if any(margins) and screen is not None and not self.isFullScreen():
+            available = screen.availableGeometry()
+            rect = first_window_rect(
+                Rect(available.x(), available.y(), available.width(), available.height()),
+                margins)
+            self.setGeometry(rect.x, rect.y, rect.width, rect.height)
+
     def _restore_settings(self) -> None:
         geometry = self.settings.value("geometry")
-        if geometry is not None:
-            self.restoreGeometry(geometry)
-        else:
-            self.resize(1280, 860)
+        if geometry is None or not self.restoreGeometry(geometry):
+            self.fit_to_screen()
         state = self.settings.value("window_state")
         if state is not None:
             self.restoreState(state)
@@ -1013,16 +1135,32 @@ class MainWindow(QMainWindow):
 
     def showEvent(self, event: QShowEvent) -> None:
         super().showEvent(event)
+        self.tidy_tab_bars()
         if self._default_layout_pending:
             self._default_layout_pending = False
+            self.level.setFocus(Qt.FocusReason.OtherFocusReason)
+            if self.settings.value("geometry") is None:
+                QTimer.singleShot(0, self, self._fit_with_frame)  # the frame is known after show
             if self.settings.value("window_state") is None:
                 # Dock sizes only stick once the window has its final size.
-                QTimer.singleShot(0, self._apply_default_layout)
+                QTimer.singleShot(0, self, self._apply_default_layout)
+
+    def resizeEvent(self, event: QResizeEvent) -> None:
+        super().resizeEvent(event)
+        threshold = PanelScroller.KEEP_WIDTH_FROM_PX
+        if (event.oldSize().width() >= threshold) != (event.size().width() >= threshold):
+            for dock in self.docks.values():  # their minimum width changes at the threshold
+                dock.widget().updateGeometry()
 
     def _apply_default_layout(self) -> None:
         height = max(300, int(self.height() * 0.45))
-        # The panels take at most a third of a narrow window (1024 px: the level keeps room).
-        width = min(400, int(self.width() * 0.3))
+        # The panels take at most a third of a narrow window (1024 px: the level keeps room),
+        # but never so little that they scroll sideways.
+        fitting = max((dock.widget().fitting_width() for dock in self.docks.values()
+                       if isinstance(dock.widget(), PanelScroller)
+                       and self.dockWidgetArea(dock) == Qt.DockWidgetArea.RightDockWidgetArea),
+                      default=0)
+        width = max(min(400, int(self.width() * 0.3)), fitting)
         self.resizeDocks([self.docks["filter"]], [width], Qt.Orientation.Horizontal)
         self.resizeDocks([self.docks["plots"]], [height], Qt.Orientation.Vertical)
 
