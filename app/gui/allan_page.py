@@ -25,7 +25,6 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QSettings, Qt, Signal
 from PySide6.QtWidgets import (
-    QFileDialog,
     QHBoxLayout,
     QHeaderView,
     QLabel,
@@ -47,6 +46,7 @@ from app.core.allan import (
 )
 from app.core.filters import FILTERS
 from app.core.samples import STANDARD_GRAVITY_M_S2
+from app.gui.file_dialogs import open_file_name
 
 AXIS_COLOURS = ("#e5534b", "#57ab5a", "#539bf5")
 SETTINGS_KEY = "calibration_lab/filter_noise_source"
@@ -155,8 +155,7 @@ class AllanPage(QWidget):
 
     # -- input ---------------------------------------------------------------------------------
     def _choose_file(self) -> None:
-        path, _ = QFileDialog.getOpenFileName(self, "Static recording", "",
-                                              "Recordings (*.csv)")
+        path = open_file_name(self, "Static recording", "Recordings (*.csv *.csv.gz)")
         if path:
             self.load_recording(path)
 

@@ -59,6 +59,7 @@ from app.core.calibration_procedures import (
 from app.core.devices import DeviceInfo
 from app.core.raw_feed import RawSampleFeed
 from app.gui import theme
+from app.gui.file_dialogs import save_file_name
 from app.services.session import DeviceSession
 
 FEED_INTERVAL_MS = 100
@@ -483,8 +484,6 @@ class ResultsPage(_Page):
 
     def save_report(self, path: str | None = None) -> str | None:
         """Write the calibration report (app.gui.calibration_report) for this result."""
-        from PySide6.QtWidgets import QFileDialog
-
         from app.gui.calibration_report import report_from_parts, write_report
 
         profile = self.profile()
@@ -492,7 +491,7 @@ class ResultsPage(_Page):
             self.summary.setText("A report needs an accelerometer fit of a connected device.")
             return None
         if path is None:
-            path, _ = QFileDialog.getSaveFileName(
+            path, _ = save_file_name(
                 self, "Save calibration report", f"calibration-{profile.device_unique_id}.pdf",
                 "PDF (*.pdf);;HTML (*.html)")
             if not path:

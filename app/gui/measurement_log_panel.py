@@ -11,13 +11,11 @@ exported as CSV.
 from __future__ import annotations
 
 from collections.abc import Callable
-from pathlib import Path
 
 from PySide6.QtCore import QEvent, Qt, Signal
 from PySide6.QtGui import QBrush, QColor, QGuiApplication, QKeyEvent, QKeySequence
 from PySide6.QtWidgets import (
     QAbstractItemView,
-    QFileDialog,
     QHBoxLayout,
     QHeaderView,
     QLabel,
@@ -32,6 +30,7 @@ from PySide6.QtWidgets import (
 
 from app.core.measurement_log import Measurement, MeasurementLog
 from app.gui import theme
+from app.gui.file_dialogs import save_file_name
 
 UNIT_SUFFIX = {"deg": "°", "percent": " %", "mm/m": " mm/m"}
 HEADERS = ("Time", "Label", "Roll", "Pitch", "Tilt", "Direction", "Window", "Filter",
@@ -172,9 +171,8 @@ class MeasurementLogPanel(QWidget):
 
     def export_csv(self, path: str | None = None) -> None:
         if path is None:
-            path, _ = QFileDialog.getSaveFileName(
-                self, "Export the measurement log", str(Path.home() / "measurements.csv"),
-                "CSV (*.csv)")
+            path, _ = save_file_name(self, "Export the measurement log", "measurements.csv",
+                                     "CSV (*.csv)")
             if not path:
                 return
         try:
