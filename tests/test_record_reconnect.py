@@ -1,5 +1,6 @@
 """Headless ``inclinometer record`` survives an unplug: an emulated NUCLEO on a pseudo-terminal
-is pulled mid-recording and plugged back in (a new port, the same USB serial and unique id).
+is pulled mid-recording and plugged back in (a new pseudo-terminal, the same USB serial and
+unique id). Also the time axis a reconnection continues (the window's and record's).
 
 The command runs in the main thread as from a shell; a helper thread plays the user, acting on
 what the command prints (no sleeps).
@@ -22,8 +23,11 @@ import pytest
 
 from app import cli_recording
 from app.cli import main
+from app.core.devices import DeviceInfo
 from app.core.recording import read_recording
+from app.core.samples import RawBlock, ScaleFactors
 from app.services import recorder
+from app.services.connection import Connection
 from drivers.emulated_nucleo import EmulatedNucleo
 from drivers.sim.error_model import unique_id_for_seed
 
@@ -100,27 +104,22 @@ def play(tap: Tap, board: EmulatedNucleo, out: Path,
     return thread
 
 
-def test_record_reconnects_by_usb_serial_and_marks_the_outage(tmp_path, board, monkeypatch, capsys):
+@pytest.mark.parametrize("power_cycle", [False, True], ids=["clock-runs-on", "board-reset"])
+def test_record_reconnects_by_usb_serial_and_marks_the_outage(tmp_path, board, monkeypatch,
+                                                              capsys, power_cycle):
     tap = tap_stderr(monkeypatch)
     out = tmp_path / "unplugged.csv"
-    first_port = board.port
-    squatter: list[int] = []
-
     def replug_then_stop() -> None:
-        squatter.extend(os.openpty())  # hold the freed pty: the board comes back elsewhere
-        board.replug()
+        board.replug(power_cycle=power_cycle)  # a reset board's clock starts at 0 again
         if tap.wait_for(BACK) and wait_for_rows(out, rows_in(out) + MIN_ROWS):
             os.kill(os.getpid(), signal.SIGTERM)  # the recording's own stop
 
     user = play(tap, board, out, replug_then_stop)
     try:
-        code = main(["record", "--device", first_port, "--duration", "30", str(out)])
+        code = main(["record", "--device", board.port, "--duration", "30", str(out)])
     finally:
         user.join(WAIT_S)
-        for fd in squatter:
-            os.close(fd)
     assert code == 0, tap.text
-    assert board.port != first_port, tap.text
     lost, back = LOST.search(tap.text), BACK.search(tap.text)
     assert lost and back, tap.text
     assert lost.start() < back.start()
@@ -135,7 +134,8 @@ def test_record_reconnects_by_usb_serial_and_marks_the_outage(tmp_path, board, m
     period = 1.0 / recording.device["odr_hz"]
     assert k >= MIN_ROWS and len(t) - k >= MIN_ROWS  # rows before and after it
     span = t[k] - t[k - 1]
-    assert span > 5 * period  # the hole in t spans the outage
+    assert span > 1.5 * period  # a hole in t spans the outage
+    assert int(back.group(2)) >= 1
     assert float(lost.group(1)) == pytest.approx(t[k - 1] - t[0], abs=0.051)
     assert float(back.group(1)) == pytest.approx(span, abs=0.051)
     assert int(back.group(2)) == round(span / period) - 1
@@ -204,3 +204,49 @@ def test_reconnect_options_are_checked(tmp_path, monkeypatch):
     assert "--reconnect-timeout 'soon': give seconds" in tap.text
     assert "--reconnect-timeout and --no-reconnect contradict each other" in tap.text
     assert cli_recording.DEFAULT_RECONNECT_TIMEOUT_S == recorder.DEFAULT_RECONNECT_TIMEOUT_S
+
+
+class _Board:
+    """A closed-or-open stand-in for a serial board: its info and its clock origin."""
+
+    url = "/dev/ttyACM0"
+
+    def __init__(self, origin_s: float) -> None:
+        self.device_clock_origin_s = origin_s
+        self.info = DeviceInfo(url=self.url, name="NUCLEO", unique_id="ABC", sensor="LSM6DSOX",
+                               odr_hz=100.0, odr_nominal_hz=104.0, accel_fs_g=4,
+                               gyro_fs_dps=250, extra={"usb_serial": "0670FF"})
+
+    def open(self) -> DeviceInfo:
+        return self.info
+
+    def close(self) -> None:
+        pass
+
+
+def _block(t0: float) -> RawBlock:
+    n = 5
+    return RawBlock(t_s=t0 + np.arange(n) / 100.0, accel_raw=np.zeros((n, 3)),
+                    gyro_raw=np.zeros((n, 3)), temp_raw=np.zeros(n),
+                    scale=ScaleFactors(1e-3, 1e-4))
+
+
+@pytest.mark.parametrize(("new_origin_s", "first_t_s"), [
+    (2.1, 10.0 + 5.0),  # reset, and streaming as late after power-on as before: host clock
+    (0.5, 10.0 + 5.0),  # reset, streaming sooner: host clock
+    (2.0 + 10.0 + 7.0, 10.0 + 7.0),  # the clock ran on: the board's clock spans the outage
+])
+def test_a_reconnected_board_continues_the_time_axis(new_origin_s, first_t_s):
+    now = [100.0]
+    boards = iter([_Board(2.0), _Board(new_origin_s)])
+    connection = Connection(factory=lambda url: next(boards),
+                            find_board=lambda url, serial: url, clock=lambda: now[0])
+    connection.open("/dev/ttyACM0")
+    connection.continue_time_axis(_block(0.0))
+    assert connection.await_board("unplugged", last_t_s=10.0) is not None
+    assert connection.try_reconnect() is not None
+    now[0] += 5.0  # host time from the loss to the first block after it
+    raw = _block(0.0)
+    connection.continue_time_axis(raw)
+    assert raw.t_s[0] == pytest.approx(first_t_s)
+    assert raw.gap is not None and raw.gap[0] and not raw.gap[1:].any()

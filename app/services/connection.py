@@ -169,8 +169,11 @@ class Connection:
         plan = self.awaited
         if self._align_time and plan is not None:
             origin = getattr(self.device, "device_clock_origin_s", None)
+            # The board's clock read clock_origin_s + last_t_s at the last sample; a clock that
+            # ran on is past it now. (Comparing with the origin alone took a reset board,
+            # started as late after power-on as before, for one whose clock ran on: no outage.)
             if origin is not None and plan.clock_origin_s is not None and (
-                origin >= plan.clock_origin_s
+                origin >= plan.clock_origin_s + plan.last_t_s
             ):
                 # Same board, clock still running: its own clock spans the outage exactly.
                 self._time_offset_s = float(origin) - plan.clock_origin_s
