@@ -273,9 +273,9 @@ class _Reconnect:
     def gave_up(self, rows: int, duration_s: float) -> str:
         outage = self.pending
         assert outage is not None
-        return (f"the device was lost at {outage.lost_at_s:.1f} s ({outage.reason}) and did "
-                f"not come back within {self.timeout_s:g} s; the file keeps the {rows} rows "
-                f"({duration_s:.1f} s) recorded")
+        return (f"the device lost at {outage.lost_at_s:.1f} s did not come back within "
+                f"{self.timeout_s:g} s; the file keeps the {rows} rows ({duration_s:.1f} s) "
+                "recorded")
 
 
 def _record_and_close(
