@@ -2,7 +2,8 @@
 
 ``inclinometer record --device URL [--duration S] OUT.csv``
     read a device headless, run the pipeline, write a recording; Ctrl-C (or SIGTERM) ends it
-    cleanly and keeps the file.
+    cleanly and keeps the file. An unplugged board is awaited (``--reconnect-timeout``) and
+    recorded on into the same file, the outage marked as a gap.
 ``inclinometer replay IN.csv [--filter NAME...] [--param FILTER.NAME=VALUE...] --out ANGLES.csv``
     run filters over a recording as fast as possible, exactly as live, and export their angles.
 
@@ -26,6 +27,8 @@ from typing import Any, TextIO
 from app.core.safe_output import OutputRefused, check_output, write_error_message
 
 EXIT_USAGE = 2
+DEFAULT_RECONNECT_TIMEOUT_S = 300.0
+"""As :data:`app.services.recorder.DEFAULT_RECONNECT_TIMEOUT_S` (a test keeps them equal)."""
 EXIT_FAILED = 1
 TRUE_WORDS = ("true", "1", "yes", "on")
 FALSE_WORDS = ("false", "0", "no", "off")
@@ -121,6 +124,13 @@ def add_recording_parsers(commands: argparse._SubParsersAction) -> None:
                              "also chosen by a name ending in .gz")
     record.add_argument("--quiet", action="store_true", help="no progress lines")
     record.add_argument(
+        "--reconnect-timeout", metavar="S", default=None,
+        help="how long to wait for an unplugged board (one with a USB serial number, found "
+             "again on any port) before the recording ends; it records on into the same file "
+             f"and marks the outage as a gap (default: {DEFAULT_RECONNECT_TIMEOUT_S:g} s)")
+    record.add_argument("--no-reconnect", action="store_true",
+                        help="end the recording when the device is lost (exit 1)")
+    record.add_argument(
         "--alarm", dest="alarms", metavar="SPEC", action="append", default=[],
         help="watch a limit on the filtered angles (degrees) and print each crossing as it "
              "happens (also stored in the file); repeatable. SPEC: QUANTITY>LIMIT, "
@@ -200,6 +210,19 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     except ValueError:
         _error(f"--duration {args.duration!r}: give seconds (30), or 30s, 2m, 1h")
         return EXIT_USAGE
+    reconnect_timeout: float | None = DEFAULT_RECONNECT_TIMEOUT_S
+    if args.reconnect_timeout is not None:
+        if args.no_reconnect:
+            _error("--reconnect-timeout and --no-reconnect contradict each other: give one")
+            return EXIT_USAGE
+        try:
+            reconnect_timeout = parse_duration(args.reconnect_timeout)
+        except ValueError:
+            _error(f"--reconnect-timeout {args.reconnect_timeout!r}: give seconds (60), or "
+                   "60s, 5m, 1h")
+            return EXIT_USAGE
+    if args.no_reconnect:
+        reconnect_timeout = None
     calibration = None
     if args.calibration:
         try:
@@ -250,6 +273,7 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             calibration=calibration, overwrite=args.overwrite, stop=stop, on_flush=progress,
             alarms=AlarmMonitor(alarm_config) if alarm_config.limits else None,
             on_alarms=lambda events: print_crossings(events, out),
+            reconnect_timeout_s=reconnect_timeout, on_outage=print_outage,
         )
     except (DeviceError, RecordingWriteError) as exc:
         _error(str(exc))
@@ -264,6 +288,7 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     endings = {
         "duration": "duration reached", "stopped": "stopped", "interrupted": "stopped by Ctrl-C",
         "end": "the source ended", "device": "the device failed", "write": "writing failed",
+        "lost": "the device did not come back",
     }
     print(f"{status.path}: {status.rows_written} rows, {status.duration_s:.1f} s of device "
           f"time ({endings.get(outcome.reason, outcome.reason)})", file=out)
@@ -273,7 +298,22 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
         _error(outcome.message)
     if outcome.closing_error:
         _error(outcome.closing_error)
-    return EXIT_FAILED if outcome.reason in ("device", "write") or outcome.closing_error else 0
+    if outcome.reason == "interrupted" and outcome.outages and (
+            outcome.outages[-1].back_after_s is None):
+        _error("stopped while waiting for the device; the rows before it was lost are kept")
+    failed = outcome.reason in ("device", "lost", "write")
+    return EXIT_FAILED if failed or outcome.closing_error else 0
+
+
+def print_outage(outage: Any) -> None:
+    """One line when the board is lost and one when it is back (stderr, even with --quiet:
+    they change what the file holds)."""
+    if outage.back_after_s is None:
+        _error(f"device lost at {outage.lost_at_s:.1f} s: {outage.reason}; waiting for it "
+               "(Ctrl-C stops)")
+    else:
+        _error(f"device back after {outage.back_after_s:.1f} s, {outage.samples_lost} samples "
+               "lost, marked as a gap")
 
 
 def _record_inputs(args: argparse.Namespace) -> list[Path]:

@@ -1,8 +1,10 @@
 """The session's connection: open a device by URL, and after an unplug wait for the same board.
 
-No Qt: the worker calls these methods from its thread and turns the answers into signals.
+No Qt: the worker calls these methods from its thread and turns the answers into signals;
+headless ``record`` (:mod:`app.services.recorder`) calls them from its loop.
 
-- :meth:`Connection.open` / :meth:`Connection.close`: one device at a time.
+- :meth:`Connection.open` / :meth:`Connection.close`: one device at a time
+  (:meth:`Connection.attach` takes one opened elsewhere: headless ``record``).
 - :meth:`Connection.await_board`: a board that vanished mid-session (the cable was pulled) is
   awaited by its USB serial number, on any port; :meth:`Connection.try_reconnect` looks for it.
 - :meth:`Connection.continue_time_axis`: a reconnected board starts its time at 0 again; its
@@ -88,11 +90,15 @@ class Connection:
         """Open ``url`` (closing nothing: call :meth:`close` first). Raises DeviceError."""
         device = self._factory(url)
         info = device.open()
+        self.attach(device)
+        return info
+
+    def attach(self, device: Device) -> None:
+        """Take ``device``, opened elsewhere, as the connection's device (a new session time)."""
         self.device = device
         self.awaited = None
         self._time_offset_s = 0.0
         self._align_time = self._gap_pending = False
-        return info
 
     def close(self) -> tuple[bool, bool]:
         """Close the device and stop awaiting a board: (a device was open, a board was awaited).
@@ -163,8 +169,11 @@ class Connection:
         plan = self.awaited
         if self._align_time and plan is not None:
             origin = getattr(self.device, "device_clock_origin_s", None)
+            # The board's clock read clock_origin_s + last_t_s at the last sample; a clock that
+            # ran on is past it now. (Comparing with the origin alone took a reset board,
+            # started as late after power-on as before, for one whose clock ran on: no outage.)
             if origin is not None and plan.clock_origin_s is not None and (
-                origin >= plan.clock_origin_s
+                origin >= plan.clock_origin_s + plan.last_t_s
             ):
                 # Same board, clock still running: its own clock spans the outage exactly.
                 self._time_offset_s = float(origin) - plan.clock_origin_s
