@@ -107,14 +107,14 @@ def test_status_fields_fit_most_important_first():
 
 
 def test_a_short_axis_gets_a_coarser_label_step():
-    # -5 ... 180 degrees: pyqtgraph's step of 50 writes 4 labels; 2 fit: 100 (0 and 100).
-    assert label_step(-5.0, 180.0, 50.0, 2) == 100.0
-    assert label_step(-5.0, 180.0, 50.0, 4) == 50.0  # they fit: unchanged
-    assert label_step(-0.05, 1.05, 0.5, 3) == 0.5  # 0, 0.5, 1
-    assert label_step(-0.05, 1.05, 0.5, 2) == 1.0  # 1 -> 2 -> 5 -> 10 times a power of ten
-    assert label_step(-0.05, 1.05, 0.2, 3) == 0.5
-    assert label_step(0.0, 3e-3, 1e-3, 1) == 5e-3
-    assert label_step(0.0, 10.0, 2.0, 0) == 2.0  # no room for any label: left to pyqtgraph
+    # -5 ... 180 degrees on 35 px: pyqtgraph's step of 50 puts labels 9.5 px apart; 100: 19.
+    assert label_step(185.0, 50.0, 35.0, 16.5) == 100.0
+    assert label_step(185.0, 50.0, 70.0, 16.5) == 50.0  # 19 px apart: unchanged
+    assert label_step(1.1, 0.5, 35.0, 16.5) == 1.0  # 1 -> 2 -> 5 -> 10 times a power of ten
+    assert label_step(1.1, 0.2, 35.0, 12.0) == 0.5
+    assert label_step(0.2, 0.05, 35.0, 16.5) == 0.1  # 1.3, 1.4, 1.5: labels stay
+    assert label_step(3e-3, 1e-3, 10.0, 12.0) == 5e-3
+    assert label_step(10.0, 2.0, 0.0, 12.0) == 2.0  # no axis yet: left to pyqtgraph
 
 
 def test_the_value_labels_of_a_short_plot_never_overlap(qtbot):
@@ -127,10 +127,12 @@ def test_the_value_labels_of_a_short_plot_never_overlap(qtbot):
     axis = plots.angle_plot.getAxis("left")
     line = QFontMetricsF(axis.font()).height()
     for size in (35.0, 60.0, 120.0, 400.0):
-        levels = axis.tickSpacing(-5.0, 180.0, size)
-        step = levels[0][0]
-        labels = math.floor(180.0 / step) - math.ceil(-5.0 / step) + 1  # on the major level
-        assert labels * 1.2 * line <= size or labels <= 1, (size, levels)
+        for low, high in ((-5.0, 180.0), (-1.05, 1.05), (1.31, 1.52)):
+            levels = axis.tickSpacing(low, high, size)
+            gap = levels[0][0] / (high - low) * size  # between two labels, px
+            assert gap >= 1.1 * line, (size, low, high, levels)
+            # Still at least one label on the axis.
+            assert math.floor(high / levels[0][0]) >= math.ceil(low / levels[0][0])
     # A tall plot keeps pyqtgraph's own steps (and its minor ticks).
     assert axis.tickSpacing(-5.0, 180.0, 400.0) == pg_levels(-5.0, 180.0, 400.0)
 

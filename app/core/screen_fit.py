@@ -53,13 +53,13 @@ def fields_that_fit(widths: Sequence[int], available: int, spacing: int = 0) -> 
     return shown
 
 
-def label_step(low: float, high: float, step: float, max_labels: int) -> float:
-    """The tick step of an axis whose labels must not crowd: ``step`` (a 1-2-5 multiple of
-    a power of ten), made coarser along 1, 2, 5, 10 ... until at most ``max_labels``
-    multiples of it lie between ``low`` and ``high`` (a short plot fits few labels)."""
-    if not (high > low and step > 0) or max_labels < 1:
+def label_step(span: float, step: float, length_px: float, min_gap_px: float) -> float:
+    """The tick step of an axis whose labels must not overlap: ``step`` (a 1-2-5 multiple of
+    a power of ten), made coarser along 1, 2, 5, 10 ... until two labels lie at least
+    ``min_gap_px`` apart on an axis ``length_px`` long showing a range ``span`` wide."""
+    if not (span > 0 and step > 0 and length_px > 0):
         return step
-    while math.floor(high / step) - math.ceil(low / step) + 1 > max_labels:
+    while step / span * length_px < min_gap_px:
         exponent = math.floor(math.log10(step))
         mantissa = step / 10.0 ** exponent
         if mantissa < 1.5:

@@ -55,15 +55,14 @@ _SAMPLES = {
 class _UncrowdedAxis(pg.AxisItem):
     """A value axis whose labels never overlap: pyqtgraph puts at least two major steps on
     any axis, so a plot 35 px high (1366x768) wrote 0, 50, 100 and 150 on top of each other.
-    The major step grows until each label has 1.2 lines."""
+    The major step grows until labels are 1.1 lines apart."""
 
     def tickSpacing(self, minVal: float, maxVal: float, size: float):
         levels = super().tickSpacing(minVal, maxVal, size)
         if not levels:
             return levels
         line = QFontMetricsF(self.style["tickFont"] or self.font()).height()
-        low, high = sorted((minVal, maxVal))
-        major = label_step(low, high, levels[0][0], int(size // (1.2 * line)))
+        major = label_step(abs(maxVal - minVal), levels[0][0], size, 1.1 * line)
         # Coarser: only the major ticks (pyqtgraph would label a finer level where it
         # thinks there is room, between labels a line and a half apart).
         return levels if major == levels[0][0] else [(major, 0.0)]
