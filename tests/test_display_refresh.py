@@ -9,6 +9,8 @@ after the window's pending paints went out.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from PySide6.QtCore import QEvent, QObject
@@ -280,3 +282,46 @@ def test_an_over_range_bubble_repaints_only_around_itself_and_its_arrow(qtbot, h
     assert painted.width() * painted.height() < 0.5 * level.width() * level.height()
     arrow = level._arrow_rect(level._geometry(), level.bubbleCenter()).toAlignedRect()
     assert painted.contains(arrow.adjusted(1, 1, -1, -1))
+
+
+def test_the_axis_labels_stay_readable_on_the_alarm_ring(qtbot, host):
+    """The alarm ring lies on the bezel band that carries "+X": the label is drawn over it
+    (it was hidden under the ring in every alarm)."""
+    from PySide6.QtCore import QRect
+    from PySide6.QtGui import QColor
+
+    from app.gui import theme
+
+    level = BubbleLevel()
+    level.setFixedSize(400, 400)
+    host.layout().addWidget(level)
+    host.show()
+    qtbot.waitExposed(host)
+    level.setRange(5.0)
+    level.setValid(True)
+    level.setTilt(1.0, 0.5)
+    text = QColor(theme.current().BEZEL_TEXT)
+    geo = level._geometry()
+    band = (geo.outer_radius + geo.vial_radius) / 2
+    size = round(geo.outer_radius - geo.vial_radius)
+    spot = QRect(round(geo.center.x() + band) - size, round(geo.center.y()) - size // 2,
+                 2 * size, size)  # where "+X" is engraved
+
+    ring_half_width = (geo.outer_radius - geo.vial_radius) * 0.55 / 2
+
+    def label_pixels() -> int:
+        """Pixels of the label's colour on the alarm ring's band."""
+        image = level.grab().toImage()
+        return sum(
+            1 for x in range(spot.left(), spot.right() + 1)
+            for y in range(spot.top(), spot.bottom() + 1)
+            if abs(math.hypot(x - geo.center.x(), y - geo.center.y()) - band)
+            < ring_half_width - 1
+            and sum(abs(a - b) for a, b in zip(image.pixelColor(x, y).getRgb()[:3],
+                                               text.getRgb()[:3], strict=True)) < 60)
+
+    normal = label_pixels()
+    level.setAlarm(True)
+    alarm = label_pixels()
+    assert normal >= 5  # its glyphs' core pixels (the band is narrower than the label)
+    assert alarm >= normal * 0.8

@@ -476,5 +476,13 @@ def test_the_poses_page_shows_which_face_was_rejected_and_by_how_much(qtbot, qap
     assert text.startswith("✗ +y up is ") and "off its axis" in text
     assert "+y up" in page.instruction.text()  # asked for again
     assert page.events.item(0).text() == text
+    # The event list wraps the long rejection: read whole, no sideways scrolling.
+    wizard.resize(720, 640)
+    wizard.show()
+    qtbot.waitExposed(wizard)
+    events = page.events
+    assert events.horizontalScrollBar().maximum() == 0
+    assert events.visualItemRect(events.item(0)).width() <= events.viewport().width()
+    assert events.visualItemRect(events.item(0)).height() > events.fontMetrics().height()
     wizard.reject()
     session.shutdown()

@@ -11,9 +11,9 @@ import time
 from collections.abc import Iterator
 
 import pytest
-from PySide6.QtCore import QRect
+from PySide6.QtCore import QPoint, QRect, QSize
 from PySide6.QtGui import QColor, QFontMetrics, QImage
-from PySide6.QtWidgets import QApplication, QLabel, QWidget
+from PySide6.QtWidgets import QApplication, QLabel, QStyle, QWidget
 from test_display_refresh import raw_block
 
 from app.core.readout import slope_from_angle
@@ -99,6 +99,24 @@ def _fits(label: QLabel) -> bool:
             and metrics.height() <= rect.height())
 
 
+def _tile_texts(widget: TiltReadouts) -> list[tuple[str, QRect]]:
+    """Every visible tile text (caption, figures, unit, note, raised side) and the rectangle
+    its glyphs take, in ``widget``'s coordinates."""
+    texts = []
+    for name in QUANTITIES:
+        tile = widget.valueLabel(name).parentWidget()
+        for label in tile.findChildren(QLabel):
+            if not label.isVisibleTo(tile) or not label.text():
+                continue
+            metrics = QFontMetrics(label.font())
+            size = QSize(metrics.horizontalAdvance(label.text()), metrics.height())
+            rect = QStyle.alignedRect(label.layoutDirection(), label.alignment(), size,
+                                      label.contentsRect())
+            texts.append((f"{name} {label.text()!r}",
+                          rect.translated(label.mapTo(widget, QPoint(0, 0)))))
+    return texts
+
+
 def _layout(widget: TiltReadouts) -> dict[str, tuple]:
     """Every tile's and label's geometry and font size."""
     result = {}
@@ -143,6 +161,10 @@ def test_every_readout_fits_its_label_at_its_widest_in_every_state(qtbot, app, t
                 badge = widget.findChild(QLabel, badge_name)
                 if badge.isVisibleTo(widget):
                     assert _fits(badge) and widget.rect().contains(badge.geometry())
+                    covered = [text for text, rect in _tile_texts(widget)
+                               if rect.intersects(badge.geometry())]
+                    assert not covered, (
+                        f"{theme_name} {unit} {state}: {badge_name} covers {covered}")
                     checked_labels += 1
             if state not in ("instrument", "smallest"):
                 layouts[state] = _layout(widget)

@@ -9,6 +9,7 @@ a menu and on Help's sheet; About names the versions and the files.
 from __future__ import annotations
 
 import contextlib
+import math
 import sys
 from pathlib import Path
 
@@ -31,7 +32,7 @@ from PySide6.QtWidgets import (
 from app import cli
 from app.core.alarms import alarms_from_specs
 from app.core.recording import sample_recordings
-from app.core.screen_fit import Rect, fields_that_fit, first_window_rect
+from app.core.screen_fit import Rect, fields_that_fit, first_window_rect, label_step
 from app.gui import file_dialogs, help_dialogs, theme
 from app.gui.elided_label import ElidedLabel
 from app.gui.main_window import MainWindow
@@ -103,6 +104,43 @@ def test_status_fields_fit_most_important_first():
     # ... and a narrower, less important field may take the room a wide one left.
     assert fields_that_fit([100, 300, 50], 200, spacing=10) == [True, False, True]
     assert fields_that_fit([100], 99) == [False]
+
+
+def test_a_short_axis_gets_a_coarser_label_step():
+    # -5 ... 180 degrees on 35 px: pyqtgraph's step of 50 puts labels 9.5 px apart; 100: 19.
+    assert label_step(185.0, 50.0, 35.0, 16.5) == 100.0
+    assert label_step(185.0, 50.0, 70.0, 16.5) == 50.0  # 19 px apart: unchanged
+    assert label_step(1.1, 0.5, 35.0, 16.5) == 1.0  # 1 -> 2 -> 5 -> 10 times a power of ten
+    assert label_step(1.1, 0.2, 35.0, 12.0) == 0.5
+    assert label_step(0.2, 0.05, 35.0, 16.5) == 0.1  # 1.3, 1.4, 1.5: labels stay
+    assert label_step(3e-3, 1e-3, 10.0, 12.0) == 5e-3
+    assert label_step(10.0, 2.0, 0.0, 12.0) == 2.0  # no axis yet: left to pyqtgraph
+
+
+def test_the_value_labels_of_a_short_plot_never_overlap(qtbot):
+    from PySide6.QtGui import QFontMetricsF
+
+    from app.gui.plots import LivePlots
+
+    plots = LivePlots()
+    qtbot.addWidget(plots)
+    axis = plots.angle_plot.getAxis("left")
+    line = QFontMetricsF(axis.font()).height()
+    for size in (35.0, 60.0, 120.0, 400.0):
+        for low, high in ((-5.0, 180.0), (-1.05, 1.05), (1.31, 1.52)):
+            levels = axis.tickSpacing(low, high, size)
+            gap = levels[0][0] / (high - low) * size  # between two labels, px
+            assert gap >= 1.1 * line, (size, low, high, levels)
+            # Still at least one label on the axis.
+            assert math.floor(high / levels[0][0]) >= math.ceil(low / levels[0][0])
+    # A tall plot keeps pyqtgraph's own steps (and its minor ticks).
+    assert axis.tickSpacing(-5.0, 180.0, 400.0) == pg_levels(-5.0, 180.0, 400.0)
+
+
+def pg_levels(low: float, high: float, size: float):
+    import pyqtgraph as pg
+
+    return pg.AxisItem("left").tickSpacing(low, high, size)
 
 
 def test_the_text_check_finds_elided_cut_and_squeezed_texts(qtbot):

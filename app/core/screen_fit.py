@@ -1,4 +1,5 @@
-"""How the window fits its screen: the first window's rectangle and which status fields fit.
+"""How the window fits its screen: the first window's rectangle, which status fields fit and
+how far apart a short plot's axis labels must be.
 
 Plain arithmetic on integer pixels, so it is tested without a screen; the GUI passes in what
 Qt measured (the screen's available geometry, the fields' widths).
@@ -6,6 +7,7 @@ Qt measured (the screen's available geometry, the fields' widths).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -49,3 +51,21 @@ def fields_that_fit(widths: Sequence[int], available: int, spacing: int = 0) -> 
         if fits:
             used += needed
     return shown
+
+
+def label_step(span: float, step: float, length_px: float, min_gap_px: float) -> float:
+    """The tick step of an axis whose labels must not overlap: ``step`` (a 1-2-5 multiple of
+    a power of ten), made coarser along 1, 2, 5, 10 ... until two labels lie at least
+    ``min_gap_px`` apart on an axis ``length_px`` long showing a range ``span`` wide."""
+    if not (span > 0 and step > 0 and length_px > 0):
+        return step
+    while step / span * length_px < min_gap_px:
+        exponent = math.floor(math.log10(step))
+        mantissa = step / 10.0 ** exponent
+        if mantissa < 1.5:
+            step = 2.0 * 10.0 ** exponent
+        elif mantissa < 3.5:
+            step = 5.0 * 10.0 ** exponent
+        else:
+            step = 10.0 ** (exponent + 1)
+    return step

@@ -371,6 +371,9 @@ class BubbleLevel(QWidget):
         painter.drawPixmap(0, 0, self._state_pixmap(geo, state, state_color))
         if self._alarm and state is not LevelState.NO_DATA:
             self._paint_alarm_ring(painter, geo, state_color)
+            # The ring lies on the bezel band that carries "+X" and "+Y": engraved again on
+            # top (under the ring they were lost in every alarm).
+            self._paint_axis_labels(painter, geo)
         if state is not LevelState.NO_DATA and self._reference is not None:
             self._paint_reference(painter, geo)
         if state is LevelState.NO_DATA:

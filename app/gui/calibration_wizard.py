@@ -24,6 +24,7 @@ from PySide6.QtWidgets import (
     QHeaderView,
     QLabel,
     QLineEdit,
+    QListView,
     QListWidget,
     QProgressBar,
     QPushButton,
@@ -306,6 +307,11 @@ class PosesPage(_Page):
         self.rejection.hide()
         layout.addWidget(self.rejection, 4, 0, 1, 2)
         self.events = QListWidget()
+        # A rejection names the face, the angle and what to do: wrapped, read whole (it was
+        # cut at the list's right edge behind a sideways scroll bar).
+        self.events.setWordWrap(True)
+        self.events.setResizeMode(QListView.ResizeMode.Adjust)
+        self.events.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         layout.addWidget(self.events, 5, 0, 1, 2)
         self.capture: PoseCapture | None = None
 

@@ -23,9 +23,10 @@ from html import escape
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QPointF, QRect, Qt, Signal
-from PySide6.QtGui import QPainter, QPaintEvent, QPalette, QPen, QPolygonF, QRegion
+from PySide6.QtGui import QFontMetricsF, QPainter, QPaintEvent, QPalette, QPen, QPolygonF, QRegion
 from PySide6.QtWidgets import QGraphicsItem, QVBoxLayout, QWidget
 
+from app.core.screen_fit import label_step
 from app.gui import theme
 
 TAIL_S = 1.0
@@ -51,8 +52,24 @@ _SAMPLES = {
 """How a pen style looks in a legend line."""
 
 
+class _UncrowdedAxis(pg.AxisItem):
+    """A value axis whose labels never overlap: pyqtgraph puts at least two major steps on
+    any axis, so a plot 35 px high (1366x768) wrote 0, 50, 100 and 150 on top of each other.
+    The major step grows until labels are 1.1 lines apart."""
+
+    def tickSpacing(self, minVal: float, maxVal: float, size: float):
+        levels = super().tickSpacing(minVal, maxVal, size)
+        if not levels:
+            return levels
+        line = QFontMetricsF(self.style["tickFont"] or self.font()).height()
+        major = label_step(abs(maxVal - minVal), levels[0][0], size, 1.1 * line)
+        # Coarser: only the major ticks (pyqtgraph would label a finer level where it
+        # thinks there is room, between labels a line and a half apart).
+        return levels if major == levels[0][0] else [(major, 0.0)]
+
+
 def _make_plot() -> pg.PlotItem:
-    plot = pg.PlotItem()
+    plot = pg.PlotItem(axisItems={"left": _UncrowdedAxis("left")})
     # The plot's name and unit lead its header line: a rotated axis label does not fit a
     # short plot. Values stay in the named unit (no "m°" prefixes).
     plot.getAxis("left").setWidth(48)

@@ -106,6 +106,10 @@ def _repolish(widget: QWidget) -> None:
         target.update()
 
 
+_TILE_MARGIN_Y = 10
+"""A tile's margin above its caption and below its note (pixels): no text lies there."""
+
+
 class _ReadoutTile(QFrame):
     """One readout: caption, big value with unit, and a small note line."""
 
@@ -141,7 +145,7 @@ class _ReadoutTile(QFrame):
         value_row.addStretch(1)
 
         layout = QVBoxLayout(self)
-        layout.setContentsMargins(14, 10, 14, 10)
+        layout.setContentsMargins(14, _TILE_MARGIN_Y, 14, _TILE_MARGIN_Y)
         layout.setSpacing(2)
         layout.addWidget(self.caption)
         layout.addStretch(1)
@@ -581,15 +585,46 @@ class TiltReadouts(QWidget):
         )
 
     def _place_hold_badge(self) -> None:
-        """HOLD in the top-right corner, the stale badge left of it (or there)."""
+        """HOLD in the top-right corner, right of the top row's last caption; the stale badge
+        (the widest) centred on the gap between the first two rows of tiles, where it covers
+        only the tiles' frames and margins, never a caption, a figure or a note (in the top
+        right corner it covered the PITCH caption at 1366x768). A single row has no such gap:
+        the stale badge then goes left of HOLD."""
         right = self.width() - 10
-        for badge in (self._hold_badge, getattr(self, "_stale_badge", None)):
-            if badge is None or badge.isHidden():
-                continue
-            badge.adjustSize()
-            badge.move(right - badge.width(), 9)
-            badge.raise_()
-            right -= badge.width() + 6
+        hold = self._hold_badge
+        if not hold.isHidden():
+            hold.adjustSize()
+            hold.move(right - hold.width(), 9)
+            hold.raise_()
+            right -= hold.width() + 6
+        stale = getattr(self, "_stale_badge", None)
+        if stale is None or stale.isHidden():
+            return
+        self._fit_stale_badge()
+        rows = math.ceil(len(QUANTITIES) / self._columns)
+        if rows > 1:  # rows share the height equally (the layout may not have run yet)
+            spacing = self._grid.spacing()
+            gap_y = (self.height() - spacing * (rows - 1)) / rows + spacing / 2
+            stale.move(round((self.width() - stale.width()) / 2),
+                       round(gap_y - stale.height() / 2))
+        else:
+            stale.move(right - stale.width(), 9)
+        stale.raise_()
+
+    def _fit_stale_badge(self) -> None:
+        """The stale badge's font: the hold badge's, made smaller (not below 8 px) until the
+        badge fits between two rows of tiles (their margins and the grid's spacing) and
+        within the widget's width."""
+        stale = self._stale_badge
+        font = QFont(self._hold_badge.font())
+        band = self._grid.spacing() + 2 * _TILE_MARGIN_Y
+        while True:
+            stale.setFont(font)
+            stale.adjustSize()
+            if (stale.height() <= band and stale.width() <= self.width() - 16) or (
+                    font.pixelSize() <= 8):
+                return
+            font.setPixelSize(font.pixelSize() - 1)
 
     def resizeEvent(self, event: QResizeEvent) -> None:
         """Keep the HOLD badge in the top-right corner; auto scale: fit the digits."""
