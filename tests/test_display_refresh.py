@@ -196,10 +196,12 @@ def test_a_stream_that_stopped_lets_the_display_rest(qtbot, live):
     live.presenter.settings.readout_rate_hz = 1e9  # no readout update pending
     # Nothing new: the plots scroll on until the lead limit stops them, then nothing is drawn.
     qtbot.waitUntil(lambda: not live.presenter.refresh(), timeout=2000)
-    frames = live.presenter.frames
+    # The first rebuilds may repeat while the value axes settle their width (it depends on the
+    # fonts installed); once the display rests nothing is drawn or handed over.
+    frames, handed = live.presenter.frames, len(live.handed)
     assert [live.presenter.refresh() for _ in range(3)] == [False] * 3
     assert live.presenter.frames == frames
-    assert len(live.handed) == 1
+    assert len(live.handed) == handed
 
 
 def test_plots_scroll_between_blocks_without_rebuilding(qtbot, live):
