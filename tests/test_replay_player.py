@@ -319,11 +319,20 @@ def test_a_paused_seek_in_the_window_shows_the_data_there_and_notices_are_inform
                      pos=QPoint(round(slider.x_of(0.5)), slider.height() // 2))
     qtbot.waitUntil(lambda: abs(newest_t(window) - start - 30.0) < 0.5, timeout=TIMEOUT_MS)
     readouts = window.readouts
-    qtbot.waitUntil(lambda: readouts.isValid()
-                    and readouts.readoutText("tilt") != NO_VALUE, timeout=TIMEOUT_MS)
-    quat = window.session.pipeline.orientation.window(0.5, ["quat"])["quat"]
-    tilt = averaged_angles(quat).tilt_deg
-    shown = float(re.search(r"\d+\.\d+", readouts.readoutText("tilt")).group())
+
+    def shown_and_held() -> tuple[float, float] | None:
+        """(the tilt shown, the tilt of the pipeline's last 0.5 s), once a value is shown."""
+        if not readouts.isValid() or readouts.readoutText("tilt") == NO_VALUE:
+            return None
+        quat = window.session.pipeline.orientation.window(0.5, ["quat"])["quat"]
+        shown = float(re.search(r"\d+\.\d+", readouts.readoutText("tilt")).group())
+        return shown, averaged_angles(quat).tilt_deg
+
+    # The readouts refresh at their own rate: until then they may show the place before the
+    # seek, so wait for the paused display to show the data at the new place.
+    qtbot.waitUntil(lambda: (pair := shown_and_held()) is not None
+                    and abs(pair[0] - pair[1]) <= 0.006, timeout=TIMEOUT_MS)
+    shown, tilt = shown_and_held()
     assert shown == pytest.approx(tilt, abs=0.006)
     assert not window.replay_bar.play_button.isChecked()  # still paused
     assert window.replay_bar.slider.marks()  # the tour's bookmarks are on the slider
