@@ -4,6 +4,9 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
+# The suite runs on this many processes (pytest-xdist); each test is ended after 10 minutes, so
+# a hang is a failure that names the test, not a stalled run.
+TEST_WORKERS ?= 2
 
 .PHONY: run test lint bench clean bundle dist install-desktop uninstall-desktop
 
@@ -20,7 +23,7 @@ run: $(STAMP)
 test: $(STAMP)
 	$(BIN)/ruff check app drivers tests benchmarks firmware/host
 	$(BIN)/lint-imports --no-cache
-	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest
+	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -n $(TEST_WORKERS) --timeout=600
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/pipeline_throughput.py
