@@ -107,7 +107,7 @@ def test_layout_round_trips_through_json_and_rejects_bad_input():
     data["links"][1]["axis"] = [0, 0, 0]
     with pytest.raises(ArmLayoutError, match="non-zero"):
         ArmLayout.from_dict(data)
-    with pytest.raises(ArmLayoutError, match="not (valid )?JSON"):
+    with pytest.raises(ArmLayoutError, match=r"not (valid )?JSON"):
         ArmLayout.from_json("{")
     with pytest.raises(ArmLayoutError, match="4 lengths for 3 links"):
         layout.with_lengths([1, 2, 3, 4])

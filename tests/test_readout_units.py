@@ -156,3 +156,20 @@ def test_after_a_tare_the_reading_error_is_measured_in_the_tared_frame():
     assert untared.reading_error_deg == pytest.approx(1.58, abs=0.01)  # the wrong comparison
     assert tared.reading_error_deg == pytest.approx(0.0, abs=1e-6)
     assert (tared.roll_deg, tared.pitch_deg) == pytest.approx((1.5, 0.5))  # the simulator's
+
+
+def test_the_filter_panel_writes_angles_and_rates_with_the_degree_sign(qtbot):
+    from PySide6.QtWidgets import QAbstractSpinBox
+
+    from app.core.readout import unit_symbol
+    from app.gui.filter_panel import FilterPanel
+
+    assert (unit_symbol("dps"), unit_symbol("deg/s"), unit_symbol("deg")) == ("°/s", "°/s", "°")
+    assert unit_symbol("mdps/√Hz") == "mdps/√Hz"  # the datasheet's own unit stays
+    panel = FilterPanel()
+    qtbot.addWidget(panel)
+    panel.show_filter("ekf", {})
+    suffixes = [spin.suffix() for spin in panel.findChildren(QAbstractSpinBox)
+                if hasattr(spin, "suffix")]
+    assert any(s.endswith("°/s") for s in suffixes), suffixes
+    assert not [s for s in suffixes if s.strip() in ("dps", "deg", "deg/s")], suffixes

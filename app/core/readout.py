@@ -54,6 +54,16 @@ SLOPE_UNITS: dict[str, SlopeUnit] = {
 }
 """The display units by key, in menu order."""
 
+UNIT_SYMBOLS: dict[str, str] = {"deg": "°", "dps": "°/s", "deg/s": "°/s", "deg/h": "°/h"}
+"""How the window writes a parameter's or figure's unit: the degree sign for angles and °/s
+for rates (the ASCII names stay in the command line, JSON and recordings)."""
+
+
+def unit_symbol(unit: str) -> str:
+    """``unit`` as the window writes it (:data:`UNIT_SYMBOLS`; any other unit unchanged)."""
+    return UNIT_SYMBOLS.get(unit, unit)
+
+
 RATIO_LIMIT = 10_000.0
 """A ratio flatter than 1:10000 (0.0057°, under the readouts' 0.01 resolution) reads 1:∞."""
 LEVEL_RATIO_TEXT = "1:∞"

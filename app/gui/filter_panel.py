@@ -34,6 +34,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.core.filters import FILTERS, ONLINE_FILTERS, OrientationFilter, ParameterSpec
+from app.core.readout import unit_symbol
 
 REFERENCE_ONLY_LABEL = "reference, not for measurement"
 REFERENCE_ONLY_NOTE = (
@@ -289,7 +290,7 @@ class FilterPanel(QWidget):
         presets.setMinimumContentsLength(8)
         presets.addItem("Presets…", None)
         for label, value in spec.presets:
-            presets.addItem(f"{label}  ({value:.4g} {spec.unit})", value)
+            presets.addItem(f"{label}  ({value:.4g} {unit_symbol(spec.unit)})", value)
 
         def chosen(index: int) -> None:
             value = presets.itemData(index)
@@ -322,7 +323,7 @@ class FilterPanel(QWidget):
             if spec.log_scale:
                 spin.setStepType(QDoubleSpinBox.StepType.AdaptiveDecimalStepType)
         if spec.unit:
-            spin.setSuffix(f" {spec.unit}")
+            spin.setSuffix(f" {unit_symbol(spec.unit)}")
         spin.setKeyboardTracking(False)
         spin.valueChanged.connect(lambda v, n=spec.name: self.parameterChanged.emit(n, v))
         return spin
