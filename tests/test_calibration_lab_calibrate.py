@@ -228,6 +228,22 @@ def test_report_from_calibrate(tour_csv, tmp_path, suffix, qapp, artifacts_dir, 
                            method=result.fit.method, temperature_degc=result.temperature_degc)
     report = report_from_offline(result, profile, d, str(tour_csv),
                                  recording.metadata["simulator"]["unit_errors"])
-    image = render_preview(report)
+    # Printed black on white whatever the window's theme: a dark theme's light text colour
+    # made the report light grey on white.
+    from PySide6.QtGui import QColor, QPalette
+
+    saved = qapp.palette()
+    dark = QPalette(saved)
+    for role in (QPalette.ColorRole.Text, QPalette.ColorRole.WindowText):
+        dark.setColor(role, QColor("#e0e0e0"))
+    qapp.setPalette(dark)
+    try:
+        image = render_preview(report)
+    finally:
+        qapp.setPalette(saved)
     assert image.height() > 800
     image.save(os.path.join(artifacts_dir, "calibration_report.png"))
+    title = image.copy(0, 0, image.width(), 40)
+    darkest = min(QColor(title.pixel(x, y)).lightness()
+                  for x in range(0, title.width(), 2) for y in range(title.height()))
+    assert darkest < 60, darkest

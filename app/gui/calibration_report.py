@@ -426,8 +426,9 @@ def report_html(report: CalibrationReport, image_src: str = PLOT_NAME,
     after_max = max((a for _, _, _, a in report.poses), default=math.nan)
     parts = [
         "<html><head><meta charset='utf-8'><title>Calibration report</title>",
-        "<style>body{font-family:sans-serif;font-size:10pt} table{border-collapse:collapse}"
-        " td,th{border:1px solid #999;padding:3px 6px} th{background:#e8e8e8}"
+        "<style>body{font-family:sans-serif;font-size:10pt;color:#000;background-color:#fff}"
+        " table{border-collapse:collapse}"
+        " td,th{border:1px solid #999;padding:3px 6px;color:#000} th{background:#e8e8e8}"
         " h1{font-size:16pt} h2{font-size:12pt;margin-top:14px}</style></head><body>",
         f"<h1>Calibration report — {e(report.device_id)}</h1>",
         "<table>",
