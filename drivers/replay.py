@@ -713,6 +713,7 @@ class ReplayDevice(Device):
             gap=gap,
             lost_samples=max(0, lost),
             reference_quat=part.reference,
+            mag_raw=part.mag,
         )
 
     # -- bookmarks for the file ---------------------------------------------------------------

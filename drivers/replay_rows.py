@@ -41,16 +41,19 @@ class Rows:
     gap: np.ndarray
     reference: np.ndarray | None
     block_start: np.ndarray | None
+    mag: np.ndarray | None = None
+    """(N, 3) magnetic field in uT (NaN rows without a new sample), None without one."""
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
 
     def slice(self, start: int, stop: int) -> Rows:
-        ref, starts = self.reference, self.block_start
+        ref, starts, mag = self.reference, self.block_start, self.mag
         return Rows(self.t[start:stop], self.accel[start:stop], self.gyro[start:stop],
                     self.temp[start:stop], self.gap[start:stop],
                     None if ref is None else ref[start:stop],
-                    None if starts is None else starts[start:stop])
+                    None if starts is None else starts[start:stop],
+                    None if mag is None else mag[start:stop])
 
     @staticmethod
     def join(parts: list[Rows]) -> Rows:
@@ -63,7 +66,8 @@ class Rows:
                     np.concatenate([p.accel for p in parts]),
                     np.concatenate([p.gyro for p in parts]),
                     np.concatenate([p.temp for p in parts]),
-                    np.concatenate([p.gap for p in parts]), ref, starts)
+                    np.concatenate([p.gap for p in parts]), ref, starts,
+                    None if parts[0].mag is None else np.concatenate([p.mag for p in parts]))
 
 
 def rows_of(recording: Recording, reference: bool | None = None) -> Rows:
@@ -79,6 +83,7 @@ def rows_of(recording: Recording, reference: bool | None = None) -> Rows:
         reference=(np.column_stack([columns[c] for c in REFERENCE_COLUMNS])
                    if has_reference else None),
         block_start=recording.block_start,
+        mag=recording.mag_ut,
     )
 
 

@@ -127,6 +127,93 @@ def temperature_from_json(value: Mapping[str, Any]) -> TemperatureCompensation |
     return TemperatureCompensation(float(reference), **vectors)
 
 
+MAG_KEY = "magnetometer"
+"""The JSON key of the magnetometer's calibration (binding: ``calibrate-mag --json``)."""
+
+
+@dataclass(frozen=True)
+class MagnetometerCalibration:
+    """The magnetometer's correction: ``m = soft_iron (raw - hard_iron)``, in uT.
+
+    The result is in the accelerometer's frame: ``soft_iron`` holds the soft-iron distortion's
+    inverse *and* the turn between the magnetometer chip's axes and the accelerometer's.
+    ``field_ut`` and ``dip_deg`` are the local field's strength and its dip below the
+    horizontal found by the fit; ``fitness_uT`` the fit's RMS residual, ``coverage`` the
+    fraction of directions the tour covered (0..1). Rows that carry no field sample (NaN)
+    stay NaN.
+    """
+
+    hard_iron_ut: np.ndarray = field(default_factory=_zeros3)
+    soft_iron: np.ndarray = field(default_factory=_eye3)
+    field_ut: float = math.nan
+    dip_deg: float = math.nan
+    fitness_ut: float = math.nan
+    coverage: float = math.nan
+    extra: dict[str, Any] = field(default_factory=dict)
+    """Further JSON keys the fit reported (kept through a round trip)."""
+
+    @property
+    def is_identity(self) -> bool:
+        return not np.any(self.hard_iron_ut) and np.array_equal(self.soft_iron, np.eye(3))
+
+    def apply(self, mag_ut: np.ndarray) -> np.ndarray:
+        """(N, 3) measured field -> (N, 3) calibrated field in the accelerometer's frame."""
+        return (np.asarray(mag_ut, dtype=np.float64) - self.hard_iron_ut) @ self.soft_iron.T
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"hard_iron_uT": [3], "soft_iron": [[3]x3], "field_uT", "dip_deg", ...}``."""
+        def number(value: float) -> float | None:
+            return float(value) if math.isfinite(value) else None
+
+        return {
+            **self.extra,
+            "hard_iron_uT": np.asarray(self.hard_iron_ut, float).tolist(),
+            "soft_iron": np.asarray(self.soft_iron, float).tolist(),
+            "field_uT": number(self.field_ut),
+            "dip_deg": number(self.dip_deg),
+            "fitness_uT": number(self.fitness_ut),
+            "coverage": number(self.coverage),
+        }
+
+    @classmethod
+    def from_json(cls, value: Any) -> MagnetometerCalibration:
+        """Inverse of :meth:`to_json`; raises ValueError naming what is wrong."""
+        if not isinstance(value, Mapping):
+            raise ValueError("the magnetometer calibration is not a JSON object")
+
+        def array(name: str, shape: tuple[int, ...]) -> np.ndarray:
+            if name not in value:
+                raise ValueError(f"the magnetometer calibration lacks {name!r}")
+            try:
+                result = np.asarray(value[name], dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"the magnetometer calibration's {name!r} is not numbers") from None
+            if result.shape != shape or not np.all(np.isfinite(result)):
+                raise ValueError(
+                    f"the magnetometer calibration's {name!r} is not {shape} finite numbers")
+            return result
+
+        def number(name: str) -> float:
+            item = value.get(name)
+            if item is None:
+                return math.nan
+            if isinstance(item, bool) or not isinstance(item, int | float):
+                raise ValueError(f"the magnetometer calibration's {name!r} is not a number")
+            return float(item)
+
+        soft = array("soft_iron", (3, 3))
+        if abs(np.linalg.det(soft)) < 1e-6:
+            raise ValueError("the magnetometer calibration's 'soft_iron' is singular")
+        known = {"hard_iron_uT", "soft_iron", "field_uT", "dip_deg", "fitness_uT", "coverage"}
+        return cls(
+            hard_iron_ut=array("hard_iron_uT", (3,)), soft_iron=soft,
+            field_ut=number("field_uT"), dip_deg=number("dip_deg"),
+            fitness_ut=number("fitness_uT"), coverage=number("coverage"),
+            extra={k: v for k, v in value.items() if k not in known},
+        )
+
+
 @dataclass(frozen=True)
 class SensorCalibration:
     """Accelerometer and gyroscope correction; ``name`` labels the active profile.
@@ -141,6 +228,8 @@ class SensorCalibration:
     gyro_matrix: np.ndarray = field(default_factory=_eye3)
     name: str = "uncalibrated"
     temperature: TemperatureCompensation | None = None
+    magnetometer: MagnetometerCalibration | None = None
+    """The magnetometer's correction, when the profile has one (applied to ``mag_ut``)."""
 
     @property
     def is_identity(self) -> bool:
@@ -150,6 +239,7 @@ class SensorCalibration:
             and np.array_equal(self.accel_matrix, np.eye(3))
             and np.array_equal(self.gyro_matrix, np.eye(3))
             and (self.temperature is None or self.temperature.is_zero)
+            and (self.magnetometer is None or self.magnetometer.is_identity)
         )
 
     def biases_at(self, temp_degc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -173,11 +263,18 @@ class SensorCalibration:
             accel_bias, gyro_bias = self.biases_at(block.temp_degc)
         accel = (block.accel_m_s2 - accel_bias) @ self.accel_matrix.T
         gyro = (block.gyro_rad_s - gyro_bias) @ self.gyro_matrix.T
-        return replace(block, accel_m_s2=accel, gyro_rad_s=gyro)
+        mag = block.mag_ut
+        if mag is not None and self.magnetometer is not None:
+            mag = self.magnetometer.apply(mag)
+        return replace(block, accel_m_s2=accel, gyro_rad_s=gyro, mag_ut=mag)
 
     def with_temperature(self, model: TemperatureCompensation | None) -> SensorCalibration:
         """This calibration with ``model`` as its temperature terms (None removes them)."""
         return replace(self, temperature=model)
+
+    def with_magnetometer(self, model: MagnetometerCalibration | None) -> SensorCalibration:
+        """This calibration with ``model`` as its magnetometer terms (None removes them)."""
+        return replace(self, magnetometer=model)
 
 
 IDENTITY_CALIBRATION = SensorCalibration()

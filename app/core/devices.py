@@ -32,6 +32,26 @@ def printable(text: str) -> str:
 
 
 @dataclass(frozen=True, slots=True)
+class MagnetometerInfo:
+    """A magnetometer beside the accelerometer: which chip and how it is set up."""
+
+    chip: str
+    """``"LIS3MDL"``, ``"LIS2MDL"``, ``"simulated"``, or what a stream or recording names."""
+    odr_hz: float
+    """Its own output rate (slower than the accelerometer's; rows between hold NaN)."""
+    range_ut: float
+    """Full scale, +-uT (LIS3MDL: 400, 800, 1200 or 1600; LIS2MDL: 4915)."""
+    ut_per_lsb: float
+    """The scale of its raw counts (``ScaleFactors.mag_ut_per_lsb``)."""
+    address: int | None = None
+    """I2C address on the sensor bus, when it sits on one."""
+    mode: str = ""
+    """Its operating mode as the datasheet names it (e.g. ``"ultra-high-performance"``)."""
+    path: str = ""
+    """How its samples reach the host (``"bus"``, ``"sensor hub"``, ``"simulated"``...)."""
+
+
+@dataclass(frozen=True, slots=True)
 class DeviceInfo:
     """What a device says about itself once open (its texts made :func:`printable`)."""
 
@@ -47,6 +67,8 @@ class DeviceInfo:
     gyro_fs_dps: int
     firmware: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    magnetometer: MagnetometerInfo | None = None
+    """The magnetometer beside the sensor, None without one."""
 
     def __post_init__(self) -> None:
         for name in ("name", "unique_id", "sensor", "firmware"):

@@ -9,6 +9,10 @@ Sensor frame and axis conventions (written down once, used everywhere)
 - Time is in seconds on the device clock (float64), starting near 0 at connection. It is
   monotonic within a connection; lost samples leave a hole in time and set ``gap``.
 - Temperature is in degrees Celsius, one value per sample.
+- The magnetic field, when a source has a magnetometer, is in microtesla (uT) in the
+  magnetometer's own axes as the driver maps them onto the sensor frame (before calibration:
+  the calibration turns them into the accelerometer's frame). A magnetometer runs slower than
+  the accelerometer: a row holds a field sample only where a new one arrived, NaN elsewhere.
 - A reference orientation, when a source knows one (the simulator, a recording with reference
   columns), is a unit quaternion ``(w, x, y, z)`` rotating sensor-frame vectors into the earth
   frame, earth z up. See :mod:`app.core.orientation` for angles.
@@ -31,6 +35,7 @@ class ScaleFactors:
     gyro_rad_s_per_lsb: float
     temp_degc_per_lsb: float = 1.0
     temp_offset_degc: float = 0.0
+    mag_ut_per_lsb: float = 1.0
 
 
 @dataclass(slots=True)
@@ -46,6 +51,8 @@ class RawBlock:
     gap : (N,) bool, True on the first sample after lost data.
     lost_samples : number of samples known to be lost just before this block.
     reference_quat : (N, 4) sensor-to-earth reference orientation, or None when unknown.
+    mag_raw : (N, 3) raw magnetometer units, NaN on rows without a new field sample; None
+        when the source has no magnetometer.
     """
 
     t_s: np.ndarray
@@ -56,6 +63,7 @@ class RawBlock:
     gap: np.ndarray | None = None
     lost_samples: int = 0
     reference_quat: np.ndarray | None = None
+    mag_raw: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -80,7 +88,8 @@ def merge_raw_blocks(blocks: list[RawBlock]) -> list[RawBlock]:
         if not len(block):
             continue
         if run and (block.scale != run[0].scale
-                    or (block.reference_quat is None) != (run[0].reference_quat is None)):
+                    or (block.reference_quat is None) != (run[0].reference_quat is None)
+                    or (block.mag_raw is None) != (run[0].mag_raw is None)):
             flush()
         run.append(block)
     flush()
@@ -106,6 +115,7 @@ def _join(run: list[RawBlock]) -> RawBlock:
         lost_samples=sum(b.lost_samples for b in run),
         reference_quat=None if run[0].reference_quat is None else np.concatenate(
             [b.reference_quat for b in run]),
+        mag_raw=None if run[0].mag_raw is None else np.concatenate([b.mag_raw for b in run]),
     )
 
 
@@ -121,6 +131,8 @@ class SampleBlock:
     temp_degc : (N,) float64.
     gap : (N,) bool, True on the first sample after lost data.
     reference_quat : (N, 4) or None, sensor-to-earth reference orientation.
+    mag_ut : (N, 3) float64 magnetic field in uT, NaN on rows without a new field sample;
+        None when the source has no magnetometer.
     """
 
     t_s: np.ndarray
@@ -129,6 +141,7 @@ class SampleBlock:
     temp_degc: np.ndarray
     gap: np.ndarray
     reference_quat: np.ndarray | None = None
+    mag_ut: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -144,6 +157,8 @@ def convert_raw_block(raw: RawBlock) -> SampleBlock:
     temp += scale.temp_offset_degc
     gap = np.zeros(n, dtype=bool) if raw.gap is None else np.asarray(raw.gap, dtype=bool)
     ref = None if raw.reference_quat is None else np.asarray(raw.reference_quat, np.float64)
+    mag = None if raw.mag_raw is None else (
+        np.asarray(raw.mag_raw, dtype=np.float64) * scale.mag_ut_per_lsb).reshape(n, 3)
     return SampleBlock(
         t_s=np.asarray(raw.t_s, dtype=np.float64),
         accel_m_s2=accel.reshape(n, 3),
@@ -151,4 +166,23 @@ def convert_raw_block(raw: RawBlock) -> SampleBlock:
         temp_degc=temp.reshape(n),
         gap=gap,
         reference_quat=ref,
+        mag_ut=mag,
     )
+
+
+def slice_block(block: SampleBlock, start: int, stop: int) -> SampleBlock:
+    """Rows ``[start, stop)`` of ``block`` with every column it carries (views, not copies)."""
+    if start == 0 and stop >= len(block):
+        return block
+    ref, mag = block.reference_quat, block.mag_ut
+    return SampleBlock(
+        block.t_s[start:stop], block.accel_m_s2[start:stop], block.gyro_rad_s[start:stop],
+        block.temp_degc[start:stop], block.gap[start:stop],
+        None if ref is None else ref[start:stop],
+        None if mag is None else mag[start:stop],
+    )
+
+
+def has_field(block: SampleBlock | RawBlock) -> bool:
+    """True when the block carries a magnetometer's columns (some rows may still be NaN)."""
+    return (block.mag_ut if isinstance(block, SampleBlock) else block.mag_raw) is not None

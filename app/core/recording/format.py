@@ -22,7 +22,13 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from app.core.calibration import SensorCalibration, temperature_from_json, temperature_to_json
+from app.core.calibration import (
+    MAG_KEY,
+    MagnetometerCalibration,
+    SensorCalibration,
+    temperature_from_json,
+    temperature_to_json,
+)
 from app.core.version import __version__
 
 T = TypeVar("T")
@@ -38,7 +44,10 @@ ACCEL_COLUMNS = ("ax", "ay", "az")
 GYRO_COLUMNS = ("gx", "gy", "gz")
 REFERENCE_COLUMNS = ("qw", "qx", "qy", "qz")
 """Reference orientation, sensor-to-earth, earth z up; empty where unknown."""
-OPTIONAL_COLUMNS = ("temp", *REFERENCE_COLUMNS, "gap", "block_start")
+MAG_COLUMNS = ("mx", "my", "mz")
+"""Magnetic field in uT, sensor frame, as measured (before the magnetometer's calibration);
+empty on rows without a new field sample. An extension within v1 (docs/recording-format.md)."""
+OPTIONAL_COLUMNS = ("temp", *REFERENCE_COLUMNS, "gap", "block_start", *MAG_COLUMNS)
 """``block_start`` is an extension within v1 (docs/recording-format.md): 1 on the first sample
 of each block as the device delivered it, so that a replay cuts the stream exactly as it was
 processed live. Readers that do not know it ignore it, as any unknown column."""
@@ -48,6 +57,7 @@ UNITS: dict[str, str] = {
     "t": "s", "ax": "m/s^2", "ay": "m/s^2", "az": "m/s^2",
     "gx": "rad/s", "gy": "rad/s", "gz": "rad/s", "temp": "degC",
     "qw": "1", "qx": "1", "qy": "1", "qz": "1", "gap": "flag", "block_start": "flag",
+    "mx": "uT", "my": "uT", "mz": "uT",
 }
 CONVENTIONS = (
     "sensor frame: the LSM6DSOX's x, y, z; a: specific force (level, +z up, reads +9.81 on z); "
@@ -70,6 +80,9 @@ KEY_NOTE = "note"
 KEY_REFERENCE = "reference"
 KEY_BOOKMARKS = "bookmarks"
 KEY_SIMULATOR = "simulator"
+KEY_MAGNETOMETER = "magnetometer"
+"""The magnetometer's identity, settings and calibration (a v1 extension); a recording whose
+metadata has it carries the ``mx,my,mz`` columns."""
 
 DEVICE_FIELDS = (
     "url", "name", "unique_id", "sensor", "odr_hz", "odr_nominal_hz", "accel_fs_g",
@@ -150,6 +163,9 @@ def calibration_to_json(calibration: SensorCalibration) -> dict[str, Any]:
         "gyro_matrix": np.asarray(calibration.gyro_matrix, float).tolist(),
         # Optional (a v1 extension): the temperature terms, only when there are some.
         **temperature_to_json(calibration.temperature),
+        # Optional (a v1 extension): the magnetometer's terms, only when there are some.
+        **({MAG_KEY: calibration.magnetometer.to_json()}
+           if calibration.magnetometer is not None else {}),
     }
 
 
@@ -173,6 +189,9 @@ def calibration_from_json(value: Any) -> SensorCalibration:
         temperature = temperature_from_json(value)
     except ValueError as exc:
         raise ValueError(f"the calibration's temperature terms: {exc}") from None
+    magnetometer = None
+    if value.get(MAG_KEY) is not None:
+        magnetometer = MagnetometerCalibration.from_json(value[MAG_KEY])
     return SensorCalibration(
         accel_bias_m_s2=array("accel_bias_m_s2", (3,)),
         accel_matrix=array("accel_matrix", (3, 3)),
@@ -180,6 +199,7 @@ def calibration_from_json(value: Any) -> SensorCalibration:
         gyro_matrix=array("gyro_matrix", (3, 3)),
         name=str(value.get("name", "recorded")),
         temperature=temperature,
+        magnetometer=magnetometer,
     )
 
 
@@ -243,6 +263,10 @@ def recording_metadata(
     if device is not None:
         metadata[KEY_DEVICE] = device_to_json(device)
         metadata[KEY_SENSOR_SETTINGS] = sensor_settings_from_device(device)
+        magnetometer = getattr(device, "magnetometer", None)
+        if magnetometer is not None:
+            metadata[KEY_MAGNETOMETER] = magnetometer_to_json(
+                magnetometer, None if calibration is None else calibration.magnetometer)
     metadata[KEY_CALIBRATION] = calibration_to_json(calibration or SensorCalibration())
     if orientation_filter is not None:
         metadata[KEY_FILTER] = filter_to_json(orientation_filter)
@@ -260,6 +284,16 @@ def recording_metadata(
     if extra:
         metadata.update(to_json_value(dict(extra)))
     return metadata
+
+
+def magnetometer_to_json(info: Any, calibration: MagnetometerCalibration | None = None
+                         ) -> dict[str, Any]:
+    """The ``magnetometer`` metadata: the chip and its settings (a
+    :class:`~app.core.devices.MagnetometerInfo`), and its calibration when one is applied."""
+    value = to_json_value(info)
+    if calibration is not None:
+        value["calibration"] = calibration.to_json()
+    return value
 
 
 def simulator_metadata(device: Any) -> dict[str, Any]:

@@ -66,6 +66,7 @@ from app.core.recording.format import (
     KEY_DEVICE,
     KEY_FILTER,
     KEY_NOTE,
+    MAG_COLUMNS,
     MAGIC,
     OPTIONAL_COLUMNS,
     REFERENCE_COLUMNS,
@@ -193,6 +194,17 @@ class Recording:
         return self._reference() if self.has_reference else None
 
     @property
+    def has_magnetometer(self) -> bool:
+        """True when the file has the magnetometer's columns ``mx,my,mz``."""
+        return all(c in self.columns for c in MAG_COLUMNS)
+
+    @property
+    def mag_ut(self) -> np.ndarray | None:
+        """(N, 3) magnetic field in uT as measured (NaN rows without a new field sample), or
+        None without a magnetometer."""
+        return self._mag() if self.has_magnetometer else None
+
+    @property
     def unknown_columns(self) -> dict[str, np.ndarray]:
         """Columns this version does not know (kept, never used)."""
         known = set(REQUIRED_COLUMNS) | set(OPTIONAL_COLUMNS)
@@ -207,6 +219,9 @@ class Recording:
 
     def _reference(self, rows: slice = slice(None)) -> np.ndarray:
         return np.column_stack([self.columns[c][rows] for c in REFERENCE_COLUMNS])
+
+    def _mag(self, rows: slice = slice(None)) -> np.ndarray:
+        return np.column_stack([self.columns[c][rows] for c in MAG_COLUMNS])
 
     # -- metadata ------------------------------------------------------------------------------
     @property
@@ -282,6 +297,7 @@ class Recording:
             scale=UNIT_SCALE,
             gap=self._flag("gap", rows),
             reference_quat=self._reference(rows) if self.has_reference else None,
+            mag_raw=self._mag(rows) if self.has_magnetometer else None,
         )
 
     def block_bounds(self, size: int | None = None) -> np.ndarray:
@@ -311,6 +327,7 @@ class Recording:
         block = SampleBlock(
             t_s=self.t_s, accel_m_s2=self.accel_m_s2, gyro_rad_s=self.gyro_rad_s,
             temp_degc=self.temp_degc, gap=self.gap, reference_quat=self.reference_quat,
+            mag_ut=self.mag_ut,
         )
         return block if calibration is None else calibration.apply(block)
 

@@ -402,6 +402,8 @@ def _join(first: RawBlock, second: RawBlock) -> RawBlock:
         scale=first.scale,
         gap=np.concatenate([first.gap, second.gap]),  # type: ignore[list-item]
         reference_quat=ref,
+        mag_raw=None if first.mag_raw is None or second.mag_raw is None
+        else np.concatenate([first.mag_raw, second.mag_raw]),
     )
 
 

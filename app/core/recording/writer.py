@@ -42,13 +42,15 @@ import orjson
 from app.core.recording.compressed import gzip_member
 from app.core.recording.errors import RecordingWriteError
 from app.core.recording.format import (
+    KEY_MAGNETOMETER,
     KEY_REFERENCE,
+    MAG_COLUMNS,
     REFERENCE_COLUMNS,
     REQUIRED_COLUMNS,
     metadata_text,
 )
 from app.core.safe_output import OutputLock, OutputRefused, check_output
-from app.core.samples import RawBlock, SampleBlock, convert_raw_block
+from app.core.samples import RawBlock, SampleBlock, convert_raw_block, slice_block
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +66,8 @@ DEFAULT_MAX_PENDING_ROWS = 20_000_000
 """Rows queued but not written after which the recording stops (the disk cannot keep up)."""
 
 BASE_COLUMNS = (*REQUIRED_COLUMNS, "temp", "gap", "block_start")
-"""Columns every recording made here has; the reference columns follow when present."""
+"""Columns every recording made here has; the magnetometer's and then the reference columns
+follow when present."""
 
 Opener = Callable[[Path, str], BinaryIO]
 """Opens the file: ``opener(path, mode)`` with mode ``"xb"`` or ``"wb"``, unbuffered."""
@@ -187,6 +190,8 @@ def _column_values(block: SampleBlock, name: str) -> np.ndarray | None:
         if block.reference_quat is None:
             return None
         return block.reference_quat[:, REFERENCE_COLUMNS.index(name)]
+    if name in MAG_COLUMNS:
+        return None if block.mag_ut is None else block.mag_ut[:, axis]
     return None
 
 
@@ -202,6 +207,9 @@ class RecordingWriter:
     metadata : ``key -> JSON value`` (see :func:`~app.core.recording.format.recording_metadata`).
     reference : write the reference columns ``qw..qz``. None: decide from the first block (the
         header row is then written with it).
+    magnetometer : write the magnetometer's columns ``mx..mz``. None: when the header is
+        written at the start, from the metadata (its ``magnetometer`` key), else from the
+        first block.
     overwrite : replace an existing regular file (default: refuse). The new recording is
         created beside it under a temporary name and renamed over it once its metadata is on
         disk: the old file is never truncated (a reader of it keeps its data).
@@ -228,6 +236,7 @@ class RecordingWriter:
         metadata: Mapping[str, Any],
         *,
         reference: bool | None = None,
+        magnetometer: bool | None = None,
         overwrite: bool = False,
         flush_interval_s: float = DEFAULT_FLUSH_INTERVAL_S,
         on_error: Callable[[str], None] | None = None,
@@ -243,6 +252,7 @@ class RecordingWriter:
         self.compress = self.path.suffix.lower() == ".gz" if compress is None else compress
         self.metadata = dict(metadata)
         self._reference = reference
+        self._magnetometer = magnetometer
         self._overwrite = overwrite
         self._flush_interval_s = float(flush_interval_s)
         self._on_error = on_error
@@ -320,8 +330,10 @@ class RecordingWriter:
         head = metadata_text(metadata)
         if self._reference is None and KEY_REFERENCE in metadata:
             self._reference = True
+        if self._magnetometer is None and self._reference is not None:
+            self._magnetometer = KEY_MAGNETOMETER in metadata
         if self._reference is not None:
-            self._columns = self._choose_columns(self._reference)
+            self._columns = self._choose_columns(self._reference, bool(self._magnetometer))
             head += ",".join(self._columns) + "\n"
         encoded = self._encode(head.encode("utf-8"))
         try:
@@ -402,8 +414,9 @@ class RecordingWriter:
 
     # -- writer thread ---------------------------------------------------------------------------
     @staticmethod
-    def _choose_columns(reference: bool) -> tuple[str, ...]:
-        return (*BASE_COLUMNS, *REFERENCE_COLUMNS) if reference else BASE_COLUMNS
+    def _choose_columns(reference: bool, magnetometer: bool = False) -> tuple[str, ...]:
+        return (*BASE_COLUMNS, *(MAG_COLUMNS if magnetometer else ()),
+                *(REFERENCE_COLUMNS if reference else ()))
 
     def _run(self) -> None:
         try:
@@ -443,11 +456,13 @@ class RecordingWriter:
         block = convert_raw_block(raw)
         n = len(block)
         if self._columns is None:
-            self._columns = self._choose_columns(block.reference_quat is not None)
+            magnetometer = (block.mag_ut is not None if self._magnetometer is None
+                            else self._magnetometer)
+            self._columns = self._choose_columns(block.reference_quat is not None, magnetometer)
             header = (",".join(self._columns) + "\n").encode("utf-8")
             self._write_rows(header, count_rows=False)
         for start in range(0, n, FORMAT_ROWS):
-            piece = _slice(block, start, start + FORMAT_ROWS)
+            piece = slice_block(block, start, start + FORMAT_ROWS)
             data = format_rows(piece, self._columns, block_start=start == 0).encode("utf-8")
             self._pieces.append((data, float(piece.t_s[0]), float(piece.t_s[-1])))
             self._buffer_bytes += len(data)
@@ -589,14 +604,3 @@ def _call_safely(callback: Callable[[Any], None], argument: Any) -> None:
         callback(argument)
     except Exception:
         log.exception("recording writer: callback %r failed", callback)
-
-
-def _slice(block: SampleBlock, start: int, stop: int) -> SampleBlock:
-    if start == 0 and stop >= len(block):
-        return block
-    ref = block.reference_quat
-    return SampleBlock(
-        block.t_s[start:stop], block.accel_m_s2[start:stop], block.gyro_rad_s[start:stop],
-        block.temp_degc[start:stop], block.gap[start:stop],
-        None if ref is None else ref[start:stop],
-    )
