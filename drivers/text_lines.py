@@ -14,6 +14,8 @@ Options (all optional):
 - ``columns``: names of the numbers on a line, in order; ``_`` skips a column. Names are
   recognised as in header rows (below), so ``accX`` or ``GYR_Z`` work too;
 - ``accel`` = ``g`` | ``mg`` | ``m/s2``; ``gyro`` = ``dps`` | ``mdps`` | ``rad/s``;
+  a magnetometer's columns (``mx,my,mz``, ``magX``, ``MAG_X``) are read in uT, gauss or
+  mgauss (a unit in the name, ``mx_uT``, ``magX[gauss]``, says which; else see *Units*);
 - ``time`` = ``s`` | ``ms`` | ``us`` (unit of the time column) or ``host`` (ignore it);
   ``time_col`` names the time column (default: a column called t, time, timestamp, ms, millis,
   us, micros...);
@@ -30,10 +32,10 @@ Lines understood
   (a, ac, acc, accel, acceleration, accelerometer, xl) then the axis; gyroscope names a
   gyroscope word (g, gy, gyr, gyro, gyroscope, w, omega, rate) then the axis; a unit may follow
   (``ax_g``, ``gx_dps``) or stand in brackets.
-- Without a header, a line of N numbers means: 3 ax,ay,az; 6 ax..gz; 9 ax..gz and three
-  ignored (a magnetometer); 4, 7, 10: the first column is a timestamp if it rises on every line
-  seen while connecting, else a temperature (Adafruit's plotter format ``temp,ax,...,gz``);
-  8: timestamp, ax..gz, temperature.
+- Without a header, a line of N numbers means: 3 ax,ay,az; 6 ax..gz; 9 ax..gz,mx,my,mz (a
+  9-DoF board's magnetometer); 4, 7, 10: the first column is a timestamp if it rises on every
+  line seen while connecting, else a temperature (Adafruit's plotter format
+  ``temp,ax,...,gz``), then as for 3, 6, 9; 8: timestamp, ax..gz, temperature.
 - ``LABEL: value`` lines. ST's DataLogTerminal example (``ACC_X[0]: 12, ACC_Y[0]: -3,
   ACC_Z[0]: 1001`` in mg, ``GYR_X[0]: 140, ...`` in mdps; other sensors' lines are ignored)
   and the Adafruit_LSM6DS examples (``adafruit_lsm6dsox_test.ino``: a ``Temperature 25.50 deg C``
@@ -48,7 +50,9 @@ Units when not given (the sensor is assumed roughly at rest while connecting): t
 60 and above -> mg. The gyroscope follows the usual pairing (g -> dps as Arduino_LSM6DS3 prints,
 m/s^2 -> rad/s as Adafruit prints, mg -> mdps as ST prints), except that a median ``|w|`` above
 35 cannot be rad/s (that is beyond +-2000 dps) and becomes dps, and above 2500 cannot be dps
-and becomes mdps. A time column's unit comes from its name (ms, millis, us, micros, s), else
+and becomes mdps. The magnetometer's unit comes from the earth's field, 25 to 65 uT: a median
+``|m|`` below 2 is gauss, 2 to 200 uT, 200 and above mgauss (ST's DataLogTerminal prints
+mgauss). A time column's unit comes from its name (ms, millis, us, micros, s), else
 from comparing its steps with the lines' arrival rate, else integers are taken as ms
 (Arduino's ``millis()``) and fractions as s.
 
@@ -87,6 +91,7 @@ from urllib.parse import parse_qsl, unquote
 import numpy as np
 import serial
 
+from app.core.devices import MagnetometerInfo
 from app.core.samples import STANDARD_GRAVITY_M_S2, RawBlock, ScaleFactors
 from drivers.base import Device, DeviceDescriptor, DeviceInfo
 from drivers.errors import DeviceIOError, DeviceOpenError, DeviceUrlError
@@ -107,7 +112,10 @@ GYRO_UNITS: dict[str, float] = {"dps": math.pi / 180.0, "mdps": math.pi / 180e3,
 """Gyroscope unit -> rad/s per unit."""
 TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 """Time column unit -> seconds per unit."""
-CHANNELS = ("t", "ax", "ay", "az", "gx", "gy", "gz", "temp")
+MAG_UNITS: dict[str, float] = {"uT": 1.0, "gauss": 100.0, "mgauss": 0.1}
+"""Magnetometer unit -> uT per unit."""
+CHANNELS = ("t", "ax", "ay", "az", "gx", "gy", "gz", "temp", "mx", "my", "mz")
+MAG_CHANNELS = ("mx", "my", "mz")
 
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _NUMBER_RE = re.compile(_NUMBER)
@@ -123,6 +131,9 @@ _BRACKETS = re.compile(r"[\[\(]([^\]\)]*)[\]\)]")
 _INDEX = re.compile(r"\[\d+\]")
 _ACCEL_BASES = {"a", "ac", "acc", "accel", "acceleration", "accelerometer", "xl"}
 _GYRO_BASES = {"g", "gy", "gyr", "gyro", "gyroscope", "w", "omega", "rate"}
+_MAG_BASES = {"m", "mag", "magn", "magnetic", "magnetometer", "compass", "b", "field"}
+_MAG_UNIT_WORDS = {"ut": "uT", "utesla": "uT", "microtesla": "uT", "gauss": "gauss", "ga": "gauss",
+                   "mgauss": "mgauss", "mga": "mgauss", "milligauss": "mgauss"}
 _ACCEL_UNIT_WORDS = {"g": "g", "mg": "mg", "ms2": "m/s2", "mps2": "m/s2", "mss": "m/s2"}
 _GYRO_UNIT_WORDS = {"dps": "dps", "degs": "dps", "degps": "dps", "degreess": "dps", "mdps": "mdps",
                     "rads": "rad/s", "radps": "rad/s", "radianss": "rad/s"}
@@ -132,6 +143,8 @@ _TIME_NAMES: dict[str, str | None] = {
     "us": "us", "micros": "us", "tus": "us", "timeus": "us", "timestampus": "us", "tsus": "us",
     "sec": "s", "secs": "s", "seconds": "s", "times": "s", "timesec": "s", "timestamps": "s",
 }
+_MAG_LINE_UNIT_RE = re.compile(r"\b(utesla|microtesla|ut|µt|mgauss|milligauss|gauss)\b",
+                               re.IGNORECASE)
 _LINE_UNIT_RE = re.compile(
     r"(m/s\^?2|m/s²|radians/s|rad/s|degrees/s|deg/s|°/s|\bmdps\b|\bdps\b|\bmg\b|\bg\b)",
     re.IGNORECASE,
@@ -176,6 +189,9 @@ def canonical_column(name: str) -> ColumnName | None:
         if base in _GYRO_BASES and (rest == "" or rest in _GYRO_UNIT_WORDS):
             unit = _GYRO_UNIT_WORDS.get(rest) or _unit_word(hint_text)[1]
             return ColumnName("g" + key[i], unit)
+        if base in _MAG_BASES and (rest == "" or rest in _MAG_UNIT_WORDS):
+            hint = re.sub(r"[^a-z0-9]", "", hint_text.lower())
+            return ColumnName("m" + key[i], _MAG_UNIT_WORDS.get(rest) or _MAG_UNIT_WORDS.get(hint))
     return None
 
 
@@ -206,6 +222,7 @@ class _Line:
     values: dict[str, float] = field(default_factory=dict)
     accel_unit: str | None = None
     gyro_unit: str | None = None
+    mag_unit: str | None = None
     datalog: bool = False
 
 
@@ -239,7 +256,7 @@ def classify_line(text: str) -> _Line:
         name = canonical_column(key)
         if name is None:
             continue
-        if name.channel[0] in "ag" and name.channel != "temp":
+        if name.channel[0] in "agm" and name.channel != "temp":
             base = key[:-1]
         values[name.channel] = float(pair.group("value"))
     if not values:
@@ -253,6 +270,11 @@ def classify_line(text: str) -> _Line:
             line.accel_unit = accel_unit
         if gyro_unit and has_gyro and not has_accel:
             line.gyro_unit = gyro_unit
+    if any(k in values for k in MAG_CHANNELS) and not any(k[0] in "ag" for k in values
+                                                          if k != "temp"):
+        found = _MAG_LINE_UNIT_RE.search(stripped)
+        if found:
+            line.mag_unit = _MAG_UNIT_WORDS[re.sub(r"[^a-z]", "", found.group(1).lower())]
     return line
 
 
@@ -287,6 +309,8 @@ class Layout:
     time_unit: str = "host"
     """s, ms, us, or host (no time column used)."""
     has_gyro: bool = True
+    mag_unit: str | None = None
+    """uT, gauss or mgauss; None: the stream has no magnetometer."""
 
     def describe(self) -> str:
         if self.kind == "labelled":
@@ -295,23 +319,25 @@ class Layout:
             order = sorted(self.columns, key=self.columns.get)  # type: ignore[arg-type]
             what = f"{self.n_columns} columns ({','.join(order)})"
         units = f"accel in {self.accel_unit}, gyro in {self.gyro_unit}, time {self.time_unit}"
+        if self.mag_unit is not None:
+            units += f", field in {self.mag_unit}"
         return f"{what}; {units}"
 
 
 def _default_columns(n: int, rows: np.ndarray) -> dict[str, int] | None:
     """The channel of each column of a headerless row of ``n`` numbers (module docstring)."""
-    six = ("ax", "ay", "az", "gx", "gy", "gz")
+    nine = ("ax", "ay", "az", "gx", "gy", "gz", *MAG_CHANNELS)
     if n in (3, 6, 9):
-        return {name: i for i, name in enumerate(six[: 3 if n == 3 else 6])}
+        return {name: i for i, name in enumerate(nine[:n])}
     if n in (4, 7, 10):
         first = rows[:, 0]
         rising = len(first) >= 2 and bool(np.all(np.diff(first) > 0))
         single_time = len(first) == 1 and first[0] == round(first[0]) and first[0] > 200
         lead = "t" if rising or single_time else "temp"
-        names = (lead, *six[: 3 if n == 4 else 6])
+        names = (lead, *nine[: n - 1])
         return {name: i for i, name in enumerate(names)}
     if n == 8:
-        return {name: i for i, name in enumerate(("t", *six, "temp"))}
+        return {name: i for i, name in enumerate(("t", *nine[:6], "temp"))}
     return None
 
 
@@ -333,7 +359,8 @@ def _columns_from_names(names: list[str], time_col: str | None) -> tuple[dict[st
             continue
         columns[meaning.channel] = index
         if meaning.unit:
-            hints[meaning.channel[0] if meaning.channel != "temp" else "temp"] = meaning.unit
+            hints[meaning.channel[0] if meaning.channel not in ("temp", "t") else meaning.channel
+                  ] = meaning.unit
     return columns, hints
 
 
@@ -436,11 +463,12 @@ class LineParser:
         lost = np.zeros(m, dtype=np.int64)
         lost[0] = self._lost
         self._lost = 0
+        mag = {} if self.layout.mag_unit is None else {"mag": take(MAG_CHANNELS, math.nan)}
         self.records.add(
             accel=take(("ax", "ay", "az"), 0.0), gyro=take(("gx", "gy", "gz"), 0.0),
             temp=take(("temp",), math.nan)[:, 0],
             t_raw=take(("t",), math.nan)[:, 0], arrival=np.asarray(arrival_s, dtype=np.float64),
-            lost=lost,
+            lost=lost, **mag,
         )
 
     def _slow(self, text: str, arrival_s: float) -> None:
@@ -497,11 +525,13 @@ class LineParser:
             row = [pending.get(n, 0.0) for n in (*groups["a"], *groups["g"])]
             lost = np.array([self._lost], dtype=np.int64)
             self._lost = 0
+            mag = {} if self.layout.mag_unit is None else {
+                "mag": np.array([[pending.get(n, math.nan) for n in MAG_CHANNELS]])}
             self.records.add(
                 accel=np.array([row[:3]]), gyro=np.array([row[3:]]),
                 temp=np.array([pending.get("temp", math.nan)]),
                 t_raw=np.array([pending.get("t", math.nan)]), arrival=np.array([arrival_s]),
-                lost=lost,
+                lost=lost, **mag,
             )
             self._pending = {}
 
@@ -598,6 +628,13 @@ def _guess_gyro_unit(accel_unit: str, magnitude: float) -> str:
     return unit
 
 
+def _guess_mag_unit(magnitude: float) -> str:
+    """The earth's field is 25 to 65 uT: 0.25 to 0.65 gauss, 250 to 650 mgauss."""
+    if magnitude < 2.0:
+        return "gauss"
+    return "uT" if magnitude < 200.0 else "mgauss"
+
+
 def _guess_time_unit(times: np.ndarray, arrivals: np.ndarray) -> str:
     steps = np.diff(times)
     steps = steps[steps > 0]
@@ -646,6 +683,8 @@ def decide_layout(
         layout = Layout("columns", n, columns, has_gyro=has_gyro)
         accel = values[:, [columns[c] for c in ("ax", "ay", "az") if c in columns]]
         gyro = values[:, [columns[c] for c in ("gx", "gy", "gz") if c in columns]]
+        field = (values[:, [columns[c] for c in MAG_CHANNELS]]
+                 if all(c in columns for c in MAG_CHANNELS) else None)
         time_values = values[:, columns["t"]] if "t" in columns else None
     elif labelled:
         datalog = any(ln.datalog for ln in labelled)
@@ -657,14 +696,22 @@ def decide_layout(
             return None
         accel = np.array(accel_rows)
         gyro = np.array(gyro_rows) if gyro_rows else np.zeros((1, 3))
-        for ln in labelled:
+        mag_rows = [[ln.values[k] for k in MAG_CHANNELS] for ln in lines
+                    if ln.kind == "labelled" and all(k in ln.values for k in MAG_CHANNELS)]
+        field = np.array(mag_rows) if mag_rows else None
+        for ln in lines:
+            if ln.kind != "labelled":
+                continue
             if ln.accel_unit:
                 hints.setdefault("a", ln.accel_unit)
             if ln.gyro_unit:
                 hints.setdefault("g", ln.gyro_unit)
+            if ln.mag_unit:
+                hints.setdefault("m", ln.mag_unit)
         if datalog:
             hints.setdefault("a", "mg")
             hints.setdefault("g", "mdps")
+            hints.setdefault("m", "mgauss")
         layout = Layout("labelled", has_gyro=bool(gyro_rows))
         time_values = None
         row_times = np.array(arrivals)
@@ -680,11 +727,15 @@ def decide_layout(
     time_unit = "host"
     if time_values is not None and options.time_unit != "host":
         time_unit = options.time_unit or hints.get("t") or _guess_time_unit(time_values, row_times)
+    mag_unit = None
+    if field is not None and len(field):
+        mag_unit = hints.get("m") or _guess_mag_unit(
+            float(np.median(np.linalg.norm(field, axis=1))))
     columns = dict(layout.columns)
     if time_unit == "host":
         columns.pop("t", None)
     return replace(layout, columns=columns, accel_unit=accel_unit, gyro_unit=gyro_unit,
-                   time_unit=time_unit)
+                   time_unit=time_unit, mag_unit=mag_unit)
 
 
 # -- the device -----------------------------------------------------------------------------
@@ -750,6 +801,7 @@ class TextLineDevice(Device):
         self._scale = ScaleFactors(
             accel_m_s2_per_lsb=ACCEL_UNITS[layout.accel_unit],
             gyro_rad_s_per_lsb=GYRO_UNITS[layout.gyro_unit],
+            mag_ut_per_lsb=MAG_UNITS[layout.mag_unit] if layout.mag_unit else 1.0,
         )
         self._timeline.start(layout, _arrival_period(arrivals))
         self._parser.feed(lines, np.asarray(arrivals))
@@ -766,7 +818,11 @@ class TextLineDevice(Device):
             gyro_fs_dps=opts.gyro_fs_dps,
             firmware="",
             extra={"layout": layout.describe(), "baud": opts.baud, "accel_unit": layout.accel_unit,
-                   "gyro_unit": layout.gyro_unit, "time_unit": layout.time_unit},
+                   "gyro_unit": layout.gyro_unit, "time_unit": layout.time_unit,
+                   **({} if layout.mag_unit is None else {"mag_unit": layout.mag_unit})},
+            magnetometer=None if layout.mag_unit is None else MagnetometerInfo(
+                chip="unknown (text)", odr_hz=self._timeline.rate_hz, range_ut=math.nan,
+                ut_per_lsb=MAG_UNITS[layout.mag_unit], path="text lines"),
         )
 
     def _read(self, timeout_s: float) -> RawBlock | None:
@@ -893,6 +949,7 @@ class TextLineDevice(Device):
             scale=self._scale,
             gap=gap,
             lost_samples=int(lost.sum()),
+            mag_raw=records.get("mag"),
         )
 
 

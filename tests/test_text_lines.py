@@ -95,7 +95,8 @@ def read_all(device: TextLineDevice, count: int) -> RawBlock:
         return np.concatenate([getattr(b, name) for b in blocks])
 
     return RawBlock(cat("t_s"), cat("accel_raw"), cat("gyro_raw"), cat("temp_raw"),
-                    blocks[0].scale, cat("gap"), sum(b.lost_samples for b in blocks))
+                    blocks[0].scale, cat("gap"), sum(b.lost_samples for b in blocks),
+                    mag_raw=None if blocks[0].mag_raw is None else cat("mag_raw"))
 
 
 def csv_rows(n: int, sep: str = ",", *, accel_scale: float = 1.0, gyro_scale: float = 1.0,
@@ -204,8 +205,13 @@ def test_st_datalogterminal_lines_in_mg_and_mdps(tty: Pty) -> None:
     np.testing.assert_allclose(si.accel_m_s2[0], np.array([12, -3, 1001]) * 1e-3 * G)
     np.testing.assert_allclose(si.gyro_rad_s[0], np.array([140, -350, 70]) * 1e-3 * DEG)
     np.testing.assert_allclose(si.temp_degc[1:], 24.52)  # the temperature of the cycle before
+    # the magnetometer's line (mgauss) follows the gyroscope's: it joins the next sample
+    assert device.layout.mag_unit == "mgauss"
+    assert device.info is not None and device.info.magnetometer is not None
+    assert np.isnan(si.mag_ut[0]).all()
+    np.testing.assert_allclose(si.mag_ut[1:], np.tile([-21.1, 9.3, 40.2], (5, 1)))
     counters = device.counters
-    assert counters.samples == 6 and counters.ignored >= 12 and counters.rejected <= 6
+    assert counters.samples == 6 and counters.ignored >= 6 and counters.rejected <= 6
     device.close()
 
 
@@ -250,6 +256,41 @@ def test_adafruit_serial_plotter_format_temperature_first(tty: Pty) -> None:
     si = convert_raw_block(raw)
     np.testing.assert_allclose(si.temp_degc, [25.50, 25.49] * 4)
     np.testing.assert_allclose(si.accel_m_s2[:, 2], 9.81)  # m/s^2 guessed from |a|
+    device.close()
+
+
+def test_nine_numbers_are_a_9dof_boards_rows_with_the_field_in_microtesla(tty: Pty) -> None:
+    text, accel, _gyro = csv_rows(12)
+    field = np.array([[21.5 + 0.5 * i, -3.25, -44.0] for i in range(12)])
+    rows = "".join(line.rstrip("\r\n") + "," + ",".join(f"{v:.2f}" for v in m) + "\r\n"
+                   for line, m in zip(text.splitlines(True), field))
+    device = open_with(tty, rows)
+    assert device.layout is not None and device.layout.mag_unit == "uT"
+    assert device.info is not None and device.info.magnetometer is not None
+    assert "field in uT" in device.info.extra["layout"]
+    si = convert_raw_block(read_all(device, 12))
+    np.testing.assert_allclose(si.accel_m_s2, accel * G)
+    np.testing.assert_allclose(si.mag_ut, field)
+    device.close()
+
+
+def test_named_field_columns_in_gauss_and_a_stream_without_them(tty: Pty) -> None:
+    header = "time_ms,ax,ay,az,gx,gy,gz,mag_x,mag_y,mag_z\r\n"
+    rows = "".join(f"{1000 + 10 * i},0.01,0.02,0.99,0.1,0.2,0.3,0.215,-0.0325,-0.44\r\n"
+                   for i in range(10))
+    device = open_with(tty, header + rows)
+    assert device.layout is not None and device.layout.mag_unit == "gauss"
+    si = convert_raw_block(read_all(device, 10))
+    np.testing.assert_allclose(si.mag_ut, np.tile([21.5, -3.25, -44.0], (10, 1)))
+    device.close()
+
+
+def test_a_stream_without_a_magnetometer_delivers_no_field(tty: Pty) -> None:
+    text, _accel, _gyro = csv_rows(10)
+    device = open_with(tty, text)
+    assert device.layout is not None and device.layout.mag_unit is None
+    assert device.info is not None and device.info.magnetometer is None
+    assert read_all(device, 10).mag_raw is None
     device.close()
 
 
@@ -404,7 +445,9 @@ def test_many_lines_take_the_vectorised_path() -> None:
     ("gyroX", "gx", None), ("GYR_Y", "gy", None), ("GyZ", "gz", None),
     ("gyro_x_rads", "gx", "rad/s"),
     ("gyroscopeZ", "gz", None), ("time_ms", "t", "ms"), ("micros", "t", "us"), ("t", "t", None),
-    ("Time (s)", "t", "s"), ("temperature", "temp", None), ("MAG_X", None, None), ("x", None, None),
+    ("Time (s)", "t", "s"), ("temperature", "temp", None), ("MAG_X", "mx", None), ("x", None, None),
+    ("magY", "my", None), ("mz_uT", "mz", "uT"), ("mag_x[gauss]", "mx", "gauss"),
+    ("Magnetic Z", "mz", None), ("mx", "mx", None),
 ])
 def test_column_names(name: str, channel: str | None, unit: str | None) -> None:
     found = canonical_column(name)
