@@ -79,12 +79,9 @@ from __future__ import annotations
 
 import contextlib
 import math
-import re
 import threading
 import time
-from collections import Counter
-from dataclasses import dataclass, field, replace
-from itertools import groupby
+from dataclasses import dataclass, replace
 from typing import ClassVar
 from urllib.parse import parse_qsl, unquote
 
@@ -92,9 +89,32 @@ import numpy as np
 import serial
 
 from app.core.devices import MagnetometerInfo
-from app.core.samples import STANDARD_GRAVITY_M_S2, RawBlock, ScaleFactors
+from app.core.samples import RawBlock, ScaleFactors
 from drivers.base import Device, DeviceDescriptor, DeviceInfo
 from drivers.errors import DeviceIOError, DeviceOpenError, DeviceUrlError
+from drivers.text_stream.layout import Layout, decide_layout
+from drivers.text_stream.lexer import (
+    ACCEL_UNITS,
+    CHANNELS,
+    GYRO_UNITS,
+    MAG_UNITS,
+    TIME_UNITS,
+    ColumnName,
+    Line,
+    canonical_column,
+    classify_line,
+    looks_like_text_lines,
+)
+from drivers.text_stream.parser import LineParser, TextLineCounters
+from drivers.text_stream.timeline import Timeline, arrival_period
+
+_Timeline = Timeline  # the name tests and older code used
+
+__all__ = [
+    "ACCEL_UNITS", "CHANNELS", "GYRO_UNITS", "MAG_UNITS", "TIME_UNITS", "ColumnName", "Layout",
+    "Line", "LineParser", "TextLineCounters", "TextLineDevice", "TextOptions", "canonical_column",
+    "classify_line", "decide_layout", "looks_like_text_lines", "parse_text_url",
+]
 
 DEFAULT_BAUD = 115200
 DEFAULT_OPEN_TIMEOUT_S = 2.0
@@ -105,95 +125,6 @@ OPEN_SETTLE_S = 0.5
 MAX_LINE_BYTES = 4096
 READ_SLICE_S = 0.05
 """Port read timeout: the longest a read waits for a first byte before checking its deadline."""
-ACCEL_UNITS: dict[str, float] = {"g": STANDARD_GRAVITY_M_S2, "mg": STANDARD_GRAVITY_M_S2 * 1e-3,
-                                 "m/s2": 1.0}
-"""Accelerometer unit -> m/s^2 per unit."""
-GYRO_UNITS: dict[str, float] = {"dps": math.pi / 180.0, "mdps": math.pi / 180e3, "rad/s": 1.0}
-"""Gyroscope unit -> rad/s per unit."""
-TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
-"""Time column unit -> seconds per unit."""
-MAG_UNITS: dict[str, float] = {"uT": 1.0, "gauss": 100.0, "mgauss": 0.1}
-"""Magnetometer unit -> uT per unit."""
-CHANNELS = ("t", "ax", "ay", "az", "gx", "gy", "gz", "temp", "mx", "my", "mz")
-MAG_CHANNELS = ("mx", "my", "mz")
-
-_NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
-_NUMBER_RE = re.compile(_NUMBER)
-_TOKEN_SPLIT = re.compile(r"[,;\s]+")
-_TO_SPACE = str.maketrans({",": " ", ";": " ", "\t": " "})
-_PAIR_RE = re.compile(
-    r"(?P<label>[A-Za-z][A-Za-z0-9_ .\[\]]*?)\s*[:=]\s*(?P<value>" + _NUMBER + r")"
-)
-_TEMPERATURE_RE = re.compile(
-    r"^\s*(?:die\s*)?temp(?:erature)?(?:\[\d+\])?\s*[:=]?\s*(" + _NUMBER + r")", re.IGNORECASE
-)
-_BRACKETS = re.compile(r"[\[\(]([^\]\)]*)[\]\)]")
-_INDEX = re.compile(r"\[\d+\]")
-_ACCEL_BASES = {"a", "ac", "acc", "accel", "acceleration", "accelerometer", "xl"}
-_GYRO_BASES = {"g", "gy", "gyr", "gyro", "gyroscope", "w", "omega", "rate"}
-_MAG_BASES = {"m", "mag", "magn", "magnetic", "magnetometer", "compass", "b", "field"}
-_MAG_UNIT_WORDS = {"ut": "uT", "utesla": "uT", "microtesla": "uT", "gauss": "gauss", "ga": "gauss",
-                   "mgauss": "mgauss", "mga": "mgauss", "milligauss": "mgauss"}
-_ACCEL_UNIT_WORDS = {"g": "g", "mg": "mg", "ms2": "m/s2", "mps2": "m/s2", "mss": "m/s2"}
-_GYRO_UNIT_WORDS = {"dps": "dps", "degs": "dps", "degps": "dps", "degreess": "dps", "mdps": "mdps",
-                    "rads": "rad/s", "radps": "rad/s", "radianss": "rad/s"}
-_TIME_NAMES: dict[str, str | None] = {
-    "t": None, "time": None, "timestamp": None, "ts": None, "stamp": None,
-    "ms": "ms", "millis": "ms", "tms": "ms", "timems": "ms", "timestampms": "ms", "tsms": "ms",
-    "us": "us", "micros": "us", "tus": "us", "timeus": "us", "timestampus": "us", "tsus": "us",
-    "sec": "s", "secs": "s", "seconds": "s", "times": "s", "timesec": "s", "timestamps": "s",
-}
-_MAG_LINE_UNIT_RE = re.compile(r"\b(utesla|microtesla|ut|µt|mgauss|milligauss|gauss)\b",
-                               re.IGNORECASE)
-_LINE_UNIT_RE = re.compile(
-    r"(m/s\^?2|m/s²|radians/s|rad/s|degrees/s|deg/s|°/s|\bmdps\b|\bdps\b|\bmg\b|\bg\b)",
-    re.IGNORECASE,
-)
-
-
-# -- names and units ---------------------------------------------------------------------------
-def _unit_word(text: str) -> tuple[str | None, str | None]:
-    """(accel unit, gyro unit) a unit word names; at most one is not None."""
-    key = re.sub(r"[^a-z0-9]", "", text.lower().replace("°", "deg"))
-    if key in _ACCEL_UNIT_WORDS:
-        return _ACCEL_UNIT_WORDS[key], None
-    return None, _GYRO_UNIT_WORDS.get(key)
-
-
-@dataclass(frozen=True, slots=True)
-class ColumnName:
-    """What a column or label name means: a channel (see :data:`CHANNELS`) and a unit hint."""
-
-    channel: str
-    unit: str | None = None
-
-
-def canonical_column(name: str) -> ColumnName | None:
-    """Recognise a column or label name (``accX``, ``ACC_X[0]``, ``gx(dps)``, ``time_ms``)."""
-    hint_text = " ".join(m.group(1) for m in _BRACKETS.finditer(_INDEX.sub("", name)))
-    key = re.sub(r"[^a-z0-9]", "", _BRACKETS.sub("", name).lower())
-    if not key:
-        return None
-    if key in _TIME_NAMES:
-        hint = hint_text.strip().lower()
-        return ColumnName("t", _TIME_NAMES[key] or (hint if hint in TIME_UNITS else None))
-    if key.startswith("temp") or key in {"tmp", "degc", "dietemp"}:
-        return ColumnName("temp")
-    for i in range(len(key) - 1, -1, -1):
-        if key[i] not in "xyz":
-            continue
-        base, rest = key[:i], key[i + 1 :]
-        if base in _ACCEL_BASES and (rest == "" or rest in _ACCEL_UNIT_WORDS):
-            unit = _ACCEL_UNIT_WORDS.get(rest) or _unit_word(hint_text)[0]
-            return ColumnName("a" + key[i], unit)
-        if base in _GYRO_BASES and (rest == "" or rest in _GYRO_UNIT_WORDS):
-            unit = _GYRO_UNIT_WORDS.get(rest) or _unit_word(hint_text)[1]
-            return ColumnName("g" + key[i], unit)
-        if base in _MAG_BASES and (rest == "" or rest in _MAG_UNIT_WORDS):
-            hint = re.sub(r"[^a-z0-9]", "", hint_text.lower())
-            return ColumnName("m" + key[i], _MAG_UNIT_WORDS.get(rest) or _MAG_UNIT_WORDS.get(hint))
-    return None
-
 
 def _parse_accel_unit(text: str) -> str:
     key = text.strip().lower().replace("^", "")
@@ -209,337 +140,6 @@ def _parse_gyro_unit(text: str) -> str:
     if key not in aliases:
         raise DeviceUrlError(f"gyro={text!r}: use dps, mdps or rad/s")
     return aliases[key]
-
-
-# -- one line ------------------------------------------------------------------------------------
-@dataclass(slots=True)
-class _Line:
-    """A classified line: kind is blank, numbers, header, labelled, ignored or garbage."""
-
-    kind: str
-    numbers: list[float] = field(default_factory=list)
-    names: list[str] = field(default_factory=list)
-    values: dict[str, float] = field(default_factory=dict)
-    accel_unit: str | None = None
-    gyro_unit: str | None = None
-    mag_unit: str | None = None
-    datalog: bool = False
-
-
-def classify_line(text: str) -> _Line:
-    """What one line of text holds (never raises)."""
-    stripped = text.strip().strip(",;").strip()
-    if not stripped:
-        return _Line("blank")
-    tokens = [t for t in _TOKEN_SPLIT.split(stripped) if t]
-    if all(_NUMBER_RE.fullmatch(t) for t in tokens):
-        return _Line("numbers", numbers=[float(t) for t in tokens])
-    named = [canonical_column(t) for t in tokens]
-    sensor_names = sum(n is not None and n.channel != "temp" for n in named)
-    if sensor_names >= 3 and not any(_NUMBER_RE.fullmatch(t) for t in tokens):
-        return _Line("header", names=tokens)
-    temperature = _TEMPERATURE_RE.match(stripped)
-    if temperature:
-        return _Line("labelled", values={"temp": float(temperature.group(1))})
-    pairs = list(_PAIR_RE.finditer(stripped))
-    if not pairs:
-        return _Line("garbage")
-    values: dict[str, float] = {}
-    base = ""
-    datalog = False
-    for pair in pairs:
-        label = pair.group("label").strip()
-        datalog = datalog or bool(_INDEX.search(label))
-        key = re.sub(r"[^a-z0-9]", "", _INDEX.sub("", label).lower())
-        if key in ("x", "y", "z") and base:
-            key = base + key
-        name = canonical_column(key)
-        if name is None:
-            continue
-        if name.channel[0] in "agm" and name.channel != "temp":
-            base = key[:-1]
-        values[name.channel] = float(pair.group("value"))
-    if not values:
-        return _Line("ignored")
-    line = _Line("labelled", values=values, datalog=datalog)
-    for word in _LINE_UNIT_RE.findall(stripped):
-        accel_unit, gyro_unit = _unit_word(word)
-        has_accel = any(k in values for k in ("ax", "ay", "az"))
-        has_gyro = any(k in values for k in ("gx", "gy", "gz"))
-        if accel_unit and has_accel and not has_gyro:
-            line.accel_unit = accel_unit
-        if gyro_unit and has_gyro and not has_accel:
-            line.gyro_unit = gyro_unit
-    if any(k in values for k in MAG_CHANNELS) and not any(k[0] in "ag" for k in values
-                                                          if k != "temp"):
-        found = _MAG_LINE_UNIT_RE.search(stripped)
-        if found:
-            line.mag_unit = _MAG_UNIT_WORDS[re.sub(r"[^a-z]", "", found.group(1).lower())]
-    return line
-
-
-def looks_like_text_lines(data: bytes) -> bool:
-    """True when ``data`` holds at least one complete line this driver can use.
-
-    For the bare-port detection (text lines or the binary protocol?): a numeric row of three or
-    more numbers, a header row, or a labelled accelerometer/gyroscope line.
-    """
-    lines = data.split(b"\n")[:-1]
-    for raw in lines[-50:]:
-        line = classify_line(raw.decode("latin-1"))
-        if (line.kind == "numbers" and len(line.numbers) >= 3) or line.kind == "header":
-            return True
-        if line.kind == "labelled" and any(k[0] in "ag" for k in line.values if k != "temp"):
-            return True
-    return False
-
-
-# -- layout ----------------------------------------------------------------------------------------
-@dataclass(frozen=True, slots=True)
-class Layout:
-    """How lines map to channels, and the units (decided while connecting)."""
-
-    kind: str
-    """``columns`` (numeric rows) or ``labelled``."""
-    n_columns: int = 0
-    columns: dict[str, int] = field(default_factory=dict)
-    """Channel -> column index (``columns`` layouts)."""
-    accel_unit: str = "g"
-    gyro_unit: str = "dps"
-    time_unit: str = "host"
-    """s, ms, us, or host (no time column used)."""
-    has_gyro: bool = True
-    mag_unit: str | None = None
-    """uT, gauss or mgauss; None: the stream has no magnetometer."""
-
-    def describe(self) -> str:
-        if self.kind == "labelled":
-            what = "labelled lines"
-        else:
-            order = sorted(self.columns, key=self.columns.get)  # type: ignore[arg-type]
-            what = f"{self.n_columns} columns ({','.join(order)})"
-        units = f"accel in {self.accel_unit}, gyro in {self.gyro_unit}, time {self.time_unit}"
-        if self.mag_unit is not None:
-            units += f", field in {self.mag_unit}"
-        return f"{what}; {units}"
-
-
-def _default_columns(n: int, rows: np.ndarray) -> dict[str, int] | None:
-    """The channel of each column of a headerless row of ``n`` numbers (module docstring)."""
-    nine = ("ax", "ay", "az", "gx", "gy", "gz", *MAG_CHANNELS)
-    if n in (3, 6, 9):
-        return {name: i for i, name in enumerate(nine[:n])}
-    if n in (4, 7, 10):
-        first = rows[:, 0]
-        rising = len(first) >= 2 and bool(np.all(np.diff(first) > 0))
-        single_time = len(first) == 1 and first[0] == round(first[0]) and first[0] > 200
-        lead = "t" if rising or single_time else "temp"
-        names = (lead, *nine[: n - 1])
-        return {name: i for i, name in enumerate(names)}
-    if n == 8:
-        return {name: i for i, name in enumerate(("t", *nine[:6], "temp"))}
-    return None
-
-
-def _columns_from_names(names: list[str], time_col: str | None) -> tuple[dict[str, int], dict]:
-    """Channel -> index from header or ``columns=`` names, and the unit hints they carry."""
-    columns: dict[str, int] = {}
-    hints: dict[str, str] = {}
-    wanted_time = time_col.strip().lower() if time_col else None
-    for index, name in enumerate(names):
-        if name.strip() in ("", "_", "-", "skip"):
-            continue
-        if wanted_time is not None and name.strip().lower() == wanted_time:
-            columns["t"] = index
-            continue
-        meaning = canonical_column(name)
-        if meaning is None or meaning.channel in columns:
-            continue
-        if meaning.channel == "t" and wanted_time is not None:
-            continue
-        columns[meaning.channel] = index
-        if meaning.unit:
-            hints[meaning.channel[0] if meaning.channel not in ("temp", "t") else meaning.channel
-                  ] = meaning.unit
-    return columns, hints
-
-
-# -- the parser: lines to records ----------------------------------------------------------------
-@dataclass(slots=True)
-class TextLineCounters:
-    """What the driver saw. ``lines`` = parsed + rejected + ignored (blank lines not counted)."""
-
-    bytes: int = 0
-    lines: int = 0
-    parsed: int = 0
-    rejected: int = 0
-    ignored: int = 0
-    samples: int = 0
-    incomplete: int = 0
-    lost_samples: int = 0
-
-
-class _Records:
-    """Growing per-channel arrays, in arrival order."""
-
-    def __init__(self) -> None:
-        self.parts: list[dict[str, np.ndarray]] = []
-
-    def add(self, **arrays: np.ndarray) -> None:
-        self.parts.append(arrays)
-
-    def take(self) -> dict[str, np.ndarray] | None:
-        if not self.parts:
-            return None
-        parts, self.parts = self.parts, []
-        return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
-
-
-class LineParser:
-    """Classified lines -> records (accelerometer, gyroscope, temperature, times, losses).
-
-    Numeric rows take a vectorised path: runs of lines that match the expected row pattern are
-    joined and converted by numpy in one go; other lines are classified one at a time.
-    """
-
-    def __init__(self, layout: Layout, counters: TextLineCounters, lock: threading.Lock,
-                 *, columns_fixed: bool = False, time_col: str | None = None) -> None:
-        self.layout = layout
-        self.counters = counters
-        self.lock = lock
-        self.columns_fixed = columns_fixed
-        self.time_col = time_col
-        self.records = _Records()
-        self._pending: dict[str, float] = {}
-        self._lost = 0
-        self._row_re = self._row_pattern(layout.n_columns)
-
-    @staticmethod
-    def _row_pattern(n: int) -> re.Pattern[str] | None:
-        if n <= 0:
-            return None
-        sep = r"(?:\s*[,;]\s*|\s+)"
-        return re.compile(rf"\s*[,;]?\s*{_NUMBER}(?:{sep}{_NUMBER}){{{n - 1}}}\s*[,;]?\s*")
-
-    def feed(self, lines: list[str], arrival_s: np.ndarray) -> None:
-        """Parse complete lines that arrived at host times ``arrival_s`` (one per line)."""
-        pattern = self._row_re if self.layout.kind == "columns" else None
-        fast = [pattern is not None and pattern.fullmatch(line) is not None for line in lines]
-        start = 0
-        for is_row, run in groupby(fast):
-            count = len(list(run))
-            chunk = lines[start : start + count]
-            times = arrival_s[start : start + count]
-            start += count
-            if is_row:
-                self._rows(chunk, times)
-            else:
-                for line, when in zip(chunk, times):
-                    self._slow(line, float(when))
-
-    def _count(self, **increments: int) -> None:
-        with self.lock:
-            for name, value in increments.items():
-                setattr(self.counters, name, getattr(self.counters, name) + value)
-
-    def _rows(self, lines: list[str], arrival_s: np.ndarray) -> None:
-        n = self.layout.n_columns
-        text = " ".join(lines).translate(_TO_SPACE)
-        values = np.array(text.split(), dtype=np.float64).reshape(-1, n)
-        self._emit_rows(values, arrival_s)
-        self._count(lines=len(lines), parsed=len(lines))
-
-    def _emit_rows(self, values: np.ndarray, arrival_s: np.ndarray) -> None:
-        cols = self.layout.columns
-        m = len(values)
-
-        def take(names: tuple[str, ...], fill: float) -> np.ndarray:
-            out = np.full((m, len(names)), fill)
-            for j, name in enumerate(names):
-                if name in cols:
-                    out[:, j] = values[:, cols[name]]
-            return out
-
-        lost = np.zeros(m, dtype=np.int64)
-        lost[0] = self._lost
-        self._lost = 0
-        mag = {} if self.layout.mag_unit is None else {"mag": take(MAG_CHANNELS, math.nan)}
-        self.records.add(
-            accel=take(("ax", "ay", "az"), 0.0), gyro=take(("gx", "gy", "gz"), 0.0),
-            temp=take(("temp",), math.nan)[:, 0],
-            t_raw=take(("t",), math.nan)[:, 0], arrival=np.asarray(arrival_s, dtype=np.float64),
-            lost=lost, **mag,
-        )
-
-    def _slow(self, text: str, arrival_s: float) -> None:
-        line = classify_line(text)
-        if line.kind == "blank":
-            return
-        if line.kind == "numbers" and self.layout.kind == "columns":
-            if len(line.numbers) == self.layout.n_columns:
-                self._emit_rows(np.array([line.numbers]), np.array([arrival_s]))
-                self._count(lines=1, parsed=1)
-            else:
-                self._reject(looks_like_data=len(line.numbers) >= 3)
-            return
-        if line.kind == "header" and self.layout.kind == "columns" and not self.columns_fixed:
-            columns, _hints = _columns_from_names(line.names, self.time_col)
-            if "t" in columns and self.layout.time_unit == "host":
-                columns.pop("t")
-            self.layout = replace(self.layout, n_columns=len(line.names), columns=columns)
-            self._row_re = self._row_pattern(len(line.names))
-            self._count(lines=1, parsed=1)
-            return
-        if line.kind == "labelled" and self.layout.kind == "labelled":
-            self._labelled(line.values, arrival_s)
-            return
-        if line.kind in ("ignored", "header"):
-            self._count(lines=1, ignored=1)
-            return
-        self._reject(looks_like_data=len(_NUMBER_RE.findall(text)) >= 3 or "nan" in text.lower())
-
-    def _reject(self, *, looks_like_data: bool) -> None:
-        if looks_like_data:
-            self._lost += 1
-        self._count(lines=1, rejected=1)
-
-    def _labelled(self, values: dict[str, float], arrival_s: float) -> None:
-        """Collect labelled readings into a sample; emit it once complete."""
-        pending = self._pending
-        groups = {"a": ("ax", "ay", "az"), "g": ("gx", "gy", "gz")}
-        for names in groups.values():
-            if any(n in values for n in names) and any(n in pending for n in names):
-                self._drop_incomplete()  # a new reading of a sensor already held
-                pending = self._pending
-                break
-        if "temp" in values and "temp" in pending and any(n in pending for n in groups["a"]):
-            self._drop_incomplete()
-            pending = self._pending
-        pending.update(values)
-        self._count(lines=1, parsed=1)
-        have_accel = all(n in pending for n in groups["a"])
-        have_gyro = all(n in pending for n in groups["g"])
-        if not have_gyro and any(n in values for n in groups["g"]):
-            return
-        if have_accel and (have_gyro or not self.layout.has_gyro):
-            row = [pending.get(n, 0.0) for n in (*groups["a"], *groups["g"])]
-            lost = np.array([self._lost], dtype=np.int64)
-            self._lost = 0
-            mag = {} if self.layout.mag_unit is None else {
-                "mag": np.array([[pending.get(n, math.nan) for n in MAG_CHANNELS]])}
-            self.records.add(
-                accel=np.array([row[:3]]), gyro=np.array([row[3:]]),
-                temp=np.array([pending.get("temp", math.nan)]),
-                t_raw=np.array([pending.get("t", math.nan)]), arrival=np.array([arrival_s]),
-                lost=lost, **mag,
-            )
-            self._pending = {}
-
-    def _drop_incomplete(self) -> None:
-        if any(k != "temp" for k in self._pending):
-            self._lost += 1
-            self._count(incomplete=1)
-        self._pending = {}
 
 
 # -- deciding the layout while connecting --------------------------------------------------
@@ -613,131 +213,6 @@ def parse_text_url(url: str) -> TextOptions:
     return TextOptions(**options)  # type: ignore[arg-type]
 
 
-def _guess_accel_unit(magnitude: float) -> str:
-    if magnitude < 4.0:
-        return "g"
-    return "m/s2" if magnitude < 60.0 else "mg"
-
-
-def _guess_gyro_unit(accel_unit: str, magnitude: float) -> str:
-    unit = {"g": "dps", "m/s2": "rad/s", "mg": "mdps"}[accel_unit]
-    if unit == "rad/s" and magnitude > 35.0:
-        unit = "dps"
-    if unit == "dps" and magnitude > 2500.0:
-        unit = "mdps"
-    return unit
-
-
-def _guess_mag_unit(magnitude: float) -> str:
-    """The earth's field is 25 to 65 uT: 0.25 to 0.65 gauss, 250 to 650 mgauss."""
-    if magnitude < 2.0:
-        return "gauss"
-    return "uT" if magnitude < 200.0 else "mgauss"
-
-
-def _guess_time_unit(times: np.ndarray, arrivals: np.ndarray) -> str:
-    steps = np.diff(times)
-    steps = steps[steps > 0]
-    if len(steps) and arrivals[-1] - arrivals[0] > 0.05:
-        host_period = (arrivals[-1] - arrivals[0]) / (len(arrivals) - 1)
-        step = float(np.median(steps))
-        return min(TIME_UNITS, key=lambda u: abs(math.log(step * TIME_UNITS[u] / host_period)))
-    return "ms" if np.all(times == np.round(times)) else "s"
-
-
-def decide_layout(
-    lines: list[_Line], arrivals: list[float], options: TextOptions
-) -> Layout | None:
-    """Layout and units from the lines seen while connecting (None: nothing usable)."""
-    numeric = [(ln, t) for ln, t in zip(lines, arrivals) if ln.kind == "numbers"]
-    labelled = [ln for ln in lines if ln.kind == "labelled"
-                and any(k[0] in "ag" for k in ln.values if k != "temp")]
-    headers = [ln for ln in lines if ln.kind == "header"]
-    hints: dict[str, str] = {}
-    if options.columns or headers or (numeric and len(numeric) >= len(labelled)):
-        names = list(options.columns) if options.columns else headers[-1].names if headers else None
-        if names is not None:
-            columns, hints = _columns_from_names(names, options.time_col)
-            n = len(names)
-        else:
-            n = Counter(len(ln.numbers) for ln, _ in numeric).most_common(1)[0][0]
-            rows = np.array([ln.numbers for ln, _ in numeric if len(ln.numbers) == n])
-            found = _default_columns(n, rows)
-            if found is None:
-                raise DeviceOpenError(
-                    f"{options.port}: lines hold {n} numbers, and no header says which is "
-                    "which; add columns=... to the URL (e.g. columns=t,ax,ay,az,gx,gy,gz,_)"
-                )
-            columns = found
-        if not any(c in columns for c in ("ax", "ay", "az")):
-            raise DeviceOpenError(
-                f"{options.port}: no accelerometer column among {names}; name them with "
-                "columns=... (e.g. columns=ax,ay,az,gx,gy,gz)"
-            )
-        rows_n = [(ln.numbers, t) for ln, t in numeric if len(ln.numbers) == n]
-        if not rows_n:
-            return None
-        values = np.array([r for r, _ in rows_n])
-        row_times = np.array([t for _, t in rows_n])
-        has_gyro = any(c in columns for c in ("gx", "gy", "gz"))
-        layout = Layout("columns", n, columns, has_gyro=has_gyro)
-        accel = values[:, [columns[c] for c in ("ax", "ay", "az") if c in columns]]
-        gyro = values[:, [columns[c] for c in ("gx", "gy", "gz") if c in columns]]
-        field = (values[:, [columns[c] for c in MAG_CHANNELS]]
-                 if all(c in columns for c in MAG_CHANNELS) else None)
-        time_values = values[:, columns["t"]] if "t" in columns else None
-    elif labelled:
-        datalog = any(ln.datalog for ln in labelled)
-        accel_rows = [[ln.values[k] for k in ("ax", "ay", "az")] for ln in labelled
-                      if all(k in ln.values for k in ("ax", "ay", "az"))]
-        gyro_rows = [[ln.values[k] for k in ("gx", "gy", "gz")] for ln in labelled
-                     if all(k in ln.values for k in ("gx", "gy", "gz"))]
-        if not accel_rows:
-            return None
-        accel = np.array(accel_rows)
-        gyro = np.array(gyro_rows) if gyro_rows else np.zeros((1, 3))
-        mag_rows = [[ln.values[k] for k in MAG_CHANNELS] for ln in lines
-                    if ln.kind == "labelled" and all(k in ln.values for k in MAG_CHANNELS)]
-        field = np.array(mag_rows) if mag_rows else None
-        for ln in lines:
-            if ln.kind != "labelled":
-                continue
-            if ln.accel_unit:
-                hints.setdefault("a", ln.accel_unit)
-            if ln.gyro_unit:
-                hints.setdefault("g", ln.gyro_unit)
-            if ln.mag_unit:
-                hints.setdefault("m", ln.mag_unit)
-        if datalog:
-            hints.setdefault("a", "mg")
-            hints.setdefault("g", "mdps")
-            hints.setdefault("m", "mgauss")
-        layout = Layout("labelled", has_gyro=bool(gyro_rows))
-        time_values = None
-        row_times = np.array(arrivals)
-    else:
-        return None
-
-    accel_unit = options.accel_unit or hints.get("a") or _guess_accel_unit(
-        float(np.median(np.linalg.norm(accel, axis=1)))
-    )
-    gyro_unit = options.gyro_unit or hints.get("g") or _guess_gyro_unit(
-        accel_unit, float(np.median(np.linalg.norm(gyro, axis=1)))
-    )
-    time_unit = "host"
-    if time_values is not None and options.time_unit != "host":
-        time_unit = options.time_unit or hints.get("t") or _guess_time_unit(time_values, row_times)
-    mag_unit = None
-    if field is not None and len(field):
-        mag_unit = hints.get("m") or _guess_mag_unit(
-            float(np.median(np.linalg.norm(field, axis=1))))
-    columns = dict(layout.columns)
-    if time_unit == "host":
-        columns.pop("t", None)
-    return replace(layout, columns=columns, accel_unit=accel_unit, gyro_unit=gyro_unit,
-                   time_unit=time_unit, mag_unit=mag_unit)
-
-
 # -- the device -----------------------------------------------------------------------------
 class TextLineDevice(Device):
     """A microcontroller sketch printing text lines (see the module docstring).
@@ -765,7 +240,7 @@ class TextLineDevice(Device):
         self._buffer = b""
         self._parser: LineParser | None = None
         self.layout: Layout | None = None
-        self._timeline = _Timeline()
+        self._timeline = Timeline()
 
     @property
     def counters(self) -> TextLineCounters:
@@ -783,7 +258,7 @@ class TextLineDevice(Device):
         opts = self.options
         self._counters = TextLineCounters()
         self._buffer = b""
-        self._timeline = _Timeline()
+        self._timeline = Timeline()
         port = self._given_port or _open_port(self.url, opts)
         if self._given_port is not None:
             port.timeout = READ_SLICE_S
@@ -803,7 +278,7 @@ class TextLineDevice(Device):
             gyro_rad_s_per_lsb=GYRO_UNITS[layout.gyro_unit],
             mag_ut_per_lsb=MAG_UNITS[layout.mag_unit] if layout.mag_unit else 1.0,
         )
-        self._timeline.start(layout, _arrival_period(arrivals))
+        self._timeline.start(layout, arrival_period(arrivals))
         self._parser.feed(lines, np.asarray(arrivals))
         self._first_block = self._take_block()  # learns the rate from what came while connecting
         name = getattr(port, "name", None) or getattr(port, "port", None) or opts.port
@@ -896,7 +371,7 @@ class TextLineDevice(Device):
         deadline = start + opts.open_timeout_s
         texts: list[str] = []
         arrivals: list[float] = []
-        classified: list[_Line] = []
+        classified: list[Line] = []
         first_data_s: float | None = None
         received = b""
         pending = self._initial
@@ -951,114 +426,6 @@ class TextLineDevice(Device):
             lost_samples=int(lost.sum()),
             mag_raw=records.get("mag"),
         )
-
-
-class _Timeline:
-    """Device times from a time column or from host arrival times (see the module docstring)."""
-
-    GAP_FACTOR = 1.5
-    MIN_STEP_S = 1e-6
-    SILENCE_PERIODS = 5.0
-    """On the host's clock, a silence longer than this many sample periods is a gap ..."""
-    MIN_SILENCE_S = 0.1
-    """... and than this (lines arrive in bursts: a USB serial port delivers every few ms)."""
-
-    def __init__(self) -> None:
-        self.origin_s: float | None = None
-        self.period_s = 0.01
-        self.rate_hz = 100.0
-        self.last_t_s: float | None = None
-        self.last_raw: float | None = None
-        self.last_arrival_s: float | None = None
-
-    def start(self, layout: Layout, period_s: float | None) -> None:
-        self.layout = layout
-        if period_s is not None:
-            self.period_s = period_s
-            self.rate_hz = 1.0 / period_s
-
-    def times(
-        self, records: dict[str, np.ndarray], layout: Layout
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(t_s, lost samples before each, gap flags) for a batch of records."""
-        lost = records["lost"].copy()
-        if layout.time_unit != "host":
-            t, restarted = self._from_column(records["t_raw"] * TIME_UNITS[layout.time_unit], lost)
-        else:
-            t, restarted = self._from_arrivals(records["arrival"])  # a silence: a gap
-        self._learn_rate(t, lost | restarted)
-        self.last_t_s = float(t[-1])
-        return t, lost, (lost > 0) | restarted
-
-    def _from_column(self, raw_s: np.ndarray, lost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Times from the time column; adds gaps' lost samples to ``lost``; returns restarts."""
-        previous = self.last_raw if self.last_raw is not None else raw_s[0]
-        steps = np.diff(raw_s, prepend=previous)
-        if self.layout.time_unit != "s":  # 32-bit millis()/micros() wrap-around
-            wrap = 2.0**32 * TIME_UNITS[self.layout.time_unit]
-            steps[steps < -0.5 * wrap] += wrap
-        missing = ~np.isfinite(steps)
-        restarted = ~missing & (steps < 0)  # the sketch restarted: time went back
-        steps[missing | restarted] = self.period_s
-        first_ever = self.last_t_s is None
-        if first_ever:
-            steps[0] = 0.0
-        t = (0.0 if first_ever else self.last_t_s) + np.cumsum(steps)
-        if not first_ever or len(t) > 1:  # equal stamps (printing faster than the clock ticks)
-            ramp = np.arange(len(t)) * self.MIN_STEP_S
-            floor = -math.inf if first_ever else self.last_t_s + self.MIN_STEP_S
-            t = np.maximum.accumulate(np.maximum(t, floor) - ramp) + ramp
-        finite = raw_s[np.isfinite(raw_s)]
-        if len(finite):
-            self.last_raw = float(finite[-1])
-        long_step = steps > self.GAP_FACTOR * self.period_s
-        lost += np.where(long_step, np.maximum(np.rint(steps / self.period_s) - 1, 0), 0).astype(
-            np.int64
-        )
-        return t, restarted
-
-    def _from_arrivals(self, arrival_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Arrival times, spread back by the period over lines that came together; t = 0 at
-        the first sample; strictly increasing. With them, True on each sample after a silence
-        of more than :data:`SILENCE_PERIODS` sample periods (and :data:`MIN_SILENCE_S`): the
-        samples are not known to be lost, but nothing may integrate across the hole."""
-        n = len(arrival_s)
-        last_in_group = np.searchsorted(arrival_s, arrival_s, side="right") - 1
-        t = arrival_s - (last_in_group - np.arange(n)) * self.period_s
-        if self.origin_s is None:
-            self.origin_s = float(t[0])
-        t = t - self.origin_s
-        floor = (self.last_t_s if self.last_t_s is not None else -math.inf) + self.MIN_STEP_S
-        t = np.maximum(t, floor)
-        ramp = np.arange(n) * self.MIN_STEP_S
-        t = np.maximum.accumulate(t - ramp) + ramp
-        steps = np.diff(t, prepend=t[0] if self.last_t_s is None else self.last_t_s)
-        silent = steps > max(self.SILENCE_PERIODS * self.period_s, self.MIN_SILENCE_S)
-        if self.last_arrival_s is not None and arrival_s[-1] > self.last_arrival_s:
-            period = (arrival_s[-1] - self.last_arrival_s) / n
-            if period < 4.0 * self.period_s:
-                self.period_s = min(1.0, max(1e-4, 0.8 * self.period_s + 0.2 * period))
-        self.last_arrival_s = float(arrival_s[-1])
-        return t, silent
-
-    def _learn_rate(self, t: np.ndarray, broken: np.ndarray) -> None:
-        if self.layout.time_unit == "host":
-            self.rate_hz = 1.0 / self.period_s
-            return
-        steps = np.diff(t)
-        steps = steps[(broken[1:] == 0) & (steps > 0)]
-        if len(steps):
-            self.period_s = 0.8 * self.period_s + 0.2 * float(np.median(steps))
-            if self.last_t_s is None:
-                self.period_s = float(np.median(steps))
-        self.rate_hz = 1.0 / self.period_s
-
-
-def _arrival_period(arrivals: list[float]) -> float | None:
-    """Line period from arrival times, when they spread over more than 50 ms."""
-    if len(arrivals) >= 2 and arrivals[-1] - arrivals[0] > 0.05:
-        return (arrivals[-1] - arrivals[0]) / (len(arrivals) - 1)
-    return None
 
 
 def _open_port(url: str, options: TextOptions) -> serial.SerialBase:
