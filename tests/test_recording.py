@@ -236,7 +236,7 @@ def test_a_corrupt_row_in_the_middle_names_its_line_and_keeps_the_rows_before(
 
 
 def test_large_file_paths_parallel_and_memory_mapped_read_the_same(tmp_path, monkeypatch):
-    from app.core.recording import reader
+    from app.core.recording import reader, text_parse
 
     blocks, _ = sim_blocks(count=60, block=211)
     path = tmp_path / "big.csv"
@@ -246,10 +246,10 @@ def test_large_file_paths_parallel_and_memory_mapped_read_the_same(tmp_path, mon
         lines.insert(k, b" \r")
     path.write_bytes(b"\n".join(lines))
     simple = read_recording(path)
-    monkeypatch.setattr(reader, "PARALLEL_MIN_BYTES", 1)
+    monkeypatch.setattr(text_parse, "PARALLEL_MIN_BYTES", 1)
     monkeypatch.setattr(reader, "CHUNKED_MIN_BYTES", 0)
     monkeypatch.setattr(os, "cpu_count", lambda: 5)
-    assert len(reader._chunks(path.read_bytes(), 0, path.stat().st_size)) == 5
+    assert len(text_parse.row_chunks(path.read_bytes(), 0, path.stat().st_size)) == 5
     mapped = read_recording(path)
     assert len(mapped) == len(simple) == sum(len(b) for b in blocks)
     for name, column in simple.columns.items():
@@ -262,7 +262,7 @@ def test_large_file_paths_parallel_and_memory_mapped_read_the_same(tmp_path, mon
     with pytest.raises(RecordingCorruptError) as caught:
         read_recording(path)
     assert caught.value.line == bad + 1
-    monkeypatch.setattr(reader, "PARALLEL_MIN_BYTES", 1 << 40)
+    monkeypatch.setattr(text_parse, "PARALLEL_MIN_BYTES", 1 << 40)
     with pytest.raises(RecordingCorruptError) as again:
         read_recording(path)
     assert again.value.line == bad + 1

@@ -38,7 +38,7 @@ from app.core.recording.reader import (
     read_recording,
 )
 from app.core.recording.samples import sample_recording, sample_recordings
-from app.core.recording.stream import RecordingStream  # also installs the chunked reader
+from app.core.recording.stream import RecordingStream
 from app.core.recording.writer import RecordingWriter, WriterStatus, format_rows
 
 __all__ = [

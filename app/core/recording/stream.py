@@ -32,7 +32,6 @@ from typing import Any, BinaryIO, TypeVar, overload
 import numpy as np
 
 from app.core.bounded_input import open_regular
-from app.core.recording import reader as _reader
 from app.core.recording.compressed import GzipBytes, PlainBytes, byte_source
 from app.core.recording.errors import (
     RecordingCorruptError,
@@ -41,17 +40,17 @@ from app.core.recording.errors import (
     RecordingWarning,
 )
 from app.core.recording.format import REFERENCE_COLUMNS
-from app.core.recording.reader import (
+from app.core.recording.table import Recording
+from app.core.recording.text_parse import (
     MAX_JUMPS_NAMED,
     MAX_LOAD_BYTES,
     MAX_LOAD_VALUES,
-    Recording,
     RecordingHead,
     TimeCheck,
-    _count_lines,
-    _kind,
-    _parse_fast,
-    _parse_slow,
+    column_kind,
+    count_lines,
+    parse_fast,
+    parse_slow,
     read_head_from,
 )
 from app.core.samples import RawBlock
@@ -110,7 +109,7 @@ class RecordingStream:
         except BaseException:
             self._handle.close()
             raise
-        self._kinds = np.array([_kind(name) for name in self.head.header], dtype=np.int8)
+        self._kinds = np.array([column_kind(name) for name in self.head.header], dtype=np.int8)
         self.warnings: list[str] = list(self.head.warnings)
         self._has_reference_columns = all(c in self.head.header for c in REFERENCE_COLUMNS)
         self._clock = TimeCheck.for_metadata(self.head.metadata)
@@ -192,7 +191,7 @@ class RecordingStream:
                 self._end(data, line)
                 return
             body = data  # its lines up to ``cut`` (a slice would copy them)
-            parse = _parse_slow if body.find(b'"', 0, cut) >= 0 else _parse_fast
+            parse = parse_slow if body.find(b'"', 0, cut) >= 0 else parse_fast
             columns, rows, error, offsets = parse(body, 0, cut, self.head.header, self._kinds)
             previous = clock.last_t
             bad = clock.first_out_of_order(columns["t"])
@@ -203,7 +202,7 @@ class RecordingStream:
             counted = clock.jumps
             for at_row, text in clock.mark_jumps(columns, previous):
                 self._warn(f"{self.path}: line "
-                           f"{line + _count_lines(body, 0, int(offsets[at_row]))}: {text}")
+                           f"{line + count_lines(body, 0, int(offsets[at_row]))}: {text}")
             if clock.jumps > counted and clock.jumps > MAX_JUMPS_NAMED and \
                     counted <= MAX_JUMPS_NAMED:
                 self._warn(f"{self.path}: more unmarked jumps in t follow; each is marked as "
@@ -217,11 +216,11 @@ class RecordingStream:
                 yield Chunk(recording, row, offset, line)
             if error is not None:
                 bad, message = error
-                at = line + _count_lines(body, 0, bad)
+                at = line + count_lines(body, 0, bad)
                 raise RecordingCorruptError(
                     f"{self.path}: line {at}: {message}; the {row + rows} row(s) before it "
                     "are valid", self.path, at)
-            line += _count_lines(body, 0, cut)
+            line += count_lines(body, 0, cut)
             row += rows
             offset += cut
             if max_bytes is not None and offset > max_bytes:
@@ -292,7 +291,6 @@ def read_stream(path: str | os.PathLike[str], *, on_corrupt: str = "raise",
         return recording
 
 
-_reader.read_chunked = read_stream  # read_recording's path for large and compressed files
 
 
 class _Loaded:
