@@ -1,0 +1,343 @@
+"""Device URL options declared as data, and the one parser that checks a query against them.
+
+Every driver declares its options as a table of :class:`Option` records (name, type, default,
+range or choices, unit, help); :func:`parse_options` validates a URL's query against the table
+and gives every driver the same messages, ``URL: odr='fast' is not a number``. The tables also
+answer ``inclinometer devices --options SCHEME`` and the GUI's device field
+(:func:`option_rows`, :func:`format_options`).
+
+Types: ``number`` (a finite float), ``integer`` (decimal, ``0x..`` or a whole float such as
+``1e3``), ``flag`` (:data:`TRUE_WORDS` / :data:`FALSE_WORDS`), ``choice`` (one of
+``choices``, numbers or words; ``aliases`` map other words onto them) and ``text``. An option
+with its own ``parse`` (a ``fault=`` spec, a ``warmup=RISE:TAU``) takes the text itself and
+raises :class:`ValueError` with the problem.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+from urllib.parse import parse_qsl
+
+from drivers.errors import DeviceUrlError
+
+__all__ = [
+    "FALSE_WORDS", "TRUE_WORDS", "Option", "ParsedQuery", "flag_word", "format_options",
+    "option_rows", "parse_options", "url_error",
+]
+
+TRUE_WORDS = frozenset({"1", "true", "yes", "on"})
+FALSE_WORDS = frozenset({"0", "false", "no", "off"})
+"""The words a flag option (and any other yes/no text) accepts, in any case."""
+TYPES = ("number", "integer", "flag", "choice", "text")
+
+
+def flag_word(text: str) -> bool | None:
+    """True or False for a yes/no word (:data:`TRUE_WORDS`, :data:`FALSE_WORDS`), else None."""
+    word = text.strip().lower()
+    if word in TRUE_WORDS:
+        return True
+    if word in FALSE_WORDS:
+        return False
+    return None
+
+
+@dataclass(frozen=True, slots=True)
+class Option:
+    """One URL option of a driver.
+
+    ``minimum``/``maximum`` bound a number or integer (inclusive); ``positive`` asks for more
+    than 0. ``check`` returns a further problem of a typed value (``"is outside ..."``) or
+    None; ``convert`` maps the checked value to what the driver keeps (an ODR to its label).
+    ``field`` is the attribute of the driver's options record (default: ``name``).
+    """
+
+    name: str
+    type: str
+    default: object = None
+    help: str = ""
+    unit: str = ""
+    minimum: float | None = None
+    maximum: float | None = None
+    positive: bool = False
+    choices: tuple[object, ...] = ()
+    aliases: Mapping[str, object] = field(default_factory=dict)
+    parse: Callable[[str], object] | None = None
+    check: Callable[[Any], str | None] | None = None
+    convert: Callable[[Any], object] | None = None
+    field: str = ""
+    repeatable: bool = False
+    metavar: str = "..."
+
+    def __post_init__(self) -> None:
+        if self.type not in TYPES:
+            raise ValueError(f"option {self.name!r}: type {self.type!r} is not one of {TYPES}")
+
+    @property
+    def key(self) -> str:
+        """The attribute this option sets on the driver's options record."""
+        return self.field or self.name
+
+    def limits(self) -> str:
+        """The range or the choices, in words (``[0.1, 100]``, ``2, 4, 8, 16``), or ''."""
+        if self.choices:
+            return ", ".join(_choice_text(c) for c in self.choices)
+        low = "0" if self.positive and self.minimum is None else _g(self.minimum)
+        high = _g(self.maximum)
+        if low is None and high is None:
+            return "> 0" if self.positive else ""
+        if high is None:
+            return f"> {low}" if self.positive and self.minimum is None else f">= {low}"
+        opening = "(" if self.positive and self.minimum is None else "["
+        return f"{opening}{low or '-inf'}, {high}]"
+
+    def read(self, text: str) -> object:
+        """The value of ``text``; raises :class:`ValueError` with the problem (without the
+        URL), ``odr='fast' is not a number``."""
+        shown = f"{self.name}={_shown(text)}"
+        if self.parse is not None:
+            try:
+                value = self.parse(text)
+            except ValueError as exc:  # a message that names the option stands as it is
+                problem = str(exc)
+                raise ValueError(problem if problem.startswith(self.name) else
+                                 f"{shown}: {problem}") from None
+        elif self.type == "flag":
+            value = flag_word(text)
+            if value is None:
+                raise ValueError(f"{shown}: use 1 or 0 (also true/false, yes/no, on/off)")
+        elif self.type == "text":
+            value = text
+        elif self.type == "choice":
+            value = self._choice(text, shown)
+        else:
+            value = self._number(text, shown)
+        if self.check is not None:
+            problem = self.check(value)
+            if problem is not None:
+                raise ValueError(f"{shown} {problem}")
+        return value if self.convert is None else self.convert(value)
+
+    def _choice(self, text: str, shown: str) -> object:
+        word = text.lower()
+        if word in self.aliases:
+            return self.aliases[word]
+        for choice in self.choices:
+            if isinstance(choice, str):
+                if word == choice.lower():
+                    return choice
+            else:
+                number = _to_number(text)
+                if number is not None and number == choice:
+                    return choice
+        unit = f" ({self.unit})" if self.unit else ""
+        raise ValueError(f"{shown} is not supported; use one of {self.limits()}{unit}")
+
+    def _number(self, text: str, shown: str) -> float | int:
+        value = _to_number(text)
+        if value is None:
+            kind = "whole number" if self.type == "integer" else "number"
+            raise ValueError(f"{shown} is not a {'positive ' if self.positive else ''}{kind}")
+        if not math.isfinite(value):
+            raise ValueError(f"{shown} is not a finite number")
+        unit = f" {self.unit}" if self.unit else ""
+        if self.type == "integer" and value != int(value):
+            raise ValueError(f"{shown}: expected a whole number {self._within()}".rstrip())
+        if self.positive and not value > 0:
+            raise ValueError(f"{shown} must be a positive number" +
+                             (f" ({self.unit})" if self.unit else ""))
+        low = -math.inf if self.minimum is None else self.minimum
+        high = math.inf if self.maximum is None else self.maximum
+        if not low <= value <= high:
+            within = self._within()
+            problem = f"is out of range{within[2:]}" if within.startswith("in ") else \
+                f"must be {within}"
+            raise ValueError(f"{shown} {problem}{unit}")
+        return int(value) if self.type == "integer" else float(value)
+
+    def _within(self) -> str:
+        """``in [1, 10]``, ``>= 0`` (or '' without limits)."""
+        limits = self.limits()
+        return f"in {limits}" if limits[:1] in ("[", "(") else limits
+
+    def row(self) -> dict[str, object]:
+        """This option as plain data (JSON-ready): name, type, default, limits, unit, help."""
+        return {"name": self.name, "type": self.type, "default": _jsonable(self.default),
+                "limits": self.limits(), "unit": self.unit, "help": self.help,
+                "repeatable": self.repeatable}
+
+
+@dataclass(slots=True)
+class ParsedQuery:
+    """What :func:`parse_options` found: the values by :attr:`Option.key`, the texts of
+    repeatable options, and the options the table does not know (when kept)."""
+
+    values: dict[str, object]
+    repeated: dict[str, list[object]]
+    other: list[tuple[str, str]]
+
+
+def url_error(url: str, message: str) -> DeviceUrlError:
+    """The error for a bad device URL: ``URL: message`` (a long URL cut to 120 characters)."""
+    shown = url if len(url) <= 120 else f"{url[:120]}... ({len(url)} chars)"
+    return DeviceUrlError(f"{shown}: {message}")
+
+
+def parse_options(
+    url: str,
+    query: str,
+    table: Iterable[Option],
+    *,
+    overrides: Mapping[str, object] | None = None,
+    keep_other: bool = False,
+    context: str = "",
+) -> ParsedQuery:
+    """Check ``query`` (``odr=104&accel_fs=4``) against ``table``.
+
+    Keys are case-insensitive; an option may be given once (unless ``repeatable``) and needs
+    a value. ``overrides`` (name -> Python value, None removes) win over the query. Options
+    not in the table are refused (``context`` is added to that message, `` for sim://static``)
+    or, with ``keep_other``, returned in :attr:`ParsedQuery.other` as given.
+
+    Raises
+    ------
+    DeviceUrlError
+        With the URL and one line naming the option and the problem.
+    """
+    options = {option.name: option for option in table}
+    raw: dict[str, str] = {}
+    repeated: dict[str, list[str]] = {}
+    other: list[tuple[str, str]] = []
+    for key, text in parse_qsl(query, keep_blank_values=True):
+        key = key.strip().lower()
+        option = options.get(key)
+        if option is not None and option.repeatable:
+            if not text.strip():
+                raise url_error(url, f"option {key!r} needs a value ({key}={option.metavar})")
+            repeated.setdefault(key, []).append(text.strip())
+            continue
+        if key in raw or any(key == seen for seen, _ in other):
+            raise url_error(url, f"option {key!r} is given twice")
+        if option is None:
+            if not keep_other:
+                allowed = ", ".join(options)
+                raise url_error(url, f"unknown option {key!r}{context}; allowed: {allowed}")
+            other.append((key, text))
+            continue
+        raw[key] = text.strip()
+    for key, value in (overrides or {}).items():
+        if value is None:
+            raw.pop(key, None)
+        elif key not in options and not keep_other:
+            raise url_error(url, f"unknown option {key!r}{context}; allowed: "
+                                 f"{', '.join(options)}")
+        elif key not in options:
+            other = [(k, t) for k, t in other if k != key]
+            other.append((key, _override_text(value)))
+        elif options[key].repeatable:
+            items = value if isinstance(value, list | tuple) else [value]
+            repeated[key] = [_override_text(item) for item in items]
+        else:
+            raw[key] = _override_text(value)
+    values: dict[str, object] = {}
+    for key, text in raw.items():
+        option = options[key]
+        if text == "":
+            raise url_error(url, f"option {key!r} needs a value ({key}={option.metavar})")
+        try:
+            values[option.key] = option.read(text)
+        except ValueError as exc:
+            raise url_error(url, str(exc)) from None
+    parsed: dict[str, list[object]] = {}
+    for key, texts in repeated.items():
+        option = options[key]
+        try:
+            parsed[option.key] = [option.read(text) for text in texts]
+        except ValueError as exc:
+            raise url_error(url, str(exc)) from None
+    return ParsedQuery(values, parsed, other)
+
+
+def option_rows(table: Iterable[Option]) -> list[dict[str, object]]:
+    """The options as plain data (``devices --options SCHEME --json``)."""
+    return [option.row() for option in table]
+
+
+def format_options(table: Iterable[Option]) -> str:
+    """The options as a text table: name, type, default, range or choices (with the unit),
+    and help."""
+    rows = [("option", "type", "default", "range / choices", "help")]
+    for option in table:
+        limits = option.limits()
+        if option.unit and limits:
+            limits = f"{limits} {option.unit}"
+        elif option.unit:
+            limits = option.unit
+        kind = option.type + (" (repeatable)" if option.repeatable else "")
+        rows.append((option.name, kind, _default_text(option.default), limits, option.help))
+    widths = [max(len(row[i]) for row in rows) for i in range(4)]
+    return "\n".join(
+        "  ".join(cell.ljust(width) for cell, width in zip(row[:4], widths, strict=True))
+        + "  " + row[4]
+        for row in rows
+    ).rstrip() + "\n"
+
+
+# -- helpers ---------------------------------------------------------------------------------------
+def _shown(text: str, limit: int = 40) -> str:
+    """``text`` quoted for a message, cut to ``limit`` characters (a 400-digit number)."""
+    return repr(text) if len(text) <= limit else repr(text[:limit]) + f"... ({len(text)} chars)"
+
+
+def _to_number(text: str) -> float | int | None:
+    """A number from decimal, ``0x..``/``0o..``/``0b..`` or float text, else None."""
+    try:
+        number = int(text, 0)
+    except ValueError:
+        pass
+    else:  # beyond 64 bits: a float (inf for 400 digits), as the range checks compare floats
+        beyond = math.inf if number > 0 else -math.inf
+        return number if abs(number) < 2**63 else _float(text, beyond)
+    return _float(text, None)
+
+
+def _float(text: str, otherwise: float | None) -> float | None:
+    try:
+        return float(text)
+    except ValueError:
+        return otherwise
+
+
+def _override_text(value: object) -> str:
+    return str(int(value)) if isinstance(value, bool) else str(value)
+
+
+def _g(value: float | None) -> str | None:
+    if value is None or (isinstance(value, float) and math.isinf(value)):
+        return None
+    return f"{value:g}"
+
+
+def _choice_text(choice: object) -> str:
+    return f"{choice:g}" if isinstance(choice, float) else str(choice)
+
+
+def _jsonable(value: object) -> object:
+    try:
+        json.dumps(value)
+    except (TypeError, ValueError):
+        return str(value)
+    return value
+
+
+def _default_text(value: object) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, bool):
+        return "1" if value else "0"
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
