@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 from urllib.parse import parse_qsl
 
+from app.core.words import FALSE_WORDS, TRUE_WORDS, flag_word
 from drivers.errors import DeviceUrlError
 
 __all__ = [
@@ -29,20 +30,7 @@ __all__ = [
     "option_rows", "parse_options", "url_error",
 ]
 
-TRUE_WORDS = frozenset({"1", "true", "yes", "on"})
-FALSE_WORDS = frozenset({"0", "false", "no", "off"})
-"""The words a flag option (and any other yes/no text) accepts, in any case."""
 TYPES = ("number", "integer", "flag", "choice", "text")
-
-
-def flag_word(text: str) -> bool | None:
-    """True or False for a yes/no word (:data:`TRUE_WORDS`, :data:`FALSE_WORDS`), else None."""
-    word = text.strip().lower()
-    if word in TRUE_WORDS:
-        return True
-    if word in FALSE_WORDS:
-        return False
-    return None
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,8 +154,10 @@ class Option:
     def row(self) -> dict[str, object]:
         """This option as plain data (JSON-ready): name, type, default, limits, unit, help."""
         return {"name": self.name, "type": self.type, "default": _jsonable(self.default),
-                "limits": self.limits(), "unit": self.unit, "help": self.help,
-                "repeatable": self.repeatable}
+                "limits": self.limits(), "minimum": _jsonable(_finite(self.minimum)),
+                "maximum": _jsonable(_finite(self.maximum)), "positive": self.positive,
+                "choices": [_jsonable(c) for c in self.choices], "unit": self.unit,
+                "help": self.help, "repeatable": self.repeatable}
 
 
 @dataclass(slots=True)
@@ -319,6 +309,10 @@ def _g(value: float | None) -> str | None:
     if value is None or (isinstance(value, float) and math.isinf(value)):
         return None
     return f"{value:g}"
+
+
+def _finite(value: float | None) -> float | None:
+    return value if value is not None and math.isfinite(value) else None
 
 
 def _choice_text(choice: object) -> str:

@@ -85,8 +85,9 @@ def scenario_name(url: str) -> str:
 
 
 def options_for_url(url: str) -> tuple[Option, ...]:
-    """The options of a ``sim://`` URL's scenario (the general ones for an unknown one)."""
-    name = scenario_name(url) if "://" in url else DEFAULT_SCENARIO
+    """The options of a ``sim://`` URL's scenario (the general ones for no URL or an unknown
+    scenario)."""
+    name = scenario_name(url) if "://" in url else ""
     return scenario_options(name) if name in SCENARIOS else GENERAL_OPTIONS
 
 
