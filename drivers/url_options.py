@@ -197,58 +197,72 @@ def parse_options(
     DeviceUrlError
         With the URL and one line naming the option and the problem.
     """
-    options = {option.name: option for option in table}
-    raw: dict[str, str] = {}
-    repeated: dict[str, list[str]] = {}
-    other: list[tuple[str, str]] = []
+    texts = _Texts(url, {option.name: option for option in table}, keep_other, context)
     for key, text in parse_qsl(query, keep_blank_values=True):
-        key = key.strip().lower()
-        option = options.get(key)
-        if option is not None and option.repeatable:
-            if not text.strip():
-                raise url_error(url, f"option {key!r} needs a value ({key}={option.metavar})")
-            repeated.setdefault(key, []).append(text.strip())
-            continue
-        if key in raw or any(key == seen for seen, _ in other):
-            raise url_error(url, f"option {key!r} is given twice")
-        if option is None:
-            if not keep_other:
-                allowed = ", ".join(options)
-                raise url_error(url, f"unknown option {key!r}{context}; allowed: {allowed}")
-            other.append((key, text))
-            continue
-        raw[key] = text.strip()
+        texts.add(key.strip().lower(), text)
     for key, value in (overrides or {}).items():
-        if value is None:
-            raw.pop(key, None)
-        elif key not in options and not keep_other:
-            raise url_error(url, f"unknown option {key!r}{context}; allowed: "
-                                 f"{', '.join(options)}")
-        elif key not in options:
-            other = [(k, t) for k, t in other if k != key]
-            other.append((key, _override_text(value)))
-        elif options[key].repeatable:
-            items = value if isinstance(value, list | tuple) else [value]
-            repeated[key] = [_override_text(item) for item in items]
+        texts.override(key, value)
+    return texts.parsed()
+
+
+@dataclass(slots=True)
+class _Texts:
+    """The texts of a query, by option, before they are read (see :func:`parse_options`)."""
+
+    url: str
+    options: dict[str, Option]
+    keep_other: bool
+    context: str
+    raw: dict[str, str] = field(default_factory=dict)
+    repeated: dict[str, list[str]] = field(default_factory=dict)
+    other: list[tuple[str, str]] = field(default_factory=list)
+
+    def add(self, key: str, text: str) -> None:
+        option = self.options.get(key)
+        if option is not None and option.repeatable:
+            self.repeated.setdefault(key, []).append(self._value(option, text.strip()))
+        elif key in self.raw or any(key == seen for seen, _ in self.other):
+            raise url_error(self.url, f"option {key!r} is given twice")
+        elif option is not None:
+            self.raw[key] = self._value(option, text.strip())
+        elif self.keep_other:
+            self.other.append((key, text))
         else:
-            raw[key] = _override_text(value)
-    values: dict[str, object] = {}
-    for key, text in raw.items():
-        option = options[key]
+            raise self._unknown(key)
+
+    def override(self, key: str, value: object) -> None:
+        option = self.options.get(key)
+        if value is None:
+            self.raw.pop(key, None)
+        elif option is None and not self.keep_other:
+            raise self._unknown(key)
+        elif option is None:
+            self.other = [(k, t) for k, t in self.other if k != key]
+            self.other.append((key, _override_text(value)))
+        elif option.repeatable:
+            items = value if isinstance(value, list | tuple) else [value]
+            self.repeated[key] = [self._value(option, _override_text(i)) for i in items]
+        else:
+            self.raw[key] = self._value(option, _override_text(value))
+
+    def parsed(self) -> ParsedQuery:
+        try:
+            values = {self.options[k].key: self.options[k].read(t) for k, t in self.raw.items()}
+            repeated = {self.options[k].key: [self.options[k].read(t) for t in texts]
+                        for k, texts in self.repeated.items()}
+        except ValueError as exc:
+            raise url_error(self.url, str(exc)) from None
+        return ParsedQuery(values, repeated, self.other)
+
+    def _value(self, option: Option, text: str) -> str:
         if text == "":
-            raise url_error(url, f"option {key!r} needs a value ({key}={option.metavar})")
-        try:
-            values[option.key] = option.read(text)
-        except ValueError as exc:
-            raise url_error(url, str(exc)) from None
-    parsed: dict[str, list[object]] = {}
-    for key, texts in repeated.items():
-        option = options[key]
-        try:
-            parsed[option.key] = [option.read(text) for text in texts]
-        except ValueError as exc:
-            raise url_error(url, str(exc)) from None
-    return ParsedQuery(values, parsed, other)
+            raise url_error(self.url, f"option {option.name!r} needs a value "
+                                      f"({option.name}={option.metavar})")
+        return text
+
+    def _unknown(self, key: str) -> DeviceUrlError:
+        allowed = ", ".join(self.options)
+        return url_error(self.url, f"unknown option {key!r}{self.context}; allowed: {allowed}")
 
 
 def option_rows(table: Iterable[Option]) -> list[dict[str, object]]:
