@@ -86,6 +86,7 @@ class Option:
         """The value of ``text``; raises :class:`ValueError` with the problem (without the
         URL), ``odr='fast' is not a number``."""
         shown = f"{self.name}={_shown(text)}"
+        value: object
         if self.parse is not None:
             try:
                 value = self.parse(text)
@@ -104,9 +105,9 @@ class Option:
         else:
             value = self._number(text, shown)
         if self.check is not None:
-            problem = self.check(value)
-            if problem is not None:
-                raise ValueError(f"{shown} {problem}")
+            issue = self.check(value)
+            if issue is not None:
+                raise ValueError(f"{shown} {issue}")
         return value if self.convert is None else self.convert(value)
 
     def _choice(self, text: str, shown: str) -> object:

@@ -253,7 +253,7 @@ class SimulatedDevice(Device):
             if entry is not None:
                 entry[1] -= 1
                 if entry[1] <= 0:
-                    del _SHARED_EPOCHS[key]
+                    del _SHARED_EPOCHS[key]  # type: ignore[arg-type]
 
     def _epoch_key(self) -> tuple[object, ...] | None:
         """What makes two realtime arm sensors one arm (None for other scenarios)."""
