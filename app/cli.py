@@ -88,7 +88,11 @@ def build_parser() -> argparse.ArgumentParser:
         "reason; PNG: also save a screenshot",
     )
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
-    commands.add_parser("devices", help="list the devices that can be connected")
+    devices = commands.add_parser("devices", help="list the devices that can be connected")
+    devices.add_argument("--options", metavar="SCHEME",
+                         help="list a driver's URL options instead: sim, serial, port, text, "
+                              "lsm6dsox, replay, or a URL (sim://static: with its scenario's)")
+    devices.add_argument("--json", action="store_true", help="print JSON")
     add_evaluate_parser(commands)
     add_recording_parsers(commands)
     add_simulate_parser(commands)
@@ -169,10 +173,14 @@ def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
     )
 
 
-def list_devices(out=sys.stdout) -> int:
+def list_devices(out=sys.stdout, *, as_json: bool = False) -> int:
     from drivers.registry import available_devices
 
     devices = available_devices()
+    if as_json:
+        rows = [{"url": d.url, "kind": d.kind, "description": d.description} for d in devices]
+        print(json.dumps(rows, indent=2), file=out)
+        return 0 if devices else 1
     if not devices:
         print("No devices found.", file=out)
         return 1
@@ -180,6 +188,20 @@ def list_devices(out=sys.stdout) -> int:
     for descriptor in devices:
         line = f"{descriptor.url:<{width}}  {descriptor.kind:<10}  {descriptor.description}"
         print(line, file=out)
+    return 0
+
+
+def list_device_options(name: str, *, as_json: bool = False, out: TextIO | None = None) -> int:
+    from app.services.devices import device_options, device_options_table
+    from drivers.errors import DeviceError
+
+    try:
+        text = (json.dumps(device_options(name), indent=2) + "\n" if as_json
+                else device_options_table(name))
+    except DeviceError as exc:
+        print(f"inclinometer: devices --options: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    (out or sys.stdout).write(text)
     return 0
 
 
@@ -540,7 +562,8 @@ def _start_gui(args: argparse.Namespace) -> int:
 
 
 _COMMANDS: dict[str | None, Callable[[argparse.Namespace], int]] = {
-    "devices": lambda args: list_devices(),
+    "devices": lambda args: (list_device_options(args.options, as_json=args.json)
+                             if args.options else list_devices(as_json=args.json)),
     "evaluate": lambda args: evaluate_sources(args),
     "record": record_command,
     "replay": replay_command,

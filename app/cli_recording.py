@@ -25,13 +25,12 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from app.core.safe_output import OutputRefused, check_output, write_error_message
+from app.core.words import FALSE_WORDS, TRUE_WORDS
 
 EXIT_USAGE = 2
 DEFAULT_RECONNECT_TIMEOUT_S = 300.0
 """As :data:`app.services.recorder.DEFAULT_RECONNECT_TIMEOUT_S` (a test keeps them equal)."""
 EXIT_FAILED = 1
-TRUE_WORDS = ("true", "1", "yes", "on")
-FALSE_WORDS = ("false", "0", "no", "off")
 
 
 def add_param_argument(parser: argparse.ArgumentParser) -> None:
@@ -72,7 +71,7 @@ def parse_filter_parameters(items: list[str] | None) -> dict[str, dict[str, Any]
                              f"(it has: {known})") from None
         if spec.kind == "bool":
             word = text.lower()
-            if word not in TRUE_WORDS + FALSE_WORDS:
+            if word not in TRUE_WORDS | FALSE_WORDS:
                 raise ValueError(f"--param {item!r}: {name} is true or false (or 1 or 0)")
             value: Any = word in TRUE_WORDS
         else:

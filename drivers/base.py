@@ -17,6 +17,7 @@ from typing import ClassVar
 from app.core.devices import BoardStatus, DeviceDescriptor, DeviceInfo, DeviceMessage
 from app.core.samples import RawBlock
 from drivers.errors import DeviceClosedError, DeviceError, DeviceIOError
+from drivers.url_options import Option
 
 __all__ = ["Device", "DeviceDescriptor", "DeviceInfo", "DeviceMessage", "read_block_s"]
 
@@ -44,6 +45,14 @@ class Device(ABC):
     """
 
     scheme: ClassVar[str] = ""
+    url_options: ClassVar[tuple[Option, ...]] = ()
+    """The options this driver's URLs take, as data (:mod:`drivers.url_options`)."""
+
+    @classmethod
+    def options_for(cls, url: str = "") -> tuple[Option, ...]:
+        """The options ``url`` may take (a driver whose options depend on the rest of the URL,
+        such as the simulator's scenario, overrides this); :attr:`url_options` by default."""
+        return cls.url_options
 
     def __init__(self, url: str) -> None:
         self.url = url

@@ -441,13 +441,13 @@ class EmulatedNucleo:
         self._power_on_wall = time.monotonic()
         self._status_base = dataclasses.replace(self.stats)  # STATUS counts from power-on
         self._seq = 0
-        self._last_end_ticks = self.initial_ticks
+        self._last_end_ticks: float = self.initial_ticks
         self._sim = self._new_sim(*self._settings)
         self._pending: list[np.ndarray] = []  # generated, not yet sent: (n, 7) gx..az, temp
         self._run_sent = 0
         if self.sensors > 1:
             if getattr(self, "_second", None) is not None:
-                self._second.sim.close()
+                self._second.sim.close()  # type: ignore[has-type]
             self._second = _SecondSensor(self)
 
     def _new_sim(self, odr_code: int, accel_fs_g: int, gyro_fs_dps: int,
@@ -457,7 +457,7 @@ class EmulatedNucleo:
                f"&accel_fs={accel_fs_g}&gyro_fs={gyro_fs_dps}&seed={seed}&realtime=0"
                f"&block={SIM_BLOCK}&errors={int(self.errors)}&noise={int(self.noise)}"
                "&settling=1")
-        sim = SimulatedDevice(url, **self.scenario_params)
+        sim = SimulatedDevice(url, **self.scenario_params)  # type: ignore[arg-type]
         sim.open()
         # The simulated chip starts with its turn-on transient; the firmware drops it, as
         # firmware/core does (fifo_stream_discard), before any packet.
@@ -763,13 +763,14 @@ class _SecondSensor:
         self.seed = board.seed + self.SEED_OFFSET
         self.seq = 0
         self.last_end_ticks = float(board.initial_ticks)
-        self.run_start = self.run_sent = 0
+        self.run_start: float = 0.0
+        self.run_sent = 0
         self.run_origin_ticks = 0
         self.configure(board._settings)
 
     def configure(self, settings: tuple[int, int, int]) -> None:
         if getattr(self, "sim", None) is not None:
-            self.sim.close()
+            self.sim.close()  # type: ignore[has-type]
         self.odr_code = settings[0]
         self.sim = self.board._new_sim(*settings, seed=self.seed)
         self.pending: list[np.ndarray] = []

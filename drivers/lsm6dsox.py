@@ -10,6 +10,8 @@ from __future__ import annotations
 import functools
 import math
 
+from drivers.url_options import Option
+
 WHO_AM_I_VALUE = 0x6C
 
 # Output data rates. The datasheet labels a rate "12.5 Hz", "104 Hz", ... "6667 Hz"; the chip
@@ -145,3 +147,20 @@ def gyro_rad_s_per_lsb(gyro_fs_dps: int) -> float:
 def accel_noise_g_per_sqrt_hz(accel_fs_g: int) -> float:
     """Accelerometer noise density for a full scale (higher at +-16 g)."""
     return ACCEL_NOISE_G_PER_SQRT_HZ_16G if accel_fs_g == 16 else ACCEL_NOISE_G_PER_SQRT_HZ_LOW_FS
+
+
+# The chip's settings as device-URL options (drivers.url_options), shared by every driver of it.
+ODR_OPTION = Option(
+    "odr", "number", 104.0, unit="Hz", check=odr_problem, convert=odr_label_hz,
+    field="odr_nominal_hz",
+    help="output data rate, snapped to the nearest LSM6DSOX rate (12.5 ... 6667; 12.5 runs "
+         "at 13.02)",
+)
+ACCEL_FS_OPTION = Option(
+    "accel_fs", "choice", 4, unit="g", choices=tuple(sorted(ACCEL_MG_PER_LSB)),
+    field="accel_fs_g", help="accelerometer full scale",
+)
+GYRO_FS_OPTION = Option(
+    "gyro_fs", "choice", 250, unit="dps", choices=tuple(sorted(GYRO_MDPS_PER_LSB)),
+    field="gyro_fs_dps", help="gyroscope full scale",
+)

@@ -14,6 +14,7 @@ from urllib.parse import urlsplit
 
 from drivers.base import Device, DeviceDescriptor
 from drivers.errors import DeviceOpenError, DeviceUrlError
+from drivers.url_options import Option
 
 DEFAULT_DEVICE_URL = "sim://interactive"
 
@@ -100,3 +101,16 @@ def available_devices() -> list[DeviceDescriptor]:
             continue
         found.extend(cls.discover())
     return found
+
+
+def driver_options(name: str) -> tuple[Option, ...]:
+    """The URL options a driver declares: of a scheme (``sim``, ``serial``) or of a URL
+    (``sim://static``: the general options and that scenario's).
+
+    Raises :class:`DeviceUrlError` for an unknown scheme, :class:`DeviceOpenError` when the
+    driver cannot be imported.
+    """
+    text = name.strip()
+    if "://" in text or any(c in text for c in "/\\.?"):
+        return driver_class(scheme_of(text)).options_for(text)
+    return driver_class(text.lower().removesuffix(":")).options_for("")

@@ -50,9 +50,10 @@ import math
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
-from urllib.parse import parse_qsl, unquote
+from urllib.parse import unquote
 
 import numpy as np
 
@@ -72,10 +73,11 @@ from app.core.samples import RawBlock
 from drivers.base import Device, DeviceDescriptor, DeviceInfo, DeviceMessage
 from drivers.errors import DeviceOpenError, DeviceUrlError
 from drivers.replay_rows import MemoryRows, StreamedRows
+from drivers.url_options import Option, parse_options
 
 __all__ = [
-    "HOLE_LIMIT_S", "ReplayDevice", "is_recording_path", "parse_speed", "recording_path",
-    "replay_url",
+    "HOLE_LIMIT_S", "OPTIONS", "ReplayDevice", "ReplayOptions", "is_recording_path",
+    "parse_replay_url", "parse_speed", "recording_path", "replay_url",
 ]
 
 SCHEME = "replay"
@@ -92,9 +94,41 @@ STREAMED_MIN_BYTES = 64 << 20
 memory."""
 HOLE_LIMIT_S = 1.0
 """A hole in the recorded time is waited for at most this long (at speed 1)."""
-_OPTIONS = ("speed", "loop", "start", "paused", "exact", "block")
-_TRUE = {"1", "true", "yes", "on"}
-_FALSE = {"0", "false", "no", "off"}
+
+
+def _speed(text: str) -> float:
+    return parse_speed(text)
+
+
+OPTIONS: tuple[Option, ...] = (
+    Option("speed", "number", 1.0, minimum=MIN_SPEED, maximum=MAX_SPEED, parse=_speed,
+           help="playback speed factor (1: the recorded pace), or max (also 0): as fast as "
+                "the reader takes blocks"),
+    Option("loop", "flag", False, help="1: start again at the end"),
+    Option("start", "number", 0.0, unit="s", minimum=0.0, field="start_s",
+           help="seconds from the beginning of the recording to start at"),
+    Option("paused", "flag", False, help="1: open paused"),
+    Option("exact", "flag", True,
+           help="1: the blocks exactly as recorded (bit for bit what every filter computed "
+                "live); 0: blocks of whatever is due, or of block samples"),
+    Option("block", "integer", DEFAULT_BLOCK, minimum=1, maximum=MAX_BLOCK,
+           help="samples per block when not exact"),
+)
+"""The ``replay://`` options."""
+
+
+@dataclass(frozen=True, slots=True)
+class ReplayOptions:
+    """A validated ``replay://`` URL."""
+
+    path: Path
+    speed: float = 1.0
+    """``math.inf``: as fast as the reader takes blocks."""
+    loop: bool = False
+    start_s: float = 0.0
+    paused: bool = False
+    exact: bool = True
+    block: int = DEFAULT_BLOCK
 
 
 def is_recording_path(url: str) -> bool:
@@ -109,9 +143,10 @@ def replay_url(path: str | Path, **options: Any) -> str:
     return f"{SCHEME}://{text}" + (f"?{query}" if query else "")
 
 
-def _split_url(url: str) -> tuple[Path, dict[str, str]]:
+def _split_url(url: str) -> tuple[Path, str]:
+    """The file and the query of a replay URL or a bare recording path."""
     if is_recording_path(url):
-        return Path(url.strip()), {}
+        return Path(url.strip()), ""
     prefix = f"{SCHEME}://"
     if not url.lower().startswith(prefix):
         raise DeviceUrlError(f"{url}: not a replay URL; expected replay://PATH or a .csv path")
@@ -124,22 +159,19 @@ def _split_url(url: str) -> tuple[Path, dict[str, str]]:
     path = Path(unquote(path_text))
     if not path.exists() and Path(path_text).exists():
         path = Path(path_text)  # a literal '%' in the name
-    options: dict[str, str] = {}
-    for key, value in parse_qsl(query, keep_blank_values=True):
-        key = key.strip().lower()
-        if key not in _OPTIONS:
-            raise DeviceUrlError(
-                f"{url}: unknown option {key!r}; allowed: {', '.join(_OPTIONS)}")
-        if key in options:
-            raise DeviceUrlError(f"{url}: option {key!r} is given twice")
-        options[key] = value.strip()
-    return path, options
+    return path, query
+
+
+def parse_replay_url(url: str) -> ReplayOptions:
+    """Validate ``replay://PATH?options`` or a bare ``.csv``/``.csv.gz`` path."""
+    path, query = _split_url(url)
+    return ReplayOptions(path, **parse_options(url, query, OPTIONS).values)  # type: ignore[arg-type]
 
 
 def recording_path(url: str) -> Path:
     """The file a ``replay://`` URL names; any other text is taken as a path."""
     if url.lower().startswith(f"{SCHEME}://"):
-        return _split_url(url)[0]
+        return parse_replay_url(url).path
     if "\0" in url:
         raise DeviceUrlError(f"{url!r}: a file name cannot hold a NUL character")
     return Path(url)
@@ -165,14 +197,6 @@ def parse_speed(value: float | str) -> float:
     return speed
 
 
-def _flag(url: str, key: str, text: str) -> bool:
-    if text.lower() in _TRUE:
-        return True
-    if text.lower() in _FALSE:
-        return False
-    raise DeviceUrlError(f"{url}: {key}={text!r}: use 1 or 0")
-
-
 class ReplayDevice(Device):
     """A recording played back as a device (see the module docstring).
 
@@ -184,30 +208,21 @@ class ReplayDevice(Device):
     """
 
     scheme: ClassVar[str] = SCHEME
+    url_options: ClassVar[tuple[Option, ...]] = OPTIONS
 
     def __init__(
         self, url: str, *, clock: Callable[[], float] = time.monotonic,
         recording: Recording | None = None,
     ) -> None:
         super().__init__(url)
-        self.path, options = _split_url(url)
-        try:
-            self._initial_speed = parse_speed(options.get("speed", "1"))
-        except ValueError as exc:
-            raise DeviceUrlError(f"{url}: {exc}") from None
-        self._initial_loop = _flag(url, "loop", options.get("loop", "0"))
-        self._initial_paused = _flag(url, "paused", options.get("paused", "0"))
-        self._exact = _flag(url, "exact", options.get("exact", "1"))
-        try:
-            self._start_s = float(options.get("start", "0"))
-            self._block = int(options.get("block", str(DEFAULT_BLOCK)))
-        except ValueError:
-            raise DeviceUrlError(f"{url}: start must be seconds and block a whole number of "
-                                 "samples") from None
-        if not math.isfinite(self._start_s) or self._start_s < 0:
-            raise DeviceUrlError(f"{url}: start={self._start_s!r} must be >= 0 s")
-        if not 1 <= self._block <= MAX_BLOCK:
-            raise DeviceUrlError(f"{url}: block must be 1 ... {MAX_BLOCK} samples")
+        options = parse_replay_url(url)
+        self.path = options.path
+        self._initial_speed = options.speed
+        self._initial_loop = options.loop
+        self._initial_paused = options.paused
+        self._exact = options.exact
+        self._start_s = options.start_s
+        self._block = options.block
         self._clock = clock
         self._cond = threading.Condition()
         self._given = recording

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator
 from dataclasses import dataclass
 
 import numpy as np
@@ -110,7 +110,7 @@ class MemoryRows:
         self.has_block_start = self._rows.block_start is not None
         self.has_reference = self._rows.reference is not None
         self.gap_rows = np.flatnonzero(self._rows.gap)
-        self._bounds = (np.concatenate([np.flatnonzero(self._rows.block_start), [self.count]])
+        self._bounds = (np.concatenate([np.flatnonzero(self._rows.block_start), [self.count]])  # type: ignore[arg-type]
                         if self.has_block_start else None)
 
     def complete(self) -> bool:
@@ -170,7 +170,7 @@ class StreamedRows:
     def __init__(self, stream: RecordingStream, cond: threading.Condition) -> None:
         self._stream = stream
         self._cond = cond
-        self._chunks: Iterator[Chunk] | None = stream.chunks()
+        self._chunks: Generator[Chunk, None, None] | None = stream.chunks()
         self._problem = ""
         first = self._next_chunk()
         if first is None:  # a bad first row says why; else there are no rows at all

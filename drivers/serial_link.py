@@ -60,9 +60,9 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, ClassVar
-from urllib.parse import parse_qsl, urlencode
+from urllib.parse import urlencode
 
 import serial
 
@@ -87,6 +87,7 @@ from drivers.link.ports import (
     port_info,
 )
 from drivers.link.shared_port import SensorInUse, SharedPort
+from drivers.url_options import Option, parse_options
 
 if TYPE_CHECKING:
     from drivers.text_lines import TextLineCounters
@@ -109,14 +110,24 @@ TEXT_LINES_TO_DECIDE = 3
 LINK_NOTE_INTERVAL_S = 1.0
 """At most one message a second about frames lost on the link (a bad cable makes many)."""
 
-OPTIONS: dict[str, str] = {
-    "baud": "baud rate (default 921600; native USB ignores it)",
-    "odr": "output data rate in Hz, snapped to the nearest LSM6DSOX rate (12.5 ... 6667)",
-    "accel_fs": "accelerometer full scale: 2, 4, 8 or 16 g",
-    "gyro_fs": "gyroscope full scale: 125, 250, 500, 1000 or 2000 dps",
-    "timeout": "seconds to wait for the board's answer to HELLO (default 2)",
-    "sensor": "which sensor of a board with several (default 0; 1 is the LSM6DSOX at 0x6B)",
-}
+OPTIONS: tuple[Option, ...] = (
+    Option("baud", "integer", p.DEFAULT_BAUD, positive=True, help="baud rate (native USB "
+                                                                  "ignores it)"),
+    replace(lsm6dsox.ODR_OPTION, default=None, field="odr_hz",
+            help="output data rate, snapped to the nearest LSM6DSOX rate (12.5 ... 6667; "
+                 "default: the board keeps its own; any of odr, accel_fs, gyro_fs sends "
+                 "CONFIGURE)"),
+    replace(lsm6dsox.ACCEL_FS_OPTION, default=None,
+            help="accelerometer full scale (default: the board's)"),
+    replace(lsm6dsox.GYRO_FS_OPTION, default=None,
+            help="gyroscope full scale (default: the board's)"),
+    Option("timeout", "number", DEFAULT_HELLO_TIMEOUT_S, unit="s", positive=True,
+           maximum=MAX_TIMEOUT_S, field="hello_timeout_s",
+           help="seconds to wait for the board's answer to HELLO"),
+    Option("sensor", "integer", 0, minimum=0, maximum=p.MAX_SENSORS - 1,
+           help="which sensor of a board with several (1 is the LSM6DSOX at 0x6B)"),
+)
+"""The ``serial://`` options (a bare port also takes the ``text://`` driver's)."""
 
 ACK_MESSAGES: dict[int, str] = {
     p.ACK_BAD_ARGUMENT: "the board refused the arguments",
@@ -173,65 +184,14 @@ def parse_link_url(url: str, *, allow_other: bool = False) -> LinkOptions:
     port, query = _split_url(url)
     if not port:
         raise DeviceUrlError(f"{url}: no port; expected e.g. serial:///dev/ttyACM0 or COM3")
-
-    def fail(message: str) -> DeviceUrlError:
-        return DeviceUrlError(f"{url}: {message}")
-
-    def number(key: str, text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise fail(f"{key}={text[:40]!r} is not a number") from None
-        if not value > 0 or value == float("inf"):
-            raise fail(f"{key}={text[:40]!r} must be a positive finite number")
-        return value
-
-    def choice(key: str, text: str, allowed: list[int], unit: str) -> int:
-        value = number(key, text)
-        if value not in allowed:
-            raise fail(f"{key}={text!r} is not supported; use one of "
-                       f"{', '.join(map(str, allowed))} ({unit})")
-        return int(value)
-
-    values: dict[str, object] = {}
-    passed_on: list[tuple[str, str]] = []
-    other: list[tuple[str, str]] = []
-    for key, text in parse_qsl(query, keep_blank_values=True):
-        key = key.strip().lower()
-        if key not in OPTIONS:
-            if "://" in port:  # an option of the pyserial URL (spy://...?file=...)
-                passed_on.append((key, text))
-                continue
-            if allow_other:
-                other.append((key, text))
-                continue
-            raise fail(f"unknown option {key!r}; allowed: {', '.join(OPTIONS)}")
-        if key == "baud":
-            baud = number(key, text)
-            if baud != int(baud):
-                raise fail(f"baud={text!r} must be a whole number")
-            values["baud"] = int(baud)
-        elif key == "odr":
-            odr = number(key, text)
-            problem = lsm6dsox.odr_problem(odr)
-            if problem is not None:
-                raise fail(f"odr={text[:40]!r} {problem}")
-            values["odr_hz"] = lsm6dsox.odr_label_hz(odr)
-        elif key == "accel_fs":
-            values["accel_fs_g"] = choice(key, text, sorted(lsm6dsox.ACCEL_MG_PER_LSB), "g")
-        elif key == "gyro_fs":
-            values["gyro_fs_dps"] = choice(key, text, sorted(lsm6dsox.GYRO_MDPS_PER_LSB), "dps")
-        elif key == "timeout":
-            values["hello_timeout_s"] = number(key, text)
-            if values["hello_timeout_s"] > MAX_TIMEOUT_S:
-                raise fail(f"timeout={text[:40]!r} is more than {MAX_TIMEOUT_S:g} s")
-        elif key == "sensor":
-            if not text.strip().isdigit() or int(text) >= p.MAX_SENSORS:
-                raise fail(f"sensor={text!r}: use a sensor index 0..{p.MAX_SENSORS - 1}")
-            values["sensor"] = int(text)
-    if passed_on:
-        port = f"{port}?{urlencode(passed_on)}"
-    return LinkOptions(port=port, other_options=tuple(other), **values)  # type: ignore[arg-type]
+    keep_other = "://" in port or allow_other  # pyserial's own options, or text://'s
+    parsed = parse_options(url, query, OPTIONS, keep_other=keep_other)
+    other = tuple(parsed.other)
+    if "://" in port:  # the options of the pyserial URL (spy://...?file=...)
+        if other:
+            port = f"{port}?{urlencode(other)}"
+        other = ()
+    return LinkOptions(port=port, other_options=other, **parsed.values)  # type: ignore[arg-type]
 
 
 def url_with_port(url: str, port: str) -> str:
@@ -281,6 +241,7 @@ class SerialLinkDevice(Device):
     """
 
     scheme: ClassVar[str] = "serial"
+    url_options: ClassVar[tuple[Option, ...]] = OPTIONS
     detect_text: ClassVar[bool] = False
 
     def __init__(self, url: str, *, hello_timeout_s: float | None = None) -> None:
@@ -908,6 +869,14 @@ class PortDevice(SerialLinkDevice):
 
     scheme: ClassVar[str] = "port"
     detect_text: ClassVar[bool] = True
+
+    @classmethod
+    def options_for(cls, url: str = "") -> tuple[Option, ...]:
+        """The link's options, then the text driver's it hands over."""
+        from drivers.text_lines import OPTIONS as TEXT_OPTIONS
+
+        names = {option.name for option in OPTIONS} | {"port"}
+        return OPTIONS + tuple(o for o in TEXT_OPTIONS if o.name not in names)
 
     def __init__(self, url: str, *, hello_timeout_s: float | None = None) -> None:
         super().__init__(url, hello_timeout_s=hello_timeout_s)

@@ -81,9 +81,10 @@ import contextlib
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import ClassVar
-from urllib.parse import parse_qsl, unquote
+from urllib.parse import unquote
 
 import numpy as np
 import serial
@@ -107,6 +108,7 @@ from drivers.text_stream.lexer import (
 )
 from drivers.text_stream.parser import LineParser, TextLineCounters
 from drivers.text_stream.timeline import Timeline, arrival_period
+from drivers.url_options import Option, parse_options
 
 _Timeline = Timeline  # the name tests and older code used
 
@@ -159,58 +161,68 @@ class TextOptions:
     gyro_fs_dps: int = 0
 
 
-_OPTIONS = ("port", "baud", "columns", "accel", "gyro", "time", "time_col", "open_timeout",
-            "accel_fs", "gyro_fs")
+def _columns(text: str) -> tuple[str, ...]:
+    names = tuple(name.strip() for name in text.split(","))
+    if len(names) < 3:
+        raise ValueError("needs at least ax,ay,az")
+    return names
+
+
+def _time_unit(text: str) -> str:
+    if text.lower() not in (*TIME_UNITS, "host"):
+        raise ValueError("use s, ms, us or host")
+    return text.lower()
+
+
+def _word(parse: Callable[[str], str]) -> Callable[[str], str]:
+    """A unit parser's :class:`DeviceUrlError` as the ValueError an option raises."""
+    def read(text: str) -> str:
+        try:
+            return parse(text)
+        except DeviceUrlError as exc:
+            raise ValueError(str(exc)) from None
+    return read
+
+
+OPTIONS: tuple[Option, ...] = (
+    Option("port", "text", None, help="the port (URL-encoded), instead of the one after "
+                                      "text://"),
+    Option("baud", "integer", DEFAULT_BAUD, positive=True,
+           help="baud rate (native USB CDC ports ignore it)"),
+    Option("columns", "text", None, parse=_columns, metavar="ax,ay,az,...",
+           help="names of the numbers on a line, in order; _ skips a column (default: a "
+                "header row, or the layout guessed)"),
+    Option("accel", "choice", None, choices=("g", "mg", "m/s2"), field="accel_unit",
+           parse=_word(_parse_accel_unit), help="accelerometer unit (default: guessed)"),
+    Option("gyro", "choice", None, choices=("dps", "mdps", "rad/s"), field="gyro_unit",
+           parse=_word(_parse_gyro_unit), help="gyroscope unit (default: guessed)"),
+    Option("time", "choice", None, choices=(*TIME_UNITS, "host"), field="time_unit",
+           parse=_time_unit,
+           help="unit of the time column, or host: ignore it (default: guessed)"),
+    Option("time_col", "text", None, help="name of the time column (default: t, time, "
+                                          "timestamp, ms, millis, us, micros...)"),
+    Option("open_timeout", "number", DEFAULT_OPEN_TIMEOUT_S, unit="s", positive=True,
+           maximum=3600.0, field="open_timeout_s",
+           help="seconds to wait for the first parsable lines"),
+    Option("accel_fs", "integer", 0, unit="g", minimum=0, field="accel_fs_g",
+           help="the accelerometer range the sketch set, for display and calibration "
+                "profiles only (0: unknown)"),
+    Option("gyro_fs", "integer", 0, unit="dps", minimum=0, field="gyro_fs_dps",
+           help="the gyroscope range the sketch set (0: unknown)"),
+)
+"""The ``text://`` options."""
 
 
 def parse_text_url(url: str) -> TextOptions:
     """Validate ``text://PORT?options`` (see the module docstring)."""
     if not url.lower().startswith("text://"):
         raise DeviceUrlError(f"{url}: not a text:// URL")
-    rest = url[len("text://") :]
-    port, _, query = rest.partition("?")
-    raw: dict[str, str] = {}
-    for key, value in parse_qsl(query, keep_blank_values=True):
-        key = key.strip().lower()
-        if key not in _OPTIONS:
-            raise DeviceUrlError(f"{url}: unknown option {key!r}; allowed: {', '.join(_OPTIONS)}")
-        raw[key] = value.strip()
-    port = unquote(raw.get("port", port)).strip()
+    port, _, query = url[len("text://") :].partition("?")
+    values = parse_options(url, query, OPTIONS).values
+    port = unquote(str(values.pop("port", port))).strip()
     if not port:
         raise DeviceUrlError(f"{url}: no port; e.g. text:///dev/ttyACM0 or text://COM3")
-    options: dict[str, object] = {"port": port}
-    try:
-        if "baud" in raw:
-            options["baud"] = int(raw["baud"])
-            if options["baud"] <= 0:  # type: ignore[operator]
-                raise ValueError
-        for key in ("accel_fs", "gyro_fs"):
-            if key in raw:
-                options[f"{key}_{'g' if key == 'accel_fs' else 'dps'}"] = int(raw[key])
-        if "open_timeout" in raw:
-            options["open_timeout_s"] = float(raw["open_timeout"])
-            if not 0.0 < options["open_timeout_s"] < 3600.0:  # type: ignore[operator]
-                raise ValueError
-    except ValueError:
-        raise DeviceUrlError(
-            f"{url}: baud, accel_fs, gyro_fs and open_timeout must be positive numbers"
-        ) from None
-    if "columns" in raw:
-        names = tuple(name.strip() for name in raw["columns"].split(","))
-        if len(names) < 3:
-            raise DeviceUrlError(f"{url}: columns= needs at least ax,ay,az")
-        options["columns"] = names
-    if "accel" in raw:
-        options["accel_unit"] = _parse_accel_unit(raw["accel"])
-    if "gyro" in raw:
-        options["gyro_unit"] = _parse_gyro_unit(raw["gyro"])
-    if "time" in raw:
-        if raw["time"].lower() not in (*TIME_UNITS, "host"):
-            raise DeviceUrlError(f"{url}: time={raw['time']!r}: use s, ms, us or host")
-        options["time_unit"] = raw["time"].lower()
-    if "time_col" in raw:
-        options["time_col"] = raw["time_col"]
-    return TextOptions(**options)  # type: ignore[arg-type]
+    return TextOptions(port=port, **values)  # type: ignore[arg-type]
 
 
 # -- the device -----------------------------------------------------------------------------
@@ -226,6 +238,7 @@ class TextLineDevice(Device):
     """
 
     scheme: ClassVar[str] = "text"
+    url_options: ClassVar[tuple[Option, ...]] = OPTIONS
 
     def __init__(
         self, url: str, *, port: serial.SerialBase | None = None, initial_data: bytes = b""
@@ -305,8 +318,8 @@ class TextLineDevice(Device):
         assert port is not None
         deadline = time.monotonic() + max(0.0, timeout_s)
         if self._first_block is not None:
-            block, self._first_block = self._first_block, None
-            return block
+            first, self._first_block = self._first_block, None
+            return first
         while True:
             block = self._take_block()
             if block is not None:

@@ -139,7 +139,7 @@ def concatenate_blocks(blocks: Iterable[SampleBlock]) -> SampleBlock:
         gyro_rad_s=np.concatenate([b.gyro_rad_s for b in blocks]),
         temp_degc=np.concatenate([b.temp_degc for b in blocks]),
         gap=np.concatenate([b.gap for b in blocks]),
-        reference_quat=np.concatenate(references) if has_reference else None,
+        reference_quat=np.concatenate(references) if has_reference else None,  # type: ignore[arg-type]
     )
 
 
@@ -409,8 +409,8 @@ def evaluate_source(
     if repeats is None:
         repeats = 1 if len(stream) >= LARGE_STREAM else DEFAULT_REPEATS
     result = SourceResult(
-        source.label, source.description, info["duration_s"], info["samples"], info["rate_hz"],
-        info["gaps"], int(np.count_nonzero(rows)), scoring, mask is not None,
+        source.label, source.description, info["duration_s"], info["samples"], info["rate_hz"],  # type: ignore[arg-type]
+        info["gaps"], int(np.count_nonzero(rows)), scoring, mask is not None,  # type: ignore[arg-type]
     )
     result.scores = evaluate(stream, filters, skip_s=skip_s, block=block, repeats=repeats,
                              score_mask=mask, parameters=parameters)
@@ -445,7 +445,8 @@ def _join_pieces(held: list[tuple[SampleBlock, np.ndarray | None]]
     if len(held) == 1:
         return held[0]
     masks = [m for _, m in held]
-    mask = None if any(m is None for m in masks) else np.concatenate(masks)  # type: ignore[arg-type]
+    mask: np.ndarray | None = (None if any(m is None for m in masks)
+                               else np.concatenate(masks))  # type: ignore[arg-type]
     return concatenate_blocks(b for b, _ in held), mask
 
 
@@ -563,7 +564,7 @@ class _OnlineRun:
             return
         self.elapsed += time.perf_counter() - start
         if rows is not None:
-            self.errors.add(result.quat, piece.reference_quat, rows)
+            self.errors.add(result.quat, piece.reference_quat, rows)  # type: ignore[arg-type]
 
     def finish(self) -> None:
         if not self.failure:

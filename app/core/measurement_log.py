@@ -151,9 +151,9 @@ def measure(quat: np.ndarray, unit: str, window_s: float, *, label: str = "",
     centre /= np.linalg.norm(centre)
     off = np.arctan2(np.linalg.norm(np.cross(ups, centre), axis=1), ups @ centre)
     spread = float(np.degrees(np.sqrt(np.mean(off**2))))
-    roll, roll_std = stats(per_sample.roll_deg, mean.roll_deg)
-    pitch, pitch_std = stats(per_sample.pitch_deg, mean.pitch_deg)
-    tilt, tilt_std = stats(per_sample.tilt_deg, mean.tilt_deg)
+    roll, roll_std = stats(per_sample.roll_deg, mean.roll_deg)  # type: ignore[arg-type]
+    pitch, pitch_std = stats(per_sample.pitch_deg, mean.pitch_deg)  # type: ignore[arg-type]
+    tilt, tilt_std = stats(per_sample.tilt_deg, mean.tilt_deg)  # type: ignore[arg-type]
     stamp = (when or datetime.now().astimezone()).isoformat(timespec="seconds")
     return Measurement(stamp, label, roll, roll_std, pitch, pitch_std, tilt, tilt_std,
                        float(mean.direction_deg), unit, float(window_s), len(quat),

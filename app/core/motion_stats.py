@@ -272,10 +272,10 @@ def motion_stats(
         gyro_rms_dps=_rms(rate_dps[moving]),
         gyro_peak_dps=float(np.max(rate_dps[moving])) if moving.any() else math.nan,
         gyro_spectrum=summarise_spectrum(g_freqs, g_psd),
-        tilt_deg=tuple(float(v) for v in np.percentile(tilt_moving, [5, 50, 95]))
+        tilt_deg=tuple(float(v) for v in np.percentile(tilt_moving, [5, 50, 95]))  # type: ignore[arg-type]
         if len(tilt_moving) else nan3,
         tilt_max_deg=float(np.max(tilt_moving)) if len(tilt_moving) else math.nan,
-        rotation_rms_deg=tuple(float(v) for v in np.sqrt(np.mean(rotation**2, axis=0)))
+        rotation_rms_deg=tuple(float(v) for v in np.sqrt(np.mean(rotation**2, axis=0)))  # type: ignore[arg-type]
         if len(rotation) else nan3,
         rest_fraction=float(np.mean(rest_in_span)) if len(rest_in_span) else math.nan,
         rest_breaks=len(breaks),

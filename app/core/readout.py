@@ -29,7 +29,7 @@ def averaged_angles(quat: np.ndarray) -> TiltAngles | None:
         return None
     mean_up = up_in_sensor_frame(quat).mean(axis=0)
     angles = angles_from_up(mean_up)
-    return TiltAngles(*(float(v) for v in (
+    return TiltAngles(*(float(v) for v in (  # type: ignore[arg-type]
         angles.roll_deg, angles.pitch_deg, angles.tilt_deg, angles.direction_deg
     )))
 

@@ -115,7 +115,7 @@ def arm_scene(
     bodies = tuple(
         Body(
             np.asarray(rotations[i]), 0.5 * (points[i] + points[i + 1]),
-            size=tuple(scale * s for s in BOARD_SIZE), axis_length=scale * AXIS_LENGTH,
+            size=tuple(scale * s for s in BOARD_SIZE), axis_length=scale * AXIS_LENGTH,  # type: ignore[arg-type]
         )
         for i in links
     )

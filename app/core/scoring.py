@@ -153,7 +153,7 @@ class ErrorAccumulator:
                 break
             share = min(1.0, (late_count - covered) / self._width)
             late_sum += value * share
-            covered += self._width * share
+            covered += self._width * share  # type: ignore[assignment]
         late = math.sqrt(late_sum / late_count) if covered else 0.0
         early_count = self.count - late_count
         early = math.sqrt(max(self.sum_sq - late_sum, 0.0) / early_count) if early_count else 0.0

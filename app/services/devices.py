@@ -14,21 +14,43 @@ from urllib.parse import urlencode
 
 from app.core.devices import DeviceDescriptor
 from drivers import lsm6dsox
-from drivers.errors import DeviceUrlError
-from drivers.registry import DEFAULT_DEVICE_URL, scheme_of
+from drivers.errors import DeviceError, DeviceUrlError
+from drivers.registry import DEFAULT_DEVICE_URL, driver_options, scheme_of
 from drivers.registry import available_devices as _available_devices
 from drivers.replay import replay_url as _replay_url
 from drivers.sim.options import SimOptions, parse_sim_url
+from drivers.url_options import format_options, option_rows
 
 __all__ = [
     "DEFAULT_DEVICE_URL", "SENSOR_CHOICES", "SensorChoices", "SimulatorSettings",
-    "available_devices", "is_replay_url", "replay_url",
+    "available_devices", "device_options", "device_options_table", "is_replay_url",
+    "option_hints", "replay_url",
 ]
 
 
 def available_devices() -> list[DeviceDescriptor]:
     """Everything that could be connected now (simulator scenarios, ports, ...)."""
     return _available_devices()
+
+
+def device_options(name: str) -> list[dict[str, object]]:
+    """A driver's URL options as plain data (name, type, default, limits, unit, help, repeatable),
+    of a scheme (``sim``) or a URL (``sim://static``: with that scenario's). Raises the
+    driver's error (a :class:`~drivers.errors.DeviceError`) for an unknown scheme."""
+    return option_rows(driver_options(name))
+
+
+def device_options_table(name: str) -> str:
+    """:func:`device_options` as a text table (``inclinometer devices --options SCHEME``)."""
+    return format_options(driver_options(name))
+
+
+def option_hints(url: str) -> list[dict[str, object]]:
+    """:func:`device_options` of a URL being typed: empty while its scheme names no driver."""
+    try:
+        return device_options(url)
+    except DeviceError:
+        return []
 
 
 def is_replay_url(url: str) -> bool:

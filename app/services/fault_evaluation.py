@@ -145,7 +145,7 @@ def resolve_fault_sources(items: Sequence[str]) -> list[FaultSource]:
         if key not in seen:
             seen.add(key)
             sources.append(FaultSource(path.stem, key.parent.name or "recordings",
-                                       lambda settings, path=path: _recording_stream(path)))
+                                       lambda settings, path=path: _recording_stream(path)))  # type: ignore[misc]
 
     for item in items:
         if item == "scenarios":
@@ -171,7 +171,7 @@ def resolve_fault_sources(items: Sequence[str]) -> list[FaultSource]:
             except DeviceUrlError as exc:
                 raise ValueError(str(exc)) from None
             sources.append(FaultSource(url.removeprefix("sim://"), SIMULATOR_GROUP,
-                                       lambda settings, url=url: _simulator_stream(url, settings)))
+                                       lambda settings, url=url: _simulator_stream(url, settings)))  # type: ignore[misc]
     return sources
 
 

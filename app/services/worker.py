@@ -150,7 +150,7 @@ class DeviceWorker(QObject):
         self.health.start(info)
         self.acquisition.board.reset()
         self.alarms.reset()
-        recorded = (getattr(self.connection.device.recording, "metadata", {})
+        recorded = (getattr(self.connection.device.recording, "metadata", {})  # type: ignore[union-attr]
                     if is_replay(self.connection.device) else {})
         for note in (recorded_events_note(recorded), recorded_alarms_note(recorded)):
             if note:

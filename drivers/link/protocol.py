@@ -116,6 +116,9 @@ class Packet(Protocol):
 
     def payload(self) -> bytes: ...
 
+    @classmethod
+    def from_payload(cls, payload: bytes) -> Packet: ...
+
 
 def _exact_length(name: str, payload: bytes, expected: int) -> None:
     if len(payload) != expected:
@@ -413,7 +416,7 @@ class Status:
         values = _STATUS.unpack_from(payload)
         if values[0] == 0:
             raise PacketError("STATUS with status_version 0")
-        return cls(*values, extra=bytes(payload[_STATUS.size:]))
+        return cls(*values, extra=bytes(payload[_STATUS.size:]))  # type: ignore[misc]
 
     @property
     def reset_cause_text(self) -> str:
@@ -601,7 +604,7 @@ class GetStatus(_NoPayload):
     TYPE: ClassVar[int] = GET_STATUS
 
 
-PACKET_CLASSES: dict[int, type] = {
+PACKET_CLASSES: dict[int, type[Packet]] = {
     cls.TYPE: cls
     for cls in (Info, Config, Samples, Ack, SelfTestResult, Log, Pong, Status, SamplesIndexed,
                 Sensor, Hello, Configure, Start, Stop, SelfTest, Ping, GetStatus)

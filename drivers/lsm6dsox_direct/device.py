@@ -27,8 +27,7 @@ ranges are double: it reads half the acceleration).
 from __future__ import annotations
 
 import contextlib
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import ClassVar
 from urllib.parse import parse_qsl, urlsplit
 
@@ -50,6 +49,8 @@ from drivers.lsm6dsox_direct.driver import Lsm6dsoxDriver, SelfTestResult, Strea
 from drivers.lsm6dsox_direct.fifo import DecodedSamples
 from drivers.sim.error_model import unique_id_for_seed
 from drivers.sim.options import SimOptions, parse_sim_url
+from drivers.sim.options import options_for_url as sim_options_for_url
+from drivers.url_options import Option, parse_options, url_error
 
 BUSES = ("emulated", "mcp2221")
 DEFAULT_ODR_HZ = 104.0
@@ -57,12 +58,54 @@ DEFAULT_ACCEL_FS_G = 4
 DEFAULT_GYRO_FS_DPS = 250
 DEFAULT_ADDRESS = 0x6A
 DEFAULT_EMULATED_SCENARIO = "slow-tilt"
-COMMON_OPTIONS = ("odr", "accel_fs", "gyro_fs", "address")
-MCP2221_OPTIONS = ("serial", "index", "speed", "force")
-EMULATED_OWN_OPTIONS = ("scenario", "who_am_i", "selftest_fault", "fail_after", "part")
 _SIM_ONLY = ("realtime", "block")
-_TRUE = {"1", "true", "yes", "on"}
-_FALSE = {"0", "false", "no", "off"}
+
+
+def _address_problem(address: int) -> str | None:
+    return None if address in (0x6A, 0x6B) else "is not an LSM6DSOX address (0x6a or 0x6b)"
+
+
+def _part(text: str) -> str:
+    from drivers.lsm6dsox_direct.emulated_chip import PART_ACCEL_RANGE_FACTOR
+
+    part = text.upper()
+    if part not in PART_ACCEL_RANGE_FACTOR:
+        raise ValueError(f"use one of {', '.join(p.lower() for p in PART_ACCEL_RANGE_FACTOR)}")
+    return part
+
+
+COMMON_OPTIONS: tuple[Option, ...] = (
+    replace(lsm6dsox.ODR_OPTION, default=DEFAULT_ODR_HZ),
+    replace(lsm6dsox.ACCEL_FS_OPTION, default=DEFAULT_ACCEL_FS_G),
+    replace(lsm6dsox.GYRO_FS_OPTION, default=DEFAULT_GYRO_FS_DPS),
+    Option("address", "integer", DEFAULT_ADDRESS, minimum=0, maximum=0x7F,
+           check=_address_problem, help="I2C address: 0x6a (SA0 low) or 0x6b (107)"),
+)
+"""Options of every bus."""
+MCP2221_OPTIONS: tuple[Option, ...] = (
+    Option("serial", "text", None, help="mcp2221: the adapter's USB serial number"),
+    Option("index", "integer", 0, minimum=0, maximum=255,
+           help="mcp2221: which adapter, in enumeration order"),
+    Option("speed", "integer", mcp2221.DEFAULT_SPEED_HZ, unit="Hz", minimum=47_000,
+           maximum=400_000, field="speed_hz", help="mcp2221: I2C clock"),
+    Option("force", "flag", False,
+           help=f"mcp2221: 1 allows an odr above {mcp2221.MAX_ODR_HZ:g} Hz (expect gaps)"),
+)
+"""Options of ``lsm6dsox://mcp2221``."""
+EMULATED_OWN_OPTIONS: tuple[Option, ...] = (
+    Option("scenario", "text", DEFAULT_EMULATED_SCENARIO,
+           help="emulated: the simulator scenario (its options and seed, errors, noise, ... "
+                "as for sim://)"),
+    Option("who_am_i", "integer", lsm6dsox.WHO_AM_I_VALUE, minimum=0, maximum=0xFF,
+           help="emulated: the WHO_AM_I the chip answers (another part)"),
+    Option("selftest_fault", "flag", False, help="emulated: 1: the self-test changes nothing"),
+    Option("fail_after", "number", None, unit="s", positive=True, field="fail_after_s",
+           help="emulated: seconds after which the adapter is pulled"),
+    Option("part", "choice", "LSM6DSOX", choices=("lsm6dsox", "lsm6dso32"), parse=_part,
+           help="emulated: lsm6dso32 is a look-alike answering 0x6C whose accelerometer ranges "
+                "are double"),
+)
+"""Options of ``lsm6dsox://emulated`` beside the simulator's."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,131 +129,42 @@ class DirectOptions:
     """The emulated part (``EmulatedLsm6dsox.PART_ACCEL_RANGE_FACTOR``)."""
 
 
-def _fail(url: str, message: str) -> DeviceUrlError:
-    shown = url if len(url) <= 120 else f"{url[:120]}... ({len(url)} chars)"
-    return DeviceUrlError(f"{shown}: {message}")
-
-
-def _int(url: str, key: str, text: str, low: int, high: int) -> int:
-    try:
-        value = int(text, 0)
-    except ValueError:
-        raise _fail(url, f"{key}={text!r} is not a whole number (decimal or 0x..)") from None
-    if not low <= value <= high:
-        raise _fail(url, f"{key}={text!r} is out of range {low}..{high}")
-    return value
-
-
-def _flag(url: str, key: str, text: str) -> bool:
-    if text.lower() in _TRUE:
-        return True
-    if text.lower() in _FALSE:
-        return False
-    raise _fail(url, f"{key}={text!r}: use 1 or 0")
-
-
-def _positive(url: str, key: str, text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise _fail(url, f"{key}={text[:40]!r} is not a number") from None
-    if not math.isfinite(value) or value <= 0.0:
-        raise _fail(url, f"{key}={text[:40]!r} must be a positive number")
-    return value
-
-
 def parse_lsm6dsox_url(url: str, overrides: dict[str, object] | None = None) -> DirectOptions:
     """Validate an ``lsm6dsox://BUS?options`` URL (``overrides`` win over the query)."""
     parts = urlsplit(url)
     if parts.scheme.lower() != "lsm6dsox" or "://" not in url:
-        raise _fail(url, "not an lsm6dsox:// URL")
+        raise url_error(url, "not an lsm6dsox:// URL")
     bus = (parts.netloc + parts.path).strip("/").lower()
     if bus not in BUSES:
-        raise _fail(url, f"unknown bus {bus!r}; use lsm6dsox://emulated or lsm6dsox://mcp2221")
-    raw: dict[str, str] = {}
-    for key, value in parse_qsl(parts.query, keep_blank_values=True):
-        key = key.strip().lower()
-        if key in raw:
-            raise _fail(url, f"option {key!r} is given twice")
-        raw[key] = value.strip()
-    for key, value in (overrides or {}).items():
-        raw[key] = str(int(value)) if isinstance(value, bool) else str(value)
-    for key, value in raw.items():
-        if value == "":
-            raise _fail(url, f"option {key!r} needs a value ({key}=...)")
-
-    options: dict[str, object] = {"bus": bus}
-    if "odr" in raw:
-        odr = _positive(url, "odr", raw["odr"])
-        problem = lsm6dsox.odr_problem(odr)
-        if problem is not None:
-            raise _fail(url, f"odr={raw['odr'][:40]!r} {problem}")
-        options["odr_nominal_hz"] = lsm6dsox.odr_label_hz(odr)
-    if "accel_fs" in raw:
-        value = _int(url, "accel_fs", raw["accel_fs"], 0, 10**6)
-        if value not in lsm6dsox.FS_XL_CODES:
-            raise _fail(url, f"accel_fs={raw['accel_fs']!r}: use 2, 4, 8 or 16 (g)")
-        options["accel_fs_g"] = value
-    if "gyro_fs" in raw:
-        value = _int(url, "gyro_fs", raw["gyro_fs"], 0, 10**6)
-        if value not in lsm6dsox.FS_G_CODES:
-            raise _fail(url, f"gyro_fs={raw['gyro_fs']!r}: use 125, 250, 500, 1000 or 2000 (dps)")
-        options["gyro_fs_dps"] = value
-    if "address" in raw:
-        address = _int(url, "address", raw["address"], 0, 0x7F)
-        if address not in (0x6A, 0x6B):
-            raise _fail(url, f"address={raw['address']!r}: an LSM6DSOX is at 0x6a or 0x6b")
-        options["address"] = address
-
+        raise url_error(url, f"unknown bus {bus!r}; use lsm6dsox://emulated or "
+                             "lsm6dsox://mcp2221")
     if bus == "mcp2221":
-        allowed = (*COMMON_OPTIONS, *MCP2221_OPTIONS)
-        unknown = sorted(set(raw) - set(allowed))
-        if unknown:
-            raise _fail(url, f"unknown option {unknown[0]!r}; allowed: {', '.join(allowed)}")
-        if "serial" in raw:
-            options["serial"] = raw["serial"]
-        if "index" in raw:
-            options["index"] = _int(url, "index", raw["index"], 0, 255)
-        if "speed" in raw:
-            options["speed_hz"] = _int(url, "speed", raw["speed"], 47_000, 400_000)
-        if "force" in raw:
-            options["force"] = _flag(url, "force", raw["force"])
-        odr = float(options.get("odr_nominal_hz", DEFAULT_ODR_HZ))  # type: ignore[arg-type]
-        if odr > mcp2221.MAX_ODR_HZ and not options.get("force"):
-            raise _fail(
+        values = parse_options(url, parts.query, COMMON_OPTIONS + MCP2221_OPTIONS,
+                               overrides=overrides).values
+        odr = float(values.get("odr_nominal_hz", DEFAULT_ODR_HZ))  # type: ignore[arg-type]
+        if odr > mcp2221.MAX_ODR_HZ and not values.get("force"):
+            raise url_error(
                 url,
                 f"odr={odr:g} Hz is more than an MCP2221A can read (about 400 samples/s; "
                 f"use {mcp2221.MAX_ODR_HZ:g} Hz or less, or force=1 to try and see gaps)",
             )
-        return DirectOptions(**options)  # type: ignore[arg-type]
+        return DirectOptions(bus, **values)  # type: ignore[arg-type]
 
+    parsed = parse_options(url, parts.query, COMMON_OPTIONS + EMULATED_OWN_OPTIONS,
+                           overrides=overrides, keep_other=True)
+    sim_options = dict(parsed.other)  # the simulator's, checked by its own parser
     for key in _SIM_ONLY:
-        if key in raw:
-            raise _fail(url, f"option {key!r} is for sim:// only; the emulated chip is paced "
-                             "by the clock")
-    if "who_am_i" in raw:
-        options["who_am_i"] = _int(url, "who_am_i", raw.pop("who_am_i"), 0, 0xFF)
-    if "selftest_fault" in raw:
-        options["selftest_fault"] = _flag(url, "selftest_fault", raw.pop("selftest_fault"))
-    if "part" in raw:
-        from drivers.lsm6dsox_direct.emulated_chip import PART_ACCEL_RANGE_FACTOR
-
-        part = raw.pop("part").upper()
-        if part not in PART_ACCEL_RANGE_FACTOR:
-            raise _fail(url, f"part={part.lower()!r}: use one of "
-                             f"{', '.join(p.lower() for p in PART_ACCEL_RANGE_FACTOR)}")
-        options["part"] = part
-    if "fail_after" in raw:
-        options["fail_after_s"] = _positive(url, "fail_after", raw.pop("fail_after"))
-    scenario = raw.pop("scenario", DEFAULT_EMULATED_SCENARIO)
-    for key in COMMON_OPTIONS:
-        raw.pop(key, None)
+        if key in sim_options:
+            raise url_error(url, f"option {key!r} is for sim:// only; the emulated chip is "
+                                 "paced by the clock")
+    values = parsed.values
+    scenario = values.pop("scenario", DEFAULT_EMULATED_SCENARIO)
     try:
-        options["sim"] = parse_sim_url(f"sim://{scenario}", raw)
+        values["sim"] = parse_sim_url(f"sim://{scenario}", sim_options)
     except DeviceUrlError as exc:
-        raise _fail(url, f"{exc} (lsm6dsox://emulated also accepts "
-                         f"{', '.join((*COMMON_OPTIONS, *EMULATED_OWN_OPTIONS))})") from None
-    return DirectOptions(**options)  # type: ignore[arg-type]
+        accepted = ", ".join(o.name for o in COMMON_OPTIONS + EMULATED_OWN_OPTIONS)
+        raise url_error(url, f"{exc} (lsm6dsox://emulated also accepts {accepted})") from None
+    return DirectOptions(bus, **values)  # type: ignore[arg-type]
 
 
 class Lsm6dsoxDirectDevice(Device):
@@ -226,6 +180,24 @@ class Lsm6dsoxDirectDevice(Device):
     """
 
     scheme: ClassVar[str] = "lsm6dsox"
+    url_options: ClassVar[tuple[Option, ...]] = (
+        COMMON_OPTIONS + MCP2221_OPTIONS + EMULATED_OWN_OPTIONS
+    )
+
+    @classmethod
+    def options_for(cls, url: str = "") -> tuple[Option, ...]:
+        """A bus's options (the emulated chip's with its scenario's), or every bus's."""
+        parts = urlsplit(url)
+        bus = (parts.netloc + parts.path).strip("/").lower()
+        if bus == "mcp2221":
+            return COMMON_OPTIONS + MCP2221_OPTIONS
+        if bus != "emulated":
+            return cls.url_options
+        scenario = dict(parse_qsl(parts.query)).get("scenario", DEFAULT_EMULATED_SCENARIO)
+        own = COMMON_OPTIONS + EMULATED_OWN_OPTIONS
+        names = {option.name for option in own} | set(_SIM_ONLY)
+        return own + tuple(o for o in sim_options_for_url(f"sim://{scenario}")
+                           if o.name not in names)
 
     def __init__(self, url: str, *, bus: I2CBus | None = None, **overrides: object) -> None:
         super().__init__(url)

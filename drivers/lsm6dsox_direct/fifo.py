@@ -181,7 +181,7 @@ class FifoDecoder:
         if not np.all(keep):
             first_pending = int(np.argmin(keep))  # pending words are the trailing ones
             self._pending = np.ascontiguousarray(words[first_pending:]).tobytes()
-            words, tag, slot, cnt = (a[:first_pending] for a in (words, tag, slot, cnt))
+            words, tag, slot, cnt = (a[:first_pending] for a in (words, tag, slot, cnt))  # type: ignore[assignment]
             is_accel, is_gyro, is_ts, is_temp = (
                 a[:first_pending] for a in (is_accel, is_gyro, is_ts, is_temp)
             )

@@ -65,9 +65,10 @@ from drivers.sim.error_model import (
     unique_id_for_seed,
 )
 from drivers.sim.faults import SimulatedFaults
-from drivers.sim.options import SimOptions, parse_sim_url
+from drivers.sim.options import GENERAL_OPTIONS, SimOptions, options_for_url, parse_sim_url
 from drivers.sim.scenarios import SCENARIOS, Interactive, Scenario
 from drivers.sim.transient import apply_turn_on_transient
+from drivers.url_options import Option
 
 __all__ = ["SCENARIOS", "SimulatedDevice"]
 
@@ -100,6 +101,12 @@ class SimulatedDevice(Device):
     """
 
     scheme: ClassVar[str] = "sim"
+    url_options: ClassVar[tuple[Option, ...]] = GENERAL_OPTIONS
+
+    @classmethod
+    def options_for(cls, url: str = "") -> tuple[Option, ...]:
+        """The general options and those of the URL's scenario."""
+        return options_for_url(url)
 
     def __init__(
         self, url: str, *, clock: Callable[[], float] = time.monotonic, **overrides: object
@@ -246,7 +253,7 @@ class SimulatedDevice(Device):
             if entry is not None:
                 entry[1] -= 1
                 if entry[1] <= 0:
-                    del _SHARED_EPOCHS[key]
+                    del _SHARED_EPOCHS[key]  # type: ignore[arg-type]
 
     def _epoch_key(self) -> tuple[object, ...] | None:
         """What makes two realtime arm sensors one arm (None for other scenarios)."""

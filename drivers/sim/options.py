@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from urllib.parse import parse_qsl, urlsplit
+from dataclasses import dataclass, field, replace
+from urllib.parse import urlsplit
 
 from app.core.faults.injection import FaultSpec, parse_fault_spec
 from drivers import lsm6dsox
-from drivers.errors import DeviceUrlError
 from drivers.sim.scenarios import SCENARIOS, Param
+from drivers.url_options import Option, parse_options, url_error
 
 DEFAULT_SCENARIO = "interactive"
 """The scenario of a URL that names none (``sim://``, ``sim://?odr=52``)."""
@@ -24,32 +23,88 @@ MAX_BLOCK = 1_000_000
 MAX_CLOCK_OFFSET_S = 1e9
 """31 years: a float64 timestamp still resolves 0.1 us."""
 
-GENERAL_OPTIONS: dict[str, str] = {
-    "odr": "Hz, snapped to the nearest LSM6DSOX rate (12.5 ... 6667; 12.5 runs at 13.02)",
-    "accel_fs": "accelerometer full scale: 2, 4, 8 or 16 g (default 4, or what the motion needs)",
-    "gyro_fs": "gyroscope full scale: 125, 250, 500, 1000 or 2000 dps (default 250, or what the "
-               "motion needs)",
-    "seed": "integer >= 0 picking the simulated unit (its id and its errors)",
-    "realtime": "1: paced by the wall clock; 0: blocks as fast as possible",
-    "speed": "time-lapse factor for realtime pacing (0.1 ... 100; 1 = real time)",
-    "block": "samples per read when realtime=0",
-    "errors": "0: an ideal chip (no bias, scale, cross-axis, drift or clock error)",
-    "noise": "0: no white noise (quantisation stays)",
-    "settling": "1: the first samples after open (a configure) are the chip's turn-on transient, "
-                "as a board that does not discard them would send (default 0: discarded)",
-    "fail_after": "seconds of device time after which reads fail like an unplugged cable",
-    "warmup": "RISE[:TAU]: the die warms by RISE degC (0 ... 60) with time constant TAU s "
-              "(1 ... 36000, default 300) after power-up, instead of the unit's own 1.5-4 degC",
-    "clock_offset": "seconds added to every timestamp (a device clock started elsewhere)",
-    "clock_ppm": "parts per million the timestamps run fast (-10000 ... 10000; a drifting "
-                 "device clock, on top of the unit's own)",
-    "fault": "inject a fault, KIND:CHANNEL[:SIZE]@START[-END] (repeatable), KIND one of "
-             "noise, stuck, dead, spike, bias, scale; SIZE in g (ax..az) or dps (gx..gz)",
-}
-"""Options every scenario accepts, with a line of help each."""
 
-_TRUE = {"1", "true", "yes", "on"}
-_FALSE = {"0", "false", "no", "off"}
+def _warmup(text: str) -> tuple[float, float]:
+    rise_text, _, tau_text = text.partition(":")
+    try:
+        rise = float(rise_text)
+        tau = float(tau_text) if tau_text else DEFAULT_WARMUP_TAU_S
+    except ValueError:
+        raise ValueError("expected RISE[:TAU] in numbers") from None
+    if not 0.0 <= rise <= 60.0 or not 1.0 <= tau <= 36000.0:  # also NaN
+        raise ValueError("expected RISE[:TAU], RISE 0 ... 60 degC, TAU 1 ... 36000 s")
+    return rise, tau
+
+
+GENERAL_OPTIONS: tuple[Option, ...] = (
+    replace(lsm6dsox.ODR_OPTION, default=DEFAULT_ODR_HZ),
+    replace(lsm6dsox.ACCEL_FS_OPTION, default=DEFAULT_ACCEL_FS_G,
+            help="accelerometer full scale (default 4, or what the scenario's motion needs)"),
+    replace(lsm6dsox.GYRO_FS_OPTION, default=DEFAULT_GYRO_FS_DPS,
+            help="gyroscope full scale (default 250, or what the scenario's motion needs)"),
+    Option("seed", "integer", DEFAULT_SEED, minimum=0, maximum=2**63 - 1,
+           help="picks the simulated unit (its id and its errors)"),
+    Option("realtime", "flag", True, help="1: paced by the wall clock; 0: blocks as fast as "
+                                          "possible"),
+    Option("speed", "number", 1.0, minimum=0.1, maximum=100.0,
+           help="time-lapse factor for realtime pacing (1 = real time)"),
+    Option("block", "integer", DEFAULT_BLOCK, minimum=1, maximum=MAX_BLOCK,
+           help="samples per read when realtime=0"),
+    Option("errors", "flag", True,
+           help="0: an ideal chip (no bias, scale, cross-axis, drift or clock error)"),
+    Option("noise", "flag", True, help="0: no white noise (quantisation stays)"),
+    Option("settling", "flag", False,
+           help="1: the first samples after open (a configure) are the chip's turn-on "
+                "transient, as a board that does not discard them would send"),
+    Option("fail_after", "number", None, unit="s", positive=True, field="fail_after_s",
+           help="seconds of device time after which reads fail like an unplugged cable"),
+    Option("warmup", "text", None, parse=_warmup, metavar="RISE[:TAU]",
+           help="RISE[:TAU]: the die warms by RISE degC (0 ... 60) with time constant TAU s "
+                "(1 ... 36000, default 300) after power-up, instead of the unit's own "
+                "1.5-4 degC"),
+    Option("clock_offset", "number", 0.0, unit="s", minimum=-MAX_CLOCK_OFFSET_S,
+           maximum=MAX_CLOCK_OFFSET_S, field="clock_offset_s",
+           help="seconds added to every timestamp (a device clock started elsewhere; beyond "
+                "the range the timestamps lose the resolution of a sample period)"),
+    Option("clock_ppm", "number", 0.0, unit="ppm", minimum=-10000.0, maximum=10000.0,
+           help="parts per million the timestamps run fast (a drifting device clock, on top "
+                "of the unit's own)"),
+    Option("fault", "text", None, parse=parse_fault_spec, repeatable=True, field="faults",
+           metavar="KIND:CHANNEL[:SIZE]@START",
+           help="inject a fault, KIND:CHANNEL[:SIZE]@START[-END] (repeatable), KIND one of "
+                "noise, stuck, dead, spike, bias, scale; SIZE in g (ax..az) or dps (gx..gz)"),
+)
+"""Options every scenario accepts."""
+
+
+def scenario_name(url: str) -> str:
+    """The scenario a ``sim://`` URL names, normalised (``Slow_Tilt`` -> ``slow-tilt``);
+    ``sim://`` alone names the interactive simulator, as the app starts with."""
+    parts = urlsplit(url)
+    return (parts.netloc + parts.path).strip("/").lower().replace("_", "-") or DEFAULT_SCENARIO
+
+
+def options_for_url(url: str) -> tuple[Option, ...]:
+    """The options of a ``sim://`` URL's scenario (the general ones for no URL or an unknown
+    scenario)."""
+    name = scenario_name(url) if "://" in url else ""
+    return scenario_options(name) if name in SCENARIOS else GENERAL_OPTIONS
+
+
+def scenario_options(scenario: str) -> tuple[Option, ...]:
+    """The options of ``sim://SCENARIO``: :data:`GENERAL_OPTIONS` and the scenario's own."""
+    return GENERAL_OPTIONS + tuple(
+        _param_option(key, spec) for key, spec in SCENARIOS[scenario].parameters.items()
+    )
+
+
+def _param_option(name: str, spec: Param) -> Option:
+    """A scenario parameter as an option (its default's type is the option's)."""
+    if isinstance(spec.default, bool):
+        return Option(name, "flag", spec.default, help=spec.doc)
+    kind = "integer" if isinstance(spec.default, int) else "number"
+    return Option(name, kind, spec.default, minimum=spec.minimum, maximum=spec.maximum,
+                  help=spec.doc)
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,95 +135,6 @@ class SimOptions:
     """The timestamps run this many ppm fast (``clock_ppm``)."""
 
 
-def _fail(url: str, message: str) -> DeviceUrlError:
-    return DeviceUrlError(f"{_shown(url, 120)}: {message}")
-
-
-def _shown(text: str, limit: int = 40) -> str:
-    """``text`` quoted for a message, cut to ``limit`` characters (a 400-digit number)."""
-    return repr(text) if len(text) <= limit else repr(text[:limit]) + f"... ({len(text)} chars)"
-
-
-def _number(url: str, key: str, text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise _fail(url, f"{key}={_shown(text)} is not a number") from None
-    if not math.isfinite(value):
-        raise _fail(url, f"{key}={_shown(text)} is not a finite number")
-    return value
-
-
-def _integer(url: str, key: str, text: str, minimum: float, maximum: float) -> int:
-    value = _number(url, key, text)
-    if value != int(value) or not minimum <= value <= maximum:
-        raise _fail(url, f"{key}={text!r}: expected a whole number from {minimum:g} to {maximum:g}")
-    return int(value)
-
-
-def _choice(url: str, key: str, text: str, allowed: list[int], unit: str) -> int:
-    value = _number(url, key, text)
-    if value not in allowed:
-        choices = ", ".join(str(a) for a in allowed)
-        raise _fail(url, f"{key}={text!r} is not supported; use one of {choices} ({unit})")
-    return int(value)
-
-
-def _flag(url: str, key: str, text: str) -> bool:
-    word = text.lower()
-    if word in _TRUE:
-        return True
-    if word in _FALSE:
-        return False
-    raise _fail(url, f"{key}={text!r}: use 1 or 0 (also true/false, yes/no, on/off)")
-
-
-def _param(url: str, key: str, text: str, spec: Param) -> float | int | bool:
-    if isinstance(spec.default, bool):
-        return _flag(url, key, text)
-    if isinstance(spec.default, int):
-        return _integer(url, key, text, spec.minimum, spec.maximum)
-    value = _number(url, key, text)
-    if not spec.minimum <= value <= spec.maximum:
-        raise _fail(url, f"{key}={text!r} is out of range [{spec.minimum:g}, {spec.maximum:g}]")
-    return value
-
-
-def _warmup(url: str, text: str) -> tuple[float, float]:
-    rise_text, _, tau_text = text.partition(":")
-    rise = _number(url, "warmup", rise_text)
-    tau = _number(url, "warmup", tau_text) if tau_text else DEFAULT_WARMUP_TAU_S
-    if not 0.0 <= rise <= 60.0 or not 1.0 <= tau <= 36000.0:
-        raise _fail(url, f"warmup={text!r}: expected RISE[:TAU], RISE 0 ... 60 degC, "
-                         "TAU 1 ... 36000 s")
-    return rise, tau
-
-
-def _query(
-    url: str, query: str, overrides: Mapping[str, object], faults: list[str]
-) -> dict[str, str]:
-    raw: dict[str, str] = {}
-    for key, value in parse_qsl(query, keep_blank_values=True):
-        key = key.strip().lower()
-        if key == "fault":
-            if not value.strip():
-                raise _fail(url, "option 'fault' needs a value (fault=KIND:CHANNEL[:SIZE]@START)")
-            faults.append(value.strip())
-            continue
-        if key in raw:
-            raise _fail(url, f"option {key!r} is given twice")
-        raw[key] = value.strip()
-    for key, value in overrides.items():
-        if value is None:
-            raw.pop(key, None)
-        else:
-            raw[key] = str(int(value)) if isinstance(value, bool) else str(value)
-    for key, value in raw.items():
-        if value == "":
-            raise _fail(url, f"option {key!r} needs a value ({key}=...)")
-    return raw
-
-
 def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> SimOptions:
     """Validate a ``sim://`` URL; ``overrides`` (option name -> value) win over the query.
 
@@ -179,77 +145,19 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
     """
     parts = urlsplit(url)
     if parts.scheme.lower() != "sim" or "://" not in url:
-        raise _fail(url, "not a simulator URL; expected sim://SCENARIO?option=value&...")
-    name = (parts.netloc + parts.path).strip("/").lower().replace("_", "-")
-    if not name:  # sim:// alone: the interactive simulator, as the app starts with
-        name = DEFAULT_SCENARIO
+        raise url_error(url, "not a simulator URL; expected sim://SCENARIO?option=value&...")
+    name = scenario_name(url)
     if name not in SCENARIOS:
         names = ", ".join(SCENARIOS)
-        raise _fail(url, f"unknown simulator scenario {name!r}; choose one of: {names}")
-    spec = SCENARIOS[name].parameters
-    fault_texts: list[str] = []
-    raw = _query(url, parts.query, overrides or {}, fault_texts)
-    unknown = sorted(set(raw) - set(GENERAL_OPTIONS) - set(spec))
-    if unknown:
-        allowed = ", ".join([*GENERAL_OPTIONS, *spec])
-        raise _fail(url, f"unknown option {unknown[0]!r} for sim://{name}; allowed: {allowed}")
-
-    options: dict[str, object] = {"scenario": name}
-    if "odr" in raw:
-        odr = _number(url, "odr", raw["odr"])
-        problem = lsm6dsox.odr_problem(odr)
-        if problem is not None:
-            raise _fail(url, f"odr={_shown(raw['odr'])} {problem}")
-        options["odr_nominal_hz"] = lsm6dsox.odr_label_hz(odr)
-    if "accel_fs" in raw:
-        allowed = sorted(lsm6dsox.ACCEL_MG_PER_LSB)
-        options["accel_fs_g"] = _choice(url, "accel_fs", raw["accel_fs"], allowed, "g")
-    elif SCENARIOS[name].accel_fs_g is not None:  # what the scenario's motion needs
-        options["accel_fs_g"] = SCENARIOS[name].accel_fs_g
-    if "gyro_fs" in raw:
-        allowed = sorted(lsm6dsox.GYRO_MDPS_PER_LSB)
-        options["gyro_fs_dps"] = _choice(url, "gyro_fs", raw["gyro_fs"], allowed, "dps")
-    elif SCENARIOS[name].gyro_fs_dps is not None:
-        options["gyro_fs_dps"] = SCENARIOS[name].gyro_fs_dps
-    if "seed" in raw:
-        options["seed"] = _integer(url, "seed", raw["seed"], 0, 2**63 - 1)
-    if "speed" in raw:
-        speed = _number(url, "speed", raw["speed"])
-        if not 0.1 <= speed <= 100.0:
-            raise _fail(url, f"speed={raw['speed']!r} is out of range [0.1, 100]")
-        options["speed"] = speed
-    if "block" in raw:
-        options["block"] = _integer(url, "block", raw["block"], 1, MAX_BLOCK)
-    for key in ("realtime", "errors", "noise", "settling"):
-        if key in raw:
-            options[key] = _flag(url, key, raw[key])
-    if "fail_after" in raw:
-        seconds = _number(url, "fail_after", raw["fail_after"])
-        if seconds <= 0.0:
-            raise _fail(url, f"fail_after={raw['fail_after']!r} must be a positive time in s")
-        options["fail_after_s"] = seconds
-    if "warmup" in raw:
-        options["warmup"] = _warmup(url, raw["warmup"])
-    if "clock_offset" in raw:
-        offset = _number(url, "clock_offset", raw["clock_offset"])
-        if not -MAX_CLOCK_OFFSET_S <= offset <= MAX_CLOCK_OFFSET_S:
-            raise _fail(url, f"clock_offset={_shown(raw['clock_offset'])} is out of range "
-                             f"[-{MAX_CLOCK_OFFSET_S:g}, {MAX_CLOCK_OFFSET_S:g}] s (beyond it "
-                             "the timestamps lose the resolution of a sample period)")
-        options["clock_offset_s"] = offset
-    if "clock_ppm" in raw:
-        ppm = _number(url, "clock_ppm", raw["clock_ppm"])
-        if not -10000.0 <= ppm <= 10000.0:
-            raise _fail(url, f"clock_ppm={raw['clock_ppm']!r} is out of range [-10000, 10000]")
-        options["clock_ppm"] = ppm
-    options["scenario_params"] = {
-        key: _param(url, key, raw[key], spec[key]) for key in spec if key in raw
-    }
-    faults = []
-    for text in fault_texts:
-        try:
-            faults.append(parse_fault_spec(text))
-        except ValueError as exc:
-            raise _fail(url, str(exc)) from None
-    options["faults"] = tuple(faults)
-    return SimOptions(**options)  # type: ignore[arg-type]
+        raise url_error(url, f"unknown simulator scenario {name!r}; choose one of: {names}")
+    scenario = SCENARIOS[name]
+    parsed = parse_options(url, parts.query, scenario_options(name), overrides=overrides,
+                           context=f" for sim://{name}")
+    values = parsed.values
+    params = {key: values.pop(key) for key in scenario.parameters if key in values}
+    if "accel_fs_g" not in values and scenario.accel_fs_g is not None:  # what the motion needs
+        values["accel_fs_g"] = scenario.accel_fs_g
+    if "gyro_fs_dps" not in values and scenario.gyro_fs_dps is not None:
+        values["gyro_fs_dps"] = scenario.gyro_fs_dps
+    faults = tuple(parsed.repeated.get("faults", ()))
+    return SimOptions(name, scenario_params=params, faults=faults, **values)  # type: ignore[arg-type]

@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
+import numpy.typing as npt
 
 from app.core import quaternion as quat
 from app.core.orientation import quaternion_from_roll_pitch
@@ -346,7 +347,7 @@ class HandMotion:
         vigour[0] = self.VIGOUR * math.sqrt(2.0 / 3.0)
         self.vigour = MultiSine(
             vigour,
-            np.exp(rng.uniform(*np.log(self.VIGOUR_BAND_HZ), size=(3, 3))),
+            np.exp(rng.uniform(*np.log(self.VIGOUR_BAND_HZ), size=(3, 3))),  # type: ignore[call-overload]
             rng.uniform(0.0, _TWO_PI, size=(3, 3)),
             precise=True,
         )
@@ -607,7 +608,7 @@ class Strokes(Scenario):
         return Motion(_repeat(self.base_quat, n), np.zeros((n, 3)), lin)
 
 
-def _between(slow: np.ndarray | float, fast: np.ndarray | float, level: float) -> np.ndarray:
+def _between(slow: npt.ArrayLike, fast: npt.ArrayLike, level: float) -> np.ndarray:
     """Geometric interpolation: ``slow`` at level 0, ``fast`` at level 1."""
     slow = np.asarray(slow, dtype=np.float64)
     return slow * (np.asarray(fast, dtype=np.float64) / slow) ** level

@@ -123,12 +123,18 @@ def _guess_time_unit(times: np.ndarray, arrivals: np.ndarray) -> str:
 class LayoutOptions(Protocol):
     """What :func:`decide_layout` reads of a ``text://`` URL's options."""
 
-    port: str
-    columns: tuple[str, ...] | None
-    accel_unit: str | None
-    gyro_unit: str | None
-    time_unit: str | None
-    time_col: str | None
+    @property
+    def port(self) -> str: ...
+    @property
+    def columns(self) -> tuple[str, ...] | None: ...
+    @property
+    def accel_unit(self) -> str | None: ...
+    @property
+    def gyro_unit(self) -> str | None: ...
+    @property
+    def time_unit(self) -> str | None: ...
+    @property
+    def time_col(self) -> str | None: ...
 
 
 def decide_layout(

@@ -58,13 +58,13 @@ class Timeline:
         missing = ~np.isfinite(steps)
         restarted = ~missing & (steps < 0)  # the sketch restarted: time went back
         steps[missing | restarted] = self.period_s
-        first_ever = self.last_t_s is None
-        if first_ever:
+        last_t_s = self.last_t_s
+        if last_t_s is None:
             steps[0] = 0.0
-        t = (0.0 if first_ever else self.last_t_s) + np.cumsum(steps)
-        if not first_ever or len(t) > 1:  # equal stamps (printing faster than the clock ticks)
+        t = (0.0 if last_t_s is None else last_t_s) + np.cumsum(steps)
+        if last_t_s is not None or len(t) > 1:  # equal stamps (printing faster than the clock)
             ramp = np.arange(len(t)) * self.MIN_STEP_S
-            floor = -math.inf if first_ever else self.last_t_s + self.MIN_STEP_S
+            floor = -math.inf if last_t_s is None else last_t_s + self.MIN_STEP_S
             t = np.maximum.accumulate(np.maximum(t, floor) - ramp) + ramp
         finite = raw_s[np.isfinite(raw_s)]
         if len(finite):

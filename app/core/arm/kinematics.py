@@ -151,6 +151,7 @@ def joint_angles_from_gravity(
             usable = False  # the next joint's reference is this link's modelled up
         elif usable:
             # u_i = Rot(axis, -theta) u_{i-1}: theta is the angle from u_i to u_{i-1} about axis.
+            assert measured is not None  # usable says so
             cross = np.cross(measured, up_previous)
             along = measured - axis * (axis @ measured)
             previous = up_previous - axis * (axis @ up_previous)
@@ -158,9 +159,9 @@ def joint_angles_from_gravity(
             angles[i] = _wrap_deg(theta - link.offset_deg)
             observed[i] = True
         else:
-            angles[i] = 0.0 if known[i] is None else float(known[i])
-        frame = frame @ rotation_matrix(axis, np.radians(link.offset_deg + angles[i]))
-        up_previous = measured / np.linalg.norm(measured) if usable else frame.T @ _UP
+            angles[i] = 0.0 if known[i] is None else float(known[i])  # type: ignore[arg-type]
+        frame = frame @ rotation_matrix(axis, np.radians(link.offset_deg + angles[i]))  # type: ignore[arg-type]
+        up_previous = measured / np.linalg.norm(measured) if usable else frame.T @ _UP  # type: ignore[operator, arg-type]
     return angles, observed
 
 
@@ -196,4 +197,4 @@ def pose_from_link_quaternions(
     ]
     angles, observed = joint_angles_from_gravity(layout, ups, known_deg,
                                                  measured_deg=measured_deg)
-    return forward(layout, angles), observed
+    return forward(layout, angles), observed  # type: ignore[arg-type]

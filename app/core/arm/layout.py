@@ -45,7 +45,7 @@ def _unit_vector(value, what: str) -> tuple[float, float, float]:
     norm = float(np.linalg.norm(vector))
     if not np.all(np.isfinite(vector)) or norm < 1e-9:
         raise ArmLayoutError(f"{what} must be a finite, non-zero vector, got {value!r}")
-    return tuple(float(v) for v in vector / norm)
+    return tuple(float(v) for v in vector / norm)  # type: ignore[return-value]
 
 
 @dataclass(frozen=True, slots=True)

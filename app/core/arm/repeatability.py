@@ -74,7 +74,7 @@ class Placements:
         if not self._points:
             return np.empty((0, len(COORDINATES)))
         points = np.array(self._points)
-        return np.column_stack([points, cylindrical(points, self.base)])
+        return np.column_stack([points, cylindrical(points, self.base)])  # type: ignore[arg-type]
 
     def statistics(self) -> dict[str, CoordinateStats]:
         """Per coordinate: n, mean, SD (n - 1), min, max. Empty without placements."""

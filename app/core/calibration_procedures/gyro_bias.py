@@ -98,7 +98,7 @@ def gyro_bias_from_samples(
         batch = np.full(3, np.nan)
         std_error = white
     no_temperature = temp_degc is None or len(temp_degc) == 0
-    temperature = math.nan if no_temperature else float(np.mean(temp_degc))
+    temperature = math.nan if no_temperature else float(np.mean(temp_degc))  # type: ignore[arg-type]
     return GyroBiasResult(
         bias_rad_s=bias,
         std_error_rad_s=std_error,

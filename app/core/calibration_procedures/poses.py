@@ -359,7 +359,7 @@ class PoseCapture:
                 sl = slice(start, start + take)
                 ref = None if block.reference_quat is None else block.reference_quat[sl]
                 self._parts.append(
-                    (t[sl], block.accel_m_s2[sl], block.gyro_rad_s[sl], block.temp_degc[sl], ref)
+                    (t[sl], block.accel_m_s2[sl], block.gyro_rad_s[sl], block.temp_degc[sl], ref)  # type: ignore[arg-type]
                 )
                 self._count += take
                 if self._count >= self.samples_needed:
@@ -464,7 +464,7 @@ class PoseCapture:
 
     def _drop_tilted(self, time_s: float) -> list[CaptureEvent]:
         """Remove earlier poses found too far off their axis now that more offsets are known."""
-        events = []
+        events: list[CaptureEvent] = []
         while True:
             tilts = face_tilts(self.poses)
             worst = max(range(len(tilts)), key=lambda i: tilts[i].tilt_deg - tilts[i].limit_deg,

@@ -340,7 +340,7 @@ def fit_temperature(
     starts = np.flatnonzero(np.diff(np.concatenate([[-1], sorted_keys])))
     stops = np.append(starts[1:], len(sorted_keys))
     bin_temp, bin_pose, bin_count, bin_gyro, bin_accel = [], [], [], [], []
-    for a, b in zip(starts, stops, strict=True):
+    for a, b in zip(starts, stops, strict=True):  # type: ignore[assignment]
         if b - a < min_bin:
             continue
         rows = still_index[order[a:b]]

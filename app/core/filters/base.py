@@ -17,6 +17,7 @@ import numpy as np
 
 from app.core.orientation import TiltAngles, angles_from_quaternion
 from app.core.samples import SampleBlock
+from app.core.words import flag_word
 
 MAX_STEP_S = 0.5
 """A time step longer than this (or a marked gap) restarts integration from the accelerometer."""
@@ -51,11 +52,9 @@ class ParameterSpec:
         """Return ``value`` converted to this parameter's type; raise ValueError when invalid."""
         if self.kind == "bool":
             if isinstance(value, str):  # "false" from a settings file or a command line
-                word = value.strip().lower()
-                if word in ("1", "true", "yes", "on"):
-                    return True
-                if word in ("0", "false", "no", "off", ""):
-                    return False
+                flag = flag_word(value) if value.strip() else False
+                if flag is not None:
+                    return flag
                 raise ValueError(f"{self.label}: {value!r} is not true or false")
             return bool(value)
         try:

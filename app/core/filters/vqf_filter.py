@@ -241,7 +241,7 @@ class VQFFilter(OrientationFilter):
                 self._vqf.updateBatch(gyro0, accel0)
             elif self._vqf is None:  # reset(initial_quat) asked to continue from a quaternion
                 self._start(ts, self._quat, None)
-            elif abs(ts / self._ts - 1.0) > RATE_TOLERANCE:
+            elif abs(ts / self._ts - 1.0) > RATE_TOLERANCE:  # type: ignore[operator]
                 self._start(ts, np.asarray(self._vqf.getQuat6D()), self._bias_state())
             pieces.append(self._vqf.updateBatch(gyro[start:stop], accel[start:stop])["quat6D"])
         return pieces[0] if len(pieces) == 1 else np.concatenate(pieces)

@@ -24,7 +24,7 @@ import os
 import queue
 import threading
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Generator, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO, TypeVar, overload
@@ -151,8 +151,10 @@ class RecordingStream:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def chunks(self, offset: int | None = None, first_row: int = 0,
-               line: int | None = None, max_bytes: int | None = None) -> Iterator[Chunk]:
+    def chunks(
+        self, offset: int | None = None, first_row: int = 0, line: int | None = None,
+        max_bytes: int | None = None,
+    ) -> Generator[Chunk, None, None]:
         """The rows from the body's start, or from a line start at ``offset`` (decompressed
         bytes, as :attr:`Chunk.offset` gives; ``first_row`` and ``line`` then say which row
         and line that is). Warns (:class:`RecordingWarning`) for an incomplete last row.
@@ -437,7 +439,7 @@ def _device_blocks(chunks: Iterator[Chunk], size: int | None,
         rows = chunk.rows
         n = len(rows)
         if size is None and "block_start" in rows.columns:
-            starts = np.flatnonzero(rows.block_start).tolist()
+            starts = np.flatnonzero(rows.block_start).tolist()  # type: ignore[arg-type]
         else:
             step = size or 65536
             starts = list(range((-chunk.first_row) % step, n, step))

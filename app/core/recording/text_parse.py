@@ -230,7 +230,7 @@ def parse_head(data: Buffer, path: Path | None) -> RecordingHead:
     first = data[position: first_end if first_end >= 0 else len(data)].rstrip(b"\r")
     magic = f"# {MAGIC}".encode()
     if not first.startswith(magic):
-        shown = "the file is empty" if not data else f"its first line is {_describe(first)}"
+        shown = "the file is empty" if not data else f"its first line is {_describe(first)}"  # type: ignore[arg-type]
         raise NotARecordingError(
             f"{where}not an inclinometer recording: {shown}, expected "
             f"'# {MAGIC} {FORMAT_VERSION}'", path)

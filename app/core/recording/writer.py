@@ -74,7 +74,7 @@ Opener = Callable[[Path, str], BinaryIO]
 
 
 def _open_unbuffered(path: Path, mode: str) -> BinaryIO:
-    return open(path, mode, buffering=0)
+    return open(path, mode, buffering=0)  # type: ignore[return-value]
 
 
 @dataclass(frozen=True, slots=True)
