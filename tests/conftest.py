@@ -97,8 +97,10 @@ def pytest_runtest_teardown(item, nextitem):
     QCoreApplication.sendPostedEvents(None, QEvent.Type.DeferredDelete)
     # pyqtgraph gives every plot's and view box's context menus no parent, so Qt does not
     # delete them with their plot; they live as long as a Python reference to the plot does.
-    from PySide6.QtWidgets import QMenu
+    from PySide6.QtWidgets import QApplication, QMenu
 
+    if not isinstance(app, QApplication):  # a Qt-core or Qt-GUI application has no widgets
+        return
     for widget in app.topLevelWidgets():
         if isinstance(widget, QMenu) and widget.parent() is None and not widget.isVisible():
             widget.deleteLater()
