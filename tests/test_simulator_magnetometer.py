@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from app.core import quaternion as quat
+from app.core.calibration import MagnetometerCalibration
 from app.core.earth_field import DEFAULT_PLACE, Place, earth_field
 from app.core.orientation import quaternion_from_roll_pitch, up_in_sensor_frame
 from app.core.recording.format import simulator_metadata
@@ -172,3 +173,198 @@ def test_url_options_are_checked() -> None:
         assert all(word in message for word in words), message
     assert SimulatedDevice("sim://magtour").mag_chip is LIS3MDL  # the tour's default
     assert SimulatedDevice("sim://magtour?mag=none").mag_chip is None
+
+
+# -- the unit's errors -----------------------------------------------------------------------
+def true_sensor_field(device: SimulatedDevice, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows carrying a field sample among the first ``n`` and the true sensor-frame field there
+    (the WMM and disturbances turned by the true orientation at each sample's own time)."""
+    magnetometer = device.magnetometer
+    assert magnetometer is not None and device.earth_field is not None
+    t_true, rows = magnetometer.samples_for_rows(0, n, device.true_odr_hz)
+    earth = magnetometer.world.field_ut(device.device_time(t_true))
+    return rows, quat.rotate_inverse(device.scenario.orientation(t_true), earth)
+
+
+def test_the_truths_calibration_recovers_the_field_exactly() -> None:
+    device, block = stream(f"sim://magtour?seed=11&noise=0&date={DATE}", 6000)
+    rows, truth = true_sensor_field(device, len(block))
+    measured = block.mag_ut[rows]
+    errors = device.unit_errors.magnetometer
+    assert errors is not None
+    # The forward model: counts are the errors applied to the truth, rounded to the LSB.
+    lsb = LIS3MDL.ut_per_lsb
+    assert np.array_equal(np.rint(errors.apply(truth) / lsb), np.rint(measured / lsb))
+    # The unit is realistic: tens of uT of hard iron, a few % of soft iron, a 1-2 degree turn.
+    assert 5.0 < np.max(np.abs(errors.hard_iron_ut)) <= 40.0
+    assert 0.0 < np.max(np.abs(errors.soft_iron - np.eye(3))) <= 0.05
+    assert np.allclose(errors.soft_iron, errors.soft_iron.T)
+    assert np.allclose(errors.alignment @ errors.alignment.T, np.eye(3), atol=1e-12)
+    turn = math.degrees(math.acos((np.trace(errors.alignment) - 1.0) / 2.0))
+    assert 1.0 <= turn <= 2.0 and turn == pytest.approx(errors.alignment_deg)
+    # The truth as the recording's metadata carries it, in the binding calibrate-mag form.
+    unit = simulator_metadata(device)["simulator"]["unit_errors"]
+    assert np.allclose(unit["mag_hard_iron_ut"], errors.hard_iron_ut)
+    assert np.allclose(unit["mag_soft_iron"], errors.soft_iron)
+    assert np.allclose(unit["mag_alignment"], errors.alignment)
+    calibration = MagnetometerCalibration.from_json(unit["mag_calibration"])
+    recovered = calibration.apply(measured)
+    # Exact to the LSB: the quantisation (half an LSB per axis) through the inverse matrix.
+    bound = 0.5 * lsb * np.abs(calibration.soft_iron).sum(axis=1) + 1e-9
+    assert np.all(np.abs(recovered - truth) <= bound)
+    # Uncalibrated, the field is far off (the test could fail).
+    assert np.max(np.linalg.norm(measured - truth, axis=1)) > 10.0
+
+
+def test_errors_off_gives_an_ideal_magnetometer_with_the_datasheet_noise() -> None:
+    device, block = stream(f"sim://static?mag=lis3mdl&errors=0&date={DATE}", 8000)
+    errors = device.unit_errors.magnetometer
+    assert errors is not None and not np.any(errors.hard_iron_ut)
+    assert np.array_equal(errors.matrix, np.eye(3)) and errors.odr_error == 0.0
+    wmm = earth_field(DEFAULT_PLACE, dt.date.fromisoformat(DATE)).enu_magnetic_ut()
+    mag = block.mag_ut[field_rows(block)]
+    noise = mag.std(axis=0)
+    assert np.allclose(mag.mean(axis=0), wmm, atol=0.05)
+    # RMS per axis as the datasheet's (LIS3MDL ultra-high-performance: 3.2, 3.2, 4.1 mgauss).
+    assert np.allclose(noise, LIS3MDL.noise_ut, rtol=0.08)
+
+
+# -- disturbances ----------------------------------------------------------------------------
+def disturbed(url: str, seconds: float) -> tuple[SimulatedDevice, np.ndarray, np.ndarray,
+                                                 np.ndarray, np.ndarray]:
+    """An ideal static chip with disturbances: sample times (device clock), measured field,
+    the undisturbed field (sensor frame) and the disturbances' truth."""
+    device, block = stream(url, int(seconds * 104))
+    assert device.magnetometer is not None and device.earth_field is not None
+    t_true, rows = device.magnetometer.samples_for_rows(0, len(block), device.true_odr_hz)
+    q = device.scenario.orientation(t_true)
+    calm = quat.rotate_inverse(q, device.earth_field.enu_magnetic_ut())
+    return device, device.device_time(t_true), block.mag_ut[rows], calm, q
+
+
+def test_a_passing_magnet_rises_and_falls_inside_its_window() -> None:
+    url = (f"sim://static?mag=lis3mdl&errors=0&noise=0&date={DATE}&roll=20&yaw=70"
+           "&magdist=magnet:200@4-8")
+    device, t, mag, calm, q = disturbed(url, 12)
+    extra = np.linalg.norm(mag - calm, axis=1)
+    truth = simulator_metadata(device)["simulator"]["mag_disturbances"]
+    assert [d["kind"] for d in truth] == ["magnet"]
+    magnet = truth[0]
+    assert (magnet["start_s"], magnet["end_s"], magnet["closest_s"]) == (4.0, 8.0, 6.0)
+    # The dipole's field from the truth's geometry, computed here.
+    r = -(np.asarray(magnet["closest_m"]) + (t - 6.0)[:, None] * np.asarray(
+        magnet["velocity_m_s"]))
+    dist = np.linalg.norm(r, axis=1, keepdims=True)
+    m = np.asarray(magnet["moment_a_m2"])
+    dipole = 1e-7 * (3.0 * r * (r @ m)[:, None] / dist**2 - m) / dist**3 * 1e6
+    assert np.max(np.abs(mag - calm - quat.rotate_inverse(q, dipole))) < 0.02
+    near = np.abs(t - 6.0) < 0.02
+    assert np.all(extra[near] > 100.0) and extra.max() == pytest.approx(200.0, abs=2.0)
+    assert np.all(extra[(t < 4.0) | (t > 8.0)] <= 200.0 / 25)  # 1/25 of it at the edges
+    assert np.all(extra[(t < 3.0) | (t > 9.0)] < 1.5)  # and falling as 1/r^3
+    inside = (t > 5.0) & (t < 7.0)
+    assert np.all(extra[inside] > 20.0)
+
+
+def test_a_steel_desk_distorts_the_field_while_the_board_lies_on_it() -> None:
+    url = (f"sim://static?mag=lis2mdl&errors=0&noise=0&date={DATE}&pitch=10"
+           "&magdist=desk:40@3-9")
+    device, t, mag, calm, q = disturbed(url, 12)
+    desk = simulator_metadata(device)["simulator"]["mag_disturbances"][0]
+    extra = quat.rotate_inverse(q, np.asarray(desk["extra_ut"]))
+    earth = device.earth_field.enu_magnetic_ut()
+    assert np.allclose(desk["extra_ut"], np.asarray(desk["distortion"]) @ earth
+                       + np.asarray(desk["offset_ut"]))
+    assert np.linalg.norm(desk["offset_ut"]) == pytest.approx(40.0)
+    half = 0.5 * LIS2MDL.ut_per_lsb + 1e-9
+    on = (t >= 4.0) & (t < 8.0)
+    off = (t < 3.0) | (t >= 9.0)
+    assert np.all(np.abs(mag[on] - calm[on] - extra[on]) <= half)
+    assert np.all(np.abs(mag[off] - calm[off]) <= half)
+    ramp = (t > 3.0) & (t < 4.0)
+    size = np.linalg.norm(mag[ramp] - calm[ramp], axis=1)
+    assert np.all(np.diff(size) > -2 * half)  # it comes in smoothly
+
+
+def test_a_running_motor_adds_its_ac_field_and_offset() -> None:
+    url = (f"sim://static?mag=lis3mdl&errors=0&noise=0&date={DATE}"
+           "&magdist=motor:6:60@2")
+    device, t, mag, calm, q = disturbed(url, 6)
+    motor = simulator_metadata(device)["simulator"]["mag_disturbances"][0]
+    assert motor["end_s"] is None and motor["frequency_hz"] == 60.0
+    wave = np.sin(2 * np.pi * 60.0 * t + motor["phase_rad"])[:, None]
+    field_ = np.asarray(motor["offset_ut"]) + 6.0 * wave * np.asarray(motor["direction"])
+    expected = np.where((t >= 2.0)[:, None], quat.rotate_inverse(q, field_), 0.0)
+    assert np.max(np.abs(mag - calm - expected)) <= 0.5 * LIS3MDL.ut_per_lsb * 3
+    running = t > 2.0
+    along = quat.rotate_inverse(q[running], np.asarray(motor["direction"]))
+    ac = mag[running] - calm[running] - quat.rotate_inverse(q[running], motor["offset_ut"])
+    assert np.sqrt(np.mean(np.sum(ac * along, axis=1) ** 2)) == pytest.approx(
+        6.0 / math.sqrt(2.0), rel=0.05)
+    assert np.max(np.abs(mag[t < 2.0] - calm[t < 2.0])) <= 0.5 * LIS3MDL.ut_per_lsb + 1e-9
+
+
+def test_disturbance_specs_are_checked() -> None:
+    for text, words in [
+        ("magnet", ["@START"]), ("lamp@3", ["unknown kind", "magnet, desk, motor"]),
+        ("desk:0", ["SIZE"]), ("magnet@5-4", ["END"]), ("desk:1:2", ["FREQ"]),
+        ("motor@x", ["START", "not a number"]), ("desk,,motor", ["empty"]),
+    ]:
+        with pytest.raises(DeviceUrlError) as caught:
+            SimulatedDevice(f"sim://static?mag=lis3mdl&magdist={text}")
+        assert all(word in str(caught.value) for word in words), str(caught.value)
+
+
+# -- faults ------------------------------------------------------------------------------------
+def test_faults_on_the_magnetometers_channels() -> None:
+    device, block = stream(f"sim://wobble?mag=lis3mdl&date={DATE}&fault=stuck:mx@2"
+                           "&fault=bias:mz:50@3-4", 600)
+    rows = field_rows(block)
+    t, mag = block.t_s[rows], block.mag_ut[rows]
+    stuck = mag[t >= 2.0, 0]
+    assert len(stuck) > 200 and np.all(stuck == stuck[0])
+    assert len(np.unique(mag[t < 2.0, 0])) > 20
+    _, clean = stream(f"sim://wobble?mag=lis3mdl&date={DATE}", 600)
+    step = mag[:, 2] - clean.mag_ut[rows][:, 2]
+    assert np.allclose(step[(t >= 3.0) & (t < 4.0)], 50.0, atol=LIS3MDL.ut_per_lsb)
+    assert np.all(step[(t < 3.0) | (t >= 4.0)] == 0.0)
+    assert np.array_equal(block.accel_m_s2, clean.accel_m_s2)  # the other chip is untouched
+    assert device.injected_faults[0]["unit"] is None and device.injected_faults[1]["unit"] == "uT"
+    with pytest.raises(DeviceUrlError, match=r"mx\.\.mz need a magnetometer"):
+        SimulatedDevice("sim://wobble?fault=stuck:mx@2")
+
+
+# -- the calibration tour ----------------------------------------------------------------------
+def test_the_magtour_turns_the_field_through_every_direction() -> None:
+    device = SimulatedDevice("sim://magtour?seed=5&errors=0&noise=0", realtime=False)
+    scenario = device.scenario
+    t = np.arange(0.0, scenario.round_s, 0.05)
+    b = quat.rotate_inverse(scenario.orientation(t), device.earth_field.enu_magnetic_ut())
+    b /= np.linalg.norm(b, axis=1, keepdims=True)
+    k = np.arange(200) + 0.5
+    z = 1.0 - 2.0 * k / 200
+    ring = np.sqrt(1.0 - z * z)
+    angle = np.pi * (1.0 + 5.0**0.5) * k
+    directions = np.stack([ring * np.cos(angle), ring * np.sin(angle), z], axis=1)
+    nearest = np.degrees(np.arccos(np.clip((directions @ b.T).max(axis=1), -1.0, 1.0)))
+    assert nearest.max() < 35.0 and np.median(nearest) < 10.0
+    # It turns within the gyroscope's range and comes back to its start after a round.
+    assert np.degrees(np.abs(scenario.angular_rate(t)).max()) < 200.0
+    assert quat.angle_between(scenario.orientation(np.array([0.0]))[0],
+                              scenario.orientation(np.array([scenario.round_s]))[0]) < 1e-6
+    other = SimulatedDevice("sim://magtour?seed=6", realtime=False).scenario
+    assert not np.allclose(other.orientation(t[:50]), scenario.orientation(t[:50]))
+
+
+def test_blocks_cut_by_the_recorder_and_diagnose_keep_the_field() -> None:
+    """A duration-limited recording (and diagnose) cut their last block: the field stays."""
+    from app.services.diagnosis import _head
+    from app.services.recorder import _cut
+
+    device = SimulatedDevice("sim://magtour?realtime=0&block=300")
+    device.open()
+    raw = device.read(0.0)
+    assert raw is not None and raw.mag_raw is not None
+    for cut in (_cut(raw, 123), _head(raw, 123)):
+        assert cut.mag_raw is not None and len(cut) == 123
+        assert np.array_equal(cut.mag_raw, raw.mag_raw[:123], equal_nan=True)

@@ -92,8 +92,9 @@ _RAMP_S = 1.0
 
 # -- disturbances ----------------------------------------------------------------------------
 DISTURBANCE_KINDS: dict[str, str] = {
-    "magnet": "a magnet carried past, peak SIZE uT (default 150) at the window's middle; "
-              "needs @START, END default START + 4 s",
+    "magnet": "a magnet carried past, closest at the window's middle, its field up to SIZE "
+              "uT (default 150), at most 1/25 of that at the window's edges; needs @START, END "
+              "default START + 4 s",
     "desk": "a steel desk: the field distorted (about 15 %) and SIZE uT (default 30) added, "
             "fixed in the room; without @ the whole time; ramps over 1 s at either end",
     "motor": "a running motor nearby: SIZE uT (default 5) at FREQ Hz (default 50) plus a "
@@ -105,7 +106,9 @@ _MAGNET_DEFAULT_S = 4.0
 _MAGNET_DISTANCE_M = 0.1
 _MAGNET_EDGE_DISTANCES = math.sqrt(50.0 ** (2.0 / 3.0) - 1.0)
 """The magnet's path: at the window's edges it is this many closest distances along its path
-from the closest point, so its field there is 1/50 of the peak (falling as 1/r^3 beyond)."""
+from the closest point, 3.68 times as far as at its closest, so its field there is at most 1/25
+of the peak (1/50 of the closest point's in the same direction, and a dipole's field varies by
+at most 2 with direction), falling as 1/r^3 beyond."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -213,7 +216,10 @@ class Disturbance:
             self.velocity = along / np.linalg.norm(along) * (
                 _MAGNET_DISTANCE_M * _MAGNET_EDGE_DISTANCES / half)
             moment = _unit(rng)
-            peak = np.linalg.norm(self._dipole(self.closest[None, :], moment)[0])
+            # Scaled so that the strongest field along the whole path is SIZE (a dipole's field
+            # need not be strongest at the closest point: it depends on the direction too).
+            path = self._offsets(np.linspace(-3.0 * half, 3.0 * half, 2001) + self.t_mid)
+            peak = np.max(np.linalg.norm(self._dipole(path, moment), axis=1))
             self.moment = moment * (spec.size / peak)
             self.truth.update(peak_ut=spec.size, closest_s=self.t_mid,
                               closest_m=self.closest.tolist(),
@@ -232,7 +238,8 @@ class Disturbance:
             self.offset = _unit(rng) * spec.size
             self.phase = float(rng.uniform(0.0, 2.0 * math.pi))
             self.truth.update(amplitude_ut=spec.size, frequency_hz=spec.frequency_hz,
-                              direction=self.direction.tolist(), offset_ut=self.offset.tolist())
+                              direction=self.direction.tolist(), offset_ut=self.offset.tolist(),
+                              phase_rad=self.phase)
 
     @staticmethod
     def _dipole(r_m: np.ndarray, moment: np.ndarray) -> np.ndarray:
@@ -242,19 +249,25 @@ class Disturbance:
         b_t = _MU0_OVER_4PI * (3.0 * r_hat * (r_hat @ moment)[:, None] - moment) / r ** 3
         return b_t * 1e6
 
+    def _offsets(self, t_s: np.ndarray) -> np.ndarray:
+        """(N, 3) from the magnet to the sensor: the magnet is at ``closest + v (t - t_mid)``
+        from the sensor."""
+        return -(self.closest + (t_s - self.t_mid)[:, None] * self.velocity)
+
     def active(self, t_s: np.ndarray) -> np.ndarray:
         """(N,) True inside the spec's window."""
         end = math.inf if self.spec.end_s is None else self.spec.end_s
         return (t_s >= self.spec.start_s) & (t_s < end)
 
     def field_ut(self, t_s: np.ndarray) -> np.ndarray:
-        """(N, 3) extra field in the earth frame at device times ``t_s``."""
+        """(N, 3) extra field in the earth frame at device times ``t_s``: the magnet's dipole
+        ``mu0/4pi (3 r^(m.r^) - m) / r^3`` as it passes (``truth``: its closest point, velocity
+        and moment), the desk's ``distortion @ earth + offset`` ramped in and out, the motor's
+        ``offset + amplitude sin(2 pi f t + phase) direction`` inside its window."""
         t_s = np.asarray(t_s, dtype=np.float64)
         spec = self.spec
         if spec.kind == "magnet":
-            # From the magnet to the sensor: the magnet is at closest + v (t - t_mid) from it.
-            r = -(self.closest + (t_s - self.t_mid)[:, None] * self.velocity)
-            return self._dipole(r, self.moment)
+            return self._dipole(self._offsets(t_s), self.moment)
         end = math.inf if spec.end_s is None else spec.end_s
         if spec.kind == "desk":
             ramp = min(_RAMP_S, 0.5 * (end - spec.start_s))

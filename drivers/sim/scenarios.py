@@ -1015,9 +1015,9 @@ class MagTour(Scenario):
     name = "magtour"
     description = "magnetometer calibration tour: turned through every direction"
     parameters: ClassVar[dict[str, Param]] = {
-        "turns": Param(24, 4, 1000, "orientations in one round of the tour"),
-        "hold": Param(0.5, 0.0, 3600.0, "time held still in each orientation, seconds"),
-        "transition": Param(2.5, 0.2, 60.0, "time to turn to the next orientation, seconds"),
+        "turns": Param(40, 4, 1000, "orientations in one round of the tour"),
+        "hold": Param(0.3, 0.0, 3600.0, "time held still in each orientation, seconds"),
+        "transition": Param(2.0, 0.2, 60.0, "time to turn to the next orientation, seconds"),
     }
     magnetometer = "lis3mdl"
 
