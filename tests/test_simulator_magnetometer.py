@@ -368,3 +368,20 @@ def test_blocks_cut_by_the_recorder_and_diagnose_keep_the_field() -> None:
     for cut in (_cut(raw, 123), _head(raw, 123)):
         assert cut.mag_raw is not None and len(cut) == 123
         assert np.array_equal(cut.mag_raw, raw.mag_raw[:123], equal_nan=True)
+
+
+def test_fault_specs_take_mx_to_mz_only_where_asked() -> None:
+    from app.core.faults.injection import FAULT_CHANNELS, parse_fault_spec
+
+    with pytest.raises(ValueError, match="unknown channel 'mx'"):
+        parse_fault_spec("stuck:mx@1")  # recordings' evaluate-faults: six channels as before
+    spec = parse_fault_spec("bias:mz:25@1-2", FAULT_CHANNELS)
+    assert spec.axis == 8 and spec.si_size() == 25.0 and spec.as_dict()["unit"] == "uT"
+
+
+def test_a_strong_magnet_saturates_the_chip_at_its_16_bits() -> None:
+    _, block = stream(f"sim://static?mag=lis3mdl&errors=0&noise=0&date={DATE}"
+                      "&magdist=magnet:3000@1-3", 400)
+    counts = np.rint(block.mag_ut[field_rows(block)] / LIS3MDL.ut_per_lsb)
+    assert counts.max() == 32767 or counts.min() == -32768
+    assert np.all((counts >= -32768) & (counts <= 32767))
