@@ -22,6 +22,7 @@ from app.core.samples import RawBlock, SampleBlock, convert_raw_block
 from drivers.errors import DeviceUrlError
 from drivers.sim.device import SimulatedDevice
 from drivers.sim.magnetometer import LIS2MDL, LIS3MDL, MAG_CHIPS
+from drivers.sim.scenarios import SCENARIOS
 
 DATE = "2026-06-01"
 
@@ -385,3 +386,14 @@ def test_a_strong_magnet_saturates_the_chip_at_its_16_bits() -> None:
     counts = np.rint(block.mag_ut[field_rows(block)] / LIS3MDL.ut_per_lsb)
     assert counts.max() == 32767 or counts.min() == -32768
     assert np.all((counts >= -32768) & (counts <= 32767))
+
+
+@pytest.mark.parametrize("scenario", list(SCENARIOS))
+def test_every_scenario_carries_the_field_at_the_true_orientation(scenario: str) -> None:
+    device, block = stream(f"sim://{scenario}?mag=lis2mdl&errors=0&noise=0&date={DATE}"
+                           "&clock_ppm=300&clock_offset=5", 700)
+    rows, truth = true_sensor_field(device, len(block))
+    assert np.array_equal(np.flatnonzero(field_rows(block)), rows)
+    assert np.all(np.abs(block.mag_ut[rows] - truth) <= 0.5 * LIS2MDL.ut_per_lsb + 1e-9)
+    strength = np.linalg.norm(block.mag_ut[rows], axis=1)
+    assert np.allclose(strength, device.earth_field.total_ut, atol=0.2)
