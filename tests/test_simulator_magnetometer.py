@@ -397,3 +397,14 @@ def test_every_scenario_carries_the_field_at_the_true_orientation(scenario: str)
     assert np.all(np.abs(block.mag_ut[rows] - truth) <= 0.5 * LIS2MDL.ut_per_lsb + 1e-9)
     strength = np.linalg.norm(block.mag_ut[rows], axis=1)
     assert np.allclose(strength, device.earth_field.total_ut, atol=0.2)
+
+
+@pytest.mark.parametrize(("yaw", "compass_deg"), [(90, 0.0), (0, 90.0), (-90, 180.0), (180, 270.0)])
+def test_yaw_turns_counter_clockwise_from_magnetic_east(yaw: float, compass_deg: float) -> None:
+    """The x axis's magnetic compass heading (clockwise from magnetic north) is 90 - yaw."""
+    _, block = stream(f"sim://static?mag=lis3mdl&errors=0&noise=0&date={DATE}&yaw={yaw}", 200)
+    mag = block.mag_ut[field_rows(block)].mean(axis=0)
+    # Level: x at compass heading h reads H cos h, y (90 degrees counter-clockwise) H sin h.
+    heading = math.degrees(math.atan2(mag[1], mag[0])) % 360.0
+    assert heading == pytest.approx(compass_deg, abs=0.1) or (
+        compass_deg == 0.0 and heading == pytest.approx(360.0, abs=0.1))

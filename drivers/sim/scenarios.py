@@ -389,7 +389,9 @@ def _tilt(roll: float, pitch: float, yaw: float | None = None) -> dict[str, Para
         "pitch": Param(pitch, -90.0, 90.0, "pitch angle, degrees"),
     }
     if yaw is not None:
-        params["yaw"] = Param(yaw, -180.0, 180.0, "heading, degrees")
+        params["yaw"] = Param(yaw, -180.0, 180.0, "turn about the vertical, degrees, counter-"
+                               "clockwise seen from above; 0: x to magnetic east (the x "
+                               "axis's magnetic compass heading is 90 - yaw)")
     return params
 
 
