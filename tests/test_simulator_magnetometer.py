@@ -120,13 +120,19 @@ def test_level_sensor_at_yaw_zero_reads_zero_east_horizontal_north_and_down() ->
 
 
 @pytest.mark.parametrize(("mag", "odr"), [("lis3mdl", 104), ("lis3mdl", 416), ("lis2mdl", 52),
-                                          ("lis2mdl", 833)])
+                                          ("lis2mdl", 833), ("lis3mdl&mag_odr=155", 208),
+                                          ("lis3mdl&mag_odr=10", 104),
+                                          ("lis2mdl&mag_odr=20", 26)])
 def test_field_rows_come_at_the_chips_own_rate(mag: str, odr: int) -> None:
     device, block = stream(f"sim://wobble?mag={mag}&odr={odr}", int(10 * odr))
+    chip = device.mag_chip
+    assert chip is not None and device.info.magnetometer.odr_hz == chip.odr_hz
+    mag, _, rate = mag.partition("&mag_odr=")
+    assert chip.odr_hz == (float(rate) if rate else MAG_CHIPS[mag].odr_hz)
     magnetometer = device.magnetometer
     assert magnetometer is not None
     rows = field_rows(block)
-    chip_rate = MAG_CHIPS[mag].odr_hz * (1.0 + device.unit_errors.magnetometer.odr_error)
+    chip_rate = chip.odr_hz * (1.0 + device.unit_errors.magnetometer.odr_error)
     assert magnetometer.true_odr_hz == chip_rate
     # Sample k of the chip lands on the first row at or after its true time.
     n = len(block)
@@ -167,6 +173,8 @@ def test_url_options_are_checked() -> None:
         ("sim://static?mag=lis3mdl&place=1,north", ["place", "not a number"]),
         ("sim://static?mag=lis3mdl&date=2019-01-01", ["date", "2025"]),
         ("sim://static?mag=lis3mdl&date=tomorrow", ["YYYY-MM-DD"]),
+        ("sim://static?mag=lis2mdl&mag_odr=80", ["mag_odr", "10, 20, 50, 100"]),
+        ("sim://static?mag_odr=80", ["needs a magnetometer"]),
     ]:
         with pytest.raises(DeviceUrlError) as caught:
             SimulatedDevice(url)

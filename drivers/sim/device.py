@@ -25,8 +25,9 @@ interactive. Options every scenario accepts:
   (:mod:`app.core.faults.injection`, :mod:`drivers.sim.faults`), e.g. ``fault=stuck:gx@10``;
   with a magnetometer also on ``mx``..``mz`` (SIZE in uT)
 - ``mag=lis3mdl|lis2mdl|none``: a magnetometer beside the chip (default none; ``magtour``:
-  lis3mdl), with ``place=LAT,LON[,ALT_M]``, ``date=YYYY-MM-DD`` (the World Magnetic Model's
-  field there and then) and ``magdist=...`` (disturbances); see :mod:`drivers.sim.magnetometer`
+  lis3mdl), with ``mag_odr`` (its rate), ``place=LAT,LON[,ALT_M]``, ``date=YYYY-MM-DD`` (the
+  World Magnetic Model's field there and then) and ``magdist=...`` (disturbances); see
+  :mod:`drivers.sim.magnetometer`
 
 plus the scenario's own options (``SCENARIOS[name].parameters``), such as ``roll``/``pitch``.
 
@@ -123,6 +124,8 @@ class SimulatedDevice(Device):
             raise DeviceUrlError(f"{url}: {exc}") from None
         unit = self.scenario.unit_errors(self.options.seed)
         self.mag_chip: MagChip | None = MAG_CHIPS[self.options.mag] if self.options.mag else None
+        if self.mag_chip is not None and self.options.mag_odr_hz is not None:
+            self.mag_chip = self.mag_chip.at_rate(self.options.mag_odr_hz)
         self.earth_field: EarthField | None = None
         if self.mag_chip is not None:
             unit = replace(unit, magnetometer=MagnetometerErrors.draw(unit.seed))

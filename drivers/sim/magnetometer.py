@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -57,6 +57,17 @@ class MagChip:
     address: int
     mode: str
     who_am_i: int
+    rates_hz: tuple[float, ...] = ()
+    """Every output rate of the simulated mode (``mag_odr=``); ``odr_hz`` is the default."""
+
+    def at_rate(self, odr_hz: float) -> MagChip:
+        """This chip set to ``odr_hz`` (one of :attr:`rates_hz`; same mode and noise)."""
+        if odr_hz not in self.rates_hz:
+            raise ValueError(f"the {self.name} has no rate {odr_hz:g} Hz in its "
+                             f"{self.mode} mode; use one of "
+                             f"{', '.join(f'{r:g}' for r in self.rates_hz)}")
+        mode = self.mode + (", FAST_ODR" if self.name == "LIS3MDL" and odr_hz > 80.0 else "")
+        return replace(self, odr_hz=float(odr_hz), mode=mode)
 
     def info(self) -> MagnetometerInfo:
         """The :class:`~app.core.devices.MagnetometerInfo` of this chip, simulated."""
@@ -69,10 +80,12 @@ LIS3MDL = MagChip(
     # Datasheet DocID024204: +-4 gauss full scale, 6842 LSB/gauss; ultra-high-performance
     # mode on x/y and z (OM = ZOM = 11) at DO = 80 Hz (the fastest rate without FAST_ODR);
     # RMS noise in that mode 3.2 mgauss (x, y) and 4.1 mgauss (z); I2C address 0x1C (SA1 low,
-    # as on Adafruit's LSM6DSOX + LIS3MDL board), WHO_AM_I 0x3D.
+    # as on Adafruit's LSM6DSOX + LIS3MDL board), WHO_AM_I 0x3D. Its rates in this mode: DO =
+    # 0.625 ... 80 Hz, and 155 Hz with FAST_ODR.
     name="LIS3MDL", odr_hz=80.0, range_ut=4.0 * UT_PER_GAUSS,
     ut_per_lsb=UT_PER_GAUSS / 6842.0, noise_ut=(0.32, 0.32, 0.41), address=0x1C,
     mode="ultra-high-performance", who_am_i=0x3D,
+    rates_hz=(0.625, 1.25, 2.5, 5.0, 10.0, 20.0, 40.0, 80.0, 155.0),
 )
 LIS2MDL = MagChip(
     # Datasheet DocID 027847: 1.5 mgauss/LSB, +-49.152 gauss (16 bits x 1.5 mgauss);
@@ -81,6 +94,7 @@ LIS2MDL = MagChip(
     name="LIS2MDL", odr_hz=100.0, range_ut=32768 * 0.15, ut_per_lsb=0.15,
     noise_ut=(0.3, 0.3, 0.3), address=0x1E,
     mode="continuous, high-resolution, low-pass filter", who_am_i=0x40,
+    rates_hz=(10.0, 20.0, 50.0, 100.0),
 )
 MAG_CHIPS: dict[str, MagChip] = {"lis3mdl": LIS3MDL, "lis2mdl": LIS2MDL}
 """``mag=`` URL value -> chip."""

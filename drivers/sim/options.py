@@ -58,6 +58,8 @@ MAG_OPTIONS: dict[str, str] = {
     "mag": "the magnetometer beside the LSM6DSOX: lis3mdl (80 Hz, +-4 gauss, ultra-high-"
            "performance), lis2mdl (100 Hz, +-49 gauss) or none (default; sim://magtour: "
            "lis3mdl)",
+    "mag_odr": "the magnetometer's output rate, Hz: LIS3MDL 0.625, 1.25, 2.5, 5, 10, 20, 40, "
+               "80 (default) or 155 (FAST_ODR); LIS2MDL 10, 20, 50 or 100 (default)",
     "place": "LAT,LON[,ALT_M] where the earth's field is taken (World Magnetic Model; default "
              "52.5125,13.3269,50: TU Berlin)",
     "date": "YYYY-MM-DD the earth's field is taken for (default today; the model covers "
@@ -101,6 +103,8 @@ class SimOptions:
     # The magnetometer (MAG_OPTIONS).
     mag: str | None = None
     """Key of :data:`drivers.sim.magnetometer.MAG_CHIPS`, None without a magnetometer."""
+    mag_odr_hz: float | None = None
+    """The magnetometer's output rate (None: the chip's default)."""
     place: Place | None = None
     """Where the earth's field is taken (None: :data:`app.core.earth_field.DEFAULT_PLACE`)."""
     date: dt.date | None = None
@@ -296,10 +300,17 @@ def _magnetometer_options(url: str, name: str, raw: Mapping[str, str]) -> dict[s
             raise _fail(url, f"mag={_shown(raw['mag'])} is not a magnetometer the simulator "
                              f"has; use one of {', '.join(MAG_CHIPS)} or none")
         chip = None if word == "none" else word
-    given = [key for key in ("place", "date", "magdist") if key in raw]
+    given = [key for key in ("mag_odr", "place", "date", "magdist") if key in raw]
     if given and chip is None:
         raise _fail(url, f"option {given[0]!r} needs a magnetometer (mag=lis3mdl or lis2mdl)")
     options: dict[str, object] = {"mag": chip}
+    if "mag_odr" in raw and chip is not None:
+        rate = _number(url, "mag_odr", raw["mag_odr"])
+        try:
+            MAG_CHIPS[chip].at_rate(rate)
+        except ValueError as exc:
+            raise _fail(url, f"mag_odr={_shown(raw['mag_odr'])}: {exc}") from None
+        options["mag_odr_hz"] = rate
     if "place" in raw:
         options["place"] = _place(url, raw["place"])
     if "date" in raw:
