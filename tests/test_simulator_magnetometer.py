@@ -363,6 +363,14 @@ def test_the_magtour_turns_the_field_through_every_direction() -> None:
                               scenario.orientation(np.array([scenario.round_s]))[0]) < 1e-6
     other = SimulatedDevice("sim://magtour?seed=6", realtime=False).scenario
     assert not np.allclose(other.orientation(t[:50]), scenario.orientation(t[:50]))
+    # The same unit on another tour (data a fit never saw), and that tour for any unit.
+    elsewhere = SimulatedDevice("sim://magtour?seed=5&path=9", realtime=False)
+    unit = SimulatedDevice("sim://magtour?seed=5", realtime=False).unit_errors.magnetometer
+    assert np.any(unit.hard_iron_ut)
+    assert np.array_equal(elsewhere.unit_errors.magnetometer.hard_iron_ut, unit.hard_iron_ut)
+    assert not np.allclose(elsewhere.scenario.orientation(t[:50]), scenario.orientation(t[:50]))
+    same_path = SimulatedDevice("sim://magtour?seed=8&path=9", realtime=False).scenario
+    assert np.array_equal(same_path.orientation(t), elsewhere.scenario.orientation(t))
 
 
 def test_blocks_cut_by_the_recorder_and_diagnose_keep_the_field() -> None:

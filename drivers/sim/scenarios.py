@@ -1020,13 +1020,18 @@ class MagTour(Scenario):
         "turns": Param(40, 4, 1000, "orientations in one round of the tour"),
         "hold": Param(0.3, 0.0, 3600.0, "time held still in each orientation, seconds"),
         "transition": Param(2.0, 0.2, 60.0, "time to turn to the next orientation, seconds"),
+        "path": Param(0, 0, 2**31 - 1, "which tour: 0 one picked by the seed, others a tour "
+                      "of their own (the same unit on another tour: data a fit never saw)"),
     }
     magnetometer = "lis3mdl"
+    STREAM_PATH: ClassVar[int] = 31
 
     def __init__(self, rng: np.random.Generator | None = None, **params: float) -> None:
         super().__init__(rng, **params)
         count = int(self.params["turns"])
-        self.orientations = quat.normalize(self.rng.normal(size=(count, 4)))
+        path = int(self.params["path"])
+        draw = self.rng if path == 0 else np.random.default_rng([path, self.STREAM_PATH])
+        self.orientations = quat.normalize(draw.normal(size=(count, 4)))
         """(turns, 4) the held orientations (sensor to earth), in tour order."""
         following = np.roll(self.orientations, -1, axis=0)
         self._turns = quat.to_rotation_vector(
