@@ -424,3 +424,11 @@ def test_yaw_turns_counter_clockwise_from_magnetic_east(yaw: float, compass_deg:
     heading = math.degrees(math.atan2(mag[1], mag[0])) % 360.0
     assert heading == pytest.approx(compass_deg, abs=0.1) or (
         compass_deg == 0.0 and heading == pytest.approx(360.0, abs=0.1))
+
+
+def test_the_sensors_of_one_arm_share_the_room_but_not_their_chips() -> None:
+    url = f"sim://arm?links=2&seed=4&mag=lis3mdl&date={DATE}&magdist=desk&sensor="
+    first, second = (SimulatedDevice(url + k, realtime=False) for k in "01")
+    assert first.simulator_truth == second.simulator_truth  # one room, one desk
+    one, two = first.unit_errors.magnetometer, second.unit_errors.magnetometer
+    assert not np.allclose(one.hard_iron_ut, two.hard_iron_ut)  # two boards' chips

@@ -368,8 +368,10 @@ class SimulatedDevice(Device):
         errors = self.unit_errors.magnetometer
         if self.mag_chip is None or self.earth_field is None or errors is None:
             return None
+        # The room's disturbances from the URL's seed (one room for every sensor of an arm),
+        # the chip's noise from its unit's.
         world = MagneticWorld.build(self.earth_field.enu_magnetic_ut(),
-                                    self.options.mag_disturbances, self.unit_errors.seed)
+                                    self.options.mag_disturbances, self.options.seed)
         return SimulatedMagnetometer(self.mag_chip, errors, world, self.unit_errors.seed,
                                      white_noise=self.options.noise)
 

@@ -292,7 +292,8 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
 
 # -- the magnetometer's options ------------------------------------------------------------------
 def _magnetometer_options(url: str, name: str, raw: Mapping[str, str]) -> dict[str, object]:
-    """``mag``, ``place``, ``date`` and ``magdist`` (:data:`MAG_OPTIONS`) as SimOptions fields."""
+    """``mag``, ``mag_odr``, ``place``, ``date`` and ``magdist`` (:data:`MAG_OPTIONS`) as
+    SimOptions fields."""
     chip = SCENARIOS[name].magnetometer
     if "mag" in raw:
         word = raw["mag"].lower()
