@@ -1007,11 +1007,11 @@ class Tour(Scenario):
 class MagTour(Scenario):
     """A magnetometer calibration tour: the board turned through every direction.
 
-    ``turns`` orientations drawn uniformly over all rotations from the seed, each held for
+    ``turns`` orientations picked from random ones (the seed's, or ``path``'s) so that every
+    earth-fixed direction (the field, gravity) spreads over the sensor's sphere, each held for
     ``hold`` s, reached by smooth turns about a fixed axis (as :class:`Tour`), then the same
-    again. Uniform rotations carry any earth-fixed direction (the field, gravity) uniformly over
-    the sensor's sphere, so the field's direction in the sensor frame covers all of it, and the
-    board lies at every tilt, for a calibration that uses gravity too.
+    again: the field's direction in the sensor frame covers all of it, and the board lies at
+    every tilt, for a calibration that uses gravity too.
     """
 
     name = "magtour"
@@ -1025,13 +1025,31 @@ class MagTour(Scenario):
     }
     magnetometer = "lis3mdl"
     STREAM_PATH: ClassVar[int] = 31
+    POOL: ClassVar[int] = 3000
+    """Random orientations the tour's are picked from."""
+
+    @staticmethod
+    def _spread(pool: np.ndarray, count: int) -> np.ndarray:
+        """``count`` of ``pool``'s orientations, each next one the farthest from those picked:
+        farthest in the sensor frame for all three earth axes at once (the least of the three
+        distances), so any earth-fixed direction, the field's at any dip, spreads over the
+        sensor's sphere (16-27 degrees at most from every direction on seeds 1-8, instead of
+        22-34 for the random ones)."""
+        images = [quat.rotate_inverse(pool, axis) for axis in np.eye(3)]
+        nearest = np.full((3, len(pool)), 4.0)
+        picked = [0]
+        for _ in range(count - 1):
+            for axis, image in enumerate(images):
+                np.minimum(nearest[axis], 1.0 - image @ image[picked[-1]], out=nearest[axis])
+            picked.append(int(np.argmax(nearest.min(axis=0))))
+        return pool[picked]
 
     def __init__(self, rng: np.random.Generator | None = None, **params: float) -> None:
         super().__init__(rng, **params)
         count = int(self.params["turns"])
         path = int(self.params["path"])
         draw = self.rng if path == 0 else np.random.default_rng([path, self.STREAM_PATH])
-        self.orientations = quat.normalize(draw.normal(size=(count, 4)))
+        self.orientations = self._spread(quat.normalize(draw.normal(size=(self.POOL, 4))), count)
         """(turns, 4) the held orientations (sensor to earth), in tour order."""
         following = np.roll(self.orientations, -1, axis=0)
         self._turns = quat.to_rotation_vector(
