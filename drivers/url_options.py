@@ -335,6 +335,8 @@ def _choice_text(choice: object) -> str:
 
 
 def _jsonable(value: object) -> object:
+    if isinstance(value, tuple | list):
+        return [_jsonable(item) for item in value]
     try:
         json.dumps(value)
     except (TypeError, ValueError):

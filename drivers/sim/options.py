@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import datetime as dt
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from urllib.parse import urlsplit
 
-from app.core.faults.injection import FaultSpec, parse_fault_spec
+from app.core.earth_field import WMM_VALID_YEARS, Place
+from app.core.faults.injection import FAULT_CHANNELS, MAG_CHANNELS, FaultSpec, parse_fault_spec
 from drivers import lsm6dsox
+from drivers.sim.magnetometer import DISTURBANCE_KINDS, MAG_CHIPS, DisturbanceSpec
+from drivers.sim.magnetometer import parse_disturbances as _parse_disturbances
 from drivers.sim.scenarios import SCENARIOS, Param
 from drivers.url_options import Option, parse_options, url_error
 
@@ -34,6 +38,38 @@ def _warmup(text: str) -> tuple[float, float]:
     if not 0.0 <= rise <= 60.0 or not 1.0 <= tau <= 36000.0:  # also NaN
         raise ValueError("expected RISE[:TAU], RISE 0 ... 60 degC, TAU 1 ... 36000 s")
     return rise, tau
+
+
+def _mag_chip(text: str) -> str | None:
+    word = text.strip().lower()
+    if word not in (*MAG_CHIPS, "none"):
+        raise ValueError(f"is not a magnetometer the simulator has; use one of "
+                         f"{', '.join(MAG_CHIPS)} or none")
+    return None if word == "none" else word
+
+
+def _place(text: str) -> Place:
+    parts = text.split(",")
+    if len(parts) not in (2, 3):
+        raise ValueError("expected LAT,LON or LAT,LON,ALT_M (degrees, metres)")
+    values = []
+    for part in parts:
+        try:
+            values.append(float(part))
+        except ValueError:
+            raise ValueError(f"{part.strip()!r} is not a number") from None
+    return Place(*values)
+
+
+def _date(text: str) -> dt.date:
+    try:
+        day = dt.date.fromisoformat(text)
+    except ValueError:
+        raise ValueError("expected YYYY-MM-DD") from None
+    low, high = WMM_VALID_YEARS
+    if not low <= day.year < high:
+        raise ValueError(f"the World Magnetic Model in use covers {low:.0f} to {high:.0f}")
+    return day
 
 
 GENERAL_OPTIONS: tuple[Option, ...] = (
@@ -69,12 +105,34 @@ GENERAL_OPTIONS: tuple[Option, ...] = (
     Option("clock_ppm", "number", 0.0, unit="ppm", minimum=-10000.0, maximum=10000.0,
            help="parts per million the timestamps run fast (a drifting device clock, on top "
                 "of the unit's own)"),
-    Option("fault", "text", None, parse=parse_fault_spec, repeatable=True, field="faults",
-           metavar="KIND:CHANNEL[:SIZE]@START",
+    Option("fault", "text", None, parse=lambda text: parse_fault_spec(text, FAULT_CHANNELS),
+           repeatable=True, field="faults", metavar="KIND:CHANNEL[:SIZE]@START",
            help="inject a fault, KIND:CHANNEL[:SIZE]@START[-END] (repeatable), KIND one of "
-                "noise, stuck, dead, spike, bias, scale; SIZE in g (ax..az) or dps (gx..gz)"),
+                "noise, stuck, dead, spike, bias, scale; SIZE in g (ax..az), dps (gx..gz) or "
+                "uT (mx..mz, with a magnetometer)"),
+    # -- the magnetometer (issue 31) --
+    Option("mag", "choice", None, choices=(*MAG_CHIPS, "none"), parse=_mag_chip,
+           help="the magnetometer beside the LSM6DSOX: lis3mdl (80 Hz, +-4 gauss, ultra-high-"
+                "performance), lis2mdl (100 Hz, +-49 gauss) or none (default; sim://magtour: "
+                "lis3mdl)"),
+    Option("mag_odr", "number", None, unit="Hz", positive=True, field="mag_odr_hz",
+           help="the magnetometer's output rate: LIS3MDL 0.625, 1.25, 2.5, 5, 10, 20, 40, 80 "
+                "(default) or 155 (FAST_ODR); LIS2MDL 10, 20, 50 or 100 (default)"),
+    Option("place", "text", None, parse=_place, metavar="LAT,LON[,ALT_M]",
+           help="where the earth's field is taken (World Magnetic Model; default "
+                "52.5125,13.3269,50: TU Berlin)"),
+    Option("date", "text", None, parse=_date, metavar="YYYY-MM-DD",
+           help="the date the earth's field is taken for (default today; the model covers "
+                f"{WMM_VALID_YEARS[0]:.0f}-{WMM_VALID_YEARS[1]:.0f})"),
+    Option("magdist", "text", (), parse=_parse_disturbances, field="mag_disturbances",
+           metavar="KIND[:SIZE[:FREQ]][@START[-END]],...",
+           help="magnetic disturbances, ITEM,ITEM... (device-clock seconds): " + "; ".join(
+               f"{kind}: {text}" for kind, text in DISTURBANCE_KINDS.items())),
 )
 """Options every scenario accepts."""
+MAG_OPTION_FIELDS = {"mag_odr_hz": "mag_odr", "place": "place", "date": "date",
+                     "mag_disturbances": "magdist"}
+"""The magnetometer's options that need one (field -> option name)."""
 
 
 def scenario_name(url: str) -> str:
@@ -133,6 +191,17 @@ class SimOptions:
     """Added to every timestamp (``clock_offset``)."""
     clock_ppm: float = 0.0
     """The timestamps run this many ppm fast (``clock_ppm``)."""
+    # The magnetometer (issue 31).
+    mag: str | None = None
+    """Key of :data:`drivers.sim.magnetometer.MAG_CHIPS`, None without a magnetometer."""
+    mag_odr_hz: float | None = None
+    """The magnetometer's output rate (None: the chip's default)."""
+    place: Place | None = None
+    """Where the earth's field is taken (None: :data:`app.core.earth_field.DEFAULT_PLACE`)."""
+    date: dt.date | None = None
+    """The date the earth's field is taken for (None: today)."""
+    mag_disturbances: tuple[DisturbanceSpec, ...] = ()
+    """``magdist=`` items, in URL order."""
 
 
 def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> SimOptions:
@@ -160,4 +229,30 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
     if "gyro_fs_dps" not in values and scenario.gyro_fs_dps is not None:
         values["gyro_fs_dps"] = scenario.gyro_fs_dps
     faults = tuple(parsed.repeated.get("faults", ()))
+    _check_magnetometer(url, scenario.magnetometer, values, faults)  # type: ignore[arg-type]
     return SimOptions(name, scenario_params=params, faults=faults, **values)  # type: ignore[arg-type]
+
+
+def _check_magnetometer(url: str, default_chip: str | None, values: dict[str, object],
+                        faults: tuple[FaultSpec, ...]) -> None:
+    """The scenario's own chip unless ``mag=`` says otherwise; options and faults that need a
+    magnetometer are refused without one; the chip's rate is one it has."""
+    if "mag" not in values:
+        values["mag"] = default_chip
+    chip = values["mag"]
+    if chip is None:
+        given = [name for key, name in MAG_OPTION_FIELDS.items() if key in values]
+        if given:
+            raise url_error(url, f"option {given[0]!r} needs a magnetometer (mag=lis3mdl or "
+                                 "lis2mdl)")
+        on_field = [f for f in faults if f.channel in MAG_CHANNELS]
+        if on_field:
+            raise url_error(url, f"fault {on_field[0].text()!r}: mx..mz need a magnetometer "
+                                 "(mag=lis3mdl or lis2mdl)")
+        return
+    rate = values.get("mag_odr_hz")
+    if rate is not None:
+        try:
+            MAG_CHIPS[str(chip)].at_rate(float(rate))  # type: ignore[arg-type]
+        except ValueError as exc:
+            raise url_error(url, f"mag_odr={rate:g}: {exc}") from None
