@@ -35,6 +35,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from app.core.calibration import MagnetometerCalibration
 from app.core.earth_field import EarthField
@@ -304,14 +305,18 @@ def _still_rows(accel: np.ndarray, gyro: np.ndarray | None) -> np.ndarray:
     return still & np.all(np.isfinite(accel), axis=1)
 
 
-GRAVITY_TIME_CONSTANT_S = 2.0
+GRAVITY_TIME_CONSTANT_S = 5.0
 """The gyroscope-aided gravity direction trusts the accelerometer over this time."""
+GYRO_DISAGREEMENT_DEG = 5.0
+"""A gyroscope-carried gravity further than this (median) from the accelerometer's is not
+used (a saturated, unsynchronised or wrongly mapped gyroscope)."""
 MAX_STEP_S = 0.1
 """A longer step between rows (a gap) restarts the gravity filter."""
 
 
-def _step_rotations(w: np.ndarray) -> np.ndarray:
+def rotation_matrices(w: np.ndarray) -> np.ndarray:
     """(N, 3, 3) rotations for rotation vectors (N, 3) (Rodrigues, vectorised)."""
+    w = np.asarray(w, dtype=np.float64).reshape(-1, 3)
     angle = np.linalg.norm(w, axis=1)
     k = w / np.where(angle > 0, angle, 1.0)[:, None]
     kx = np.zeros((len(w), 3, 3))
@@ -319,6 +324,63 @@ def _step_rotations(w: np.ndarray) -> np.ndarray:
     kx[:, 1, 0], kx[:, 2, 0], kx[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
     return (np.eye(3) + np.sin(angle)[:, None, None] * kx
             + (1.0 - np.cos(angle))[:, None, None] * (kx @ kx))
+
+
+BIAS_WINDOW_S = 0.1
+"""The span over which :func:`gyro_bias_from_tilt` compares the gyroscope with the accelerometer."""
+
+
+def gyro_bias_from_tilt(accel_m_s2: np.ndarray, gyro_rad_s: np.ndarray, t_s: np.ndarray,
+                        window_s: float = BIAS_WINDOW_S) -> np.ndarray:
+    """The gyroscope's bias (3,) as the accelerometer's direction sees it during a tour.
+
+    A fixed direction turns in the sensor frame as ``da/dt = -w x a``; over a short window
+    the accelerometer's direction change plus the gyroscope's integral of ``w x a`` leaves
+    ``b x (integral of a dt)``, linear in the bias ``b``: a least-squares fit over every
+    window. (A bias about gravity is not seen in one window, but a tour through every
+    orientation sees every axis.) Zero when nothing is left to fit."""
+    accel = np.asarray(accel_m_s2, dtype=np.float64)
+    gyro = np.asarray(gyro_rad_s, dtype=np.float64)
+    t = np.asarray(t_s, dtype=np.float64)
+    n = len(t)
+    if n < 3:
+        return np.zeros(3)
+    unit = accel / np.linalg.norm(accel, axis=1, keepdims=True)
+    dts = np.diff(t)
+    typical = float(np.median(dts)) if np.all(np.isfinite(dts)) else math.nan
+    if not typical > 0:
+        return np.zeros(3)
+    lag = max(1, round(window_s / typical))
+    if n <= lag:
+        return np.zeros(3)
+    cross = np.cross(gyro, unit)
+    # trapezoids of w x a and of a, per step, then sums over ``lag`` steps by cumulative sums
+    step_cross = 0.5 * (cross[1:] + cross[:-1]) * dts[:, None]
+    step_unit = 0.5 * (unit[1:] + unit[:-1]) * dts[:, None]
+    ok_step = (np.all(np.isfinite(step_cross), axis=1) & np.all(np.isfinite(step_unit), axis=1)
+               & (dts > 0) & (dts <= MAX_STEP_S))
+    step_cross[~ok_step] = 0.0
+    step_unit[~ok_step] = 0.0
+
+    def window_sum(values: np.ndarray) -> np.ndarray:
+        total = np.vstack([np.zeros((1, values.shape[1])), np.cumsum(values, axis=0)])
+        return total[lag:] - total[:-lag]
+
+    sum_cross = window_sum(step_cross)
+    sum_unit = window_sum(step_unit)
+    whole = window_sum(ok_step[:, None].astype(np.float64))[:, 0] == lag
+    change = unit[lag:] - unit[:-lag]
+    # change = -(sum (w - b) x a dt) = -sum_cross + b x sum_unit = -sum_cross - [sum_unit]x b
+    rhs = change + sum_cross
+    ok = whole & np.all(np.isfinite(rhs), axis=1)
+    if np.count_nonzero(ok) < 10:
+        return np.zeros(3)
+    s = sum_unit[ok]
+    design = np.zeros((len(s), 3, 3))
+    design[:, 0, 1], design[:, 0, 2], design[:, 1, 2] = s[:, 2], -s[:, 1], s[:, 0]
+    design[:, 1, 0], design[:, 2, 0], design[:, 2, 1] = -s[:, 2], s[:, 1], -s[:, 0]
+    solution, *_ = np.linalg.lstsq(design.reshape(-1, 3), rhs[ok].reshape(-1), rcond=None)
+    return solution
 
 
 def smoothed_gravity(accel_m_s2: np.ndarray, gyro_rad_s: np.ndarray, t_s: np.ndarray,
@@ -332,64 +394,123 @@ def smoothed_gravity(accel_m_s2: np.ndarray, gyro_rad_s: np.ndarray, t_s: np.nda
     accel = np.asarray(accel_m_s2, dtype=np.float64)
     gyro = np.asarray(gyro_rad_s, dtype=np.float64)
     t = np.asarray(t_s, dtype=np.float64)
-    n = len(accel)
     norm = np.linalg.norm(accel, axis=1)
     unit = accel / np.where(norm > 0, norm, np.nan)[:, None]
-    valid = np.all(np.isfinite(unit), axis=1).tolist()
     dts = np.diff(t)
     joined = ((dts > 0) & (dts <= MAX_STEP_S) & np.all(np.isfinite(gyro[:-1]), axis=1)
               & np.all(np.isfinite(gyro[1:]), axis=1))
     # E_k turns row k's axes into row k+1's: a fixed vector's coordinates go by E_k^T.
     rates = np.where(joined[:, None], 0.5 * (gyro[:-1] + gyro[1:]), 0.0)
-    steps = _step_rotations(rates * np.where(joined, dts, 0.0)[:, None]).tolist()
-    alphas = (np.where(joined, dts, 0.0) / (time_constant_s + np.where(joined, dts, 0.0)))
-    alphas_l, joined_l, unit_l = alphas.tolist(), joined.tolist(), unit.tolist()
-
-    def run(forward: bool) -> np.ndarray:
-        out = np.full((n, 3), np.nan)
-        current: list[float] | None = None
-        order = range(n) if forward else range(n - 1, -1, -1)
-        for k in order:
-            link = k - 1 if forward else k  # the step between k and its previous row
-            if current is not None and 0 <= link < n - 1 and joined_l[link]:
-                e = steps[link]
-                x, y, z = current
-                if forward:  # E^T v
-                    current = [e[0][0] * x + e[1][0] * y + e[2][0] * z,
-                               e[0][1] * x + e[1][1] * y + e[2][1] * z,
-                               e[0][2] * x + e[1][2] * y + e[2][2] * z]
-                else:  # E v
-                    current = [e[0][0] * x + e[0][1] * y + e[0][2] * z,
-                               e[1][0] * x + e[1][1] * y + e[1][2] * z,
-                               e[2][0] * x + e[2][1] * y + e[2][2] * z]
-                if valid[k]:
-                    alpha = alphas_l[link]
-                    u = unit_l[k]
-                    current = [(1 - alpha) * c + alpha * v for c, v in zip(current, u)]
-                    size = math.sqrt(sum(c * c for c in current))
-                    current = [c / size for c in current]
-            elif valid[k]:
-                current = list(unit_l[k])
-            else:
-                current = None
-            if current is not None:
-                out[k] = current
-        return out
-
-    both = run(True) + run(False)
+    steps = rotation_matrices(rates * np.where(joined, dts, 0.0)[:, None])
+    alphas = np.where(joined, dts, 0.0) / (time_constant_s + np.where(joined, dts, 0.0))
+    valid = np.all(np.isfinite(unit), axis=1)
+    forward = _carry(unit, valid, steps, alphas, joined, True)
+    backward = _carry(unit, valid, steps, alphas, joined, False)
+    both = forward + backward
     return both / np.linalg.norm(both, axis=1, keepdims=True)
 
 
+@njit(cache=True)
+def _carry(unit: np.ndarray, valid: np.ndarray, steps: np.ndarray, alphas: np.ndarray,
+           joined: np.ndarray, forward: bool) -> np.ndarray:  # pragma: no cover (compiled)
+    """One run of :func:`smoothed_gravity`'s filter, forward or backward in time."""
+    n = unit.shape[0]
+    out = np.full((n, 3), np.nan)
+    current = np.zeros(3)
+    have = False
+    for i in range(n):
+        k = i if forward else n - 1 - i
+        link = k - 1 if forward else k  # the step between k and the row before it in the run
+        if have and 0 <= link < n - 1 and joined[link]:
+            e = steps[link]
+            moved = np.zeros(3)
+            for r in range(3):
+                for c in range(3):
+                    moved[r] += (e[c, r] if forward else e[r, c]) * current[c]
+            current = moved
+            if valid[k]:
+                alpha = alphas[link]
+                current = (1.0 - alpha) * current + alpha * unit[k]
+                current = current / np.sqrt(np.sum(current * current))
+        elif valid[k]:
+            current = unit[k].copy()
+            have = True
+        else:
+            have = False
+        if have:
+            out[k] = current
+    return out
+
+
+TURN_WINDOW_S = 0.2
+"""The span between the two field samples the gyroscope's turn links."""
+
+
+def gyro_pairs(rows: np.ndarray, gyro_rad_s: np.ndarray, t_s: np.ndarray,
+               window_s: float = TURN_WINDOW_S) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Field samples about ``window_s`` apart, linked by the gyroscope's turn between them:
+    ``(i, j, P)`` with ``i``, ``j`` indices into ``rows`` (the rows with a field sample) and
+    ``P`` (M, 3, 3) carrying a fixed vector's sensor coordinates from row ``rows[i]`` to
+    ``rows[j]``. Steps across a gap are never bridged."""
+    gyro = np.asarray(gyro_rad_s, dtype=np.float64)
+    t = np.asarray(t_s, dtype=np.float64)
+    empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3, 3)))
+    if len(t) < 3 or len(rows) < 2:
+        return empty
+    dts = np.diff(t)
+    typical = float(np.median(dts))
+    if not typical > 0:
+        return empty
+    lag = max(1, round(window_s / typical))
+    joined = ((dts > 0) & (dts <= MAX_STEP_S) & np.all(np.isfinite(gyro[:-1]), axis=1)
+              & np.all(np.isfinite(gyro[1:]), axis=1))
+    rates = np.where(joined[:, None], 0.5 * (gyro[:-1] + gyro[1:]), 0.0)
+    steps = rotation_matrices(rates * np.where(joined, dts, 0.0)[:, None])
+    targets = rows + lag
+    j = np.searchsorted(rows, targets)
+    found = (j < len(rows)) & (targets < len(t))
+    found[found] &= rows[j[found]] == targets[found]
+    first = np.flatnonzero(found)
+    if first.size == 0:
+        return empty
+    second = j[first]
+    start_rows = rows[first]
+    broken = np.concatenate([[0], np.cumsum(~joined)])
+    whole = broken[start_rows + lag] - broken[start_rows] == 0
+    first, second, start_rows = first[whole], second[whole], start_rows[whole]
+    carried = np.broadcast_to(np.eye(3), (len(first), 3, 3)).copy()
+    for offset in range(lag):
+        carried = np.transpose(steps[start_rows + offset], (0, 2, 1)) @ carried
+    return first, second, carried
+
+
 def _joint(x: np.ndarray, hard: np.ndarray, matrix: np.ndarray, strength: float,
-           still: np.ndarray, a: np.ndarray, sin_dip: float
-           ) -> tuple[np.ndarray, np.ndarray, float]:
+           still: np.ndarray, a: np.ndarray, sin_dip: float,
+           pairs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+           dip_correlation: float = 1.0) -> tuple[np.ndarray, np.ndarray, float]:
     """Robust joint least squares over hard iron, the full matrix and the dip.
 
     Residuals: ``|L (x - h)| - F`` on every sample, ``a . L (x - h) + F sin(dip)`` on the
-    samples at rest, each divided by its robust noise from the start values; F is held (the
-    scale is fixed afterwards by det = 1)."""
+    samples at rest, and, with ``pairs`` ``(i, j, P)`` from the gyroscope,
+    ``L (x_j - h) - P L (x_i - h)`` (the calibrated field must turn as the gyroscope says);
+    each divided by its robust noise from the start values, the dip's also by the square root
+    of ``dip_correlation`` (how many rows its errors stay alike: a smoothed gravity's errors
+    are no longer independent from row to row). F is held (the scale is fixed afterwards by
+    det = 1)."""
     xs = x[still]
     count = len(x)
+
+    def turning(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        assert pairs is not None
+        first, second, carried = pairs
+        h, lmat, _ = split(q)
+        d1, d2 = x[first] - h, x[second] - h
+        residual = d2 @ lmat.T - np.einsum("nij,nj->ni", carried, d1 @ lmat.T)
+        jac_l = (np.einsum("ia,nb->niab", np.eye(3), d2)
+                 - np.einsum("nia,nb->niab", carried, d1)).reshape(-1, 3, 9)
+        jac_h = -lmat + carried @ lmat
+        jac = np.concatenate([jac_h, jac_l, np.zeros((len(first), 3, 1))], axis=2)
+        return residual.reshape(-1), jac.reshape(-1, 13)
 
     def split(q: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         return q[:3], q[3:12].reshape(3, 3), float(q[12])
@@ -406,12 +527,20 @@ def _joint(x: np.ndarray, hard: np.ndarray, matrix: np.ndarray, strength: float,
     start = np.concatenate([hard, matrix.ravel(), [sin_dip]])
     r_strength, _, r_dip, _ = parts(start)
     sigma_strength = max(_robust_sigma(r_strength), 1e-3 * strength)
-    sigma_dip = max(_robust_sigma(r_dip), 1e-3 * strength)
+    sigma_dip = max(_robust_sigma(r_dip), 1e-3 * strength) * math.sqrt(dip_correlation)
+    sigma_turn = 1.0
+    if pairs is not None:
+        sigma_turn = max(_robust_sigma(turning(start)[0]), 1e-3 * strength)
 
     def residuals_jacobian(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         rs, js, rd, jd = parts(q)
-        return (np.concatenate([rs / sigma_strength, rd / sigma_dip]),
-                np.vstack([js / sigma_strength, jd / sigma_dip]))
+        residual = [rs / sigma_strength, rd / sigma_dip]
+        jacobian = [js / sigma_strength, jd / sigma_dip]
+        if pairs is not None:
+            rt, jt = turning(q)
+            residual.append(rt / sigma_turn)
+            jacobian.append(jt / sigma_turn)
+        return np.concatenate(residual), np.vstack(jacobian)
 
     return split(_gauss_newton(residuals_jacobian, start, robust_scale=3.0))
 
@@ -432,7 +561,10 @@ def fit_magnetometer(mag_ut: np.ndarray, accel_m_s2: np.ndarray | None = None, *
     """
     x, rows = _field_rows(mag_ut)
     _check_spread(x)
-    accel = gyro = up = None
+    reasons: list[str] = []
+    notes: list[str] = []
+    accel = gyro = up = pairs_all = None
+    dip_correlation = 1.0
     if accel_m_s2 is not None:
         accel = np.asarray(accel_m_s2, dtype=np.float64)
         if accel.shape != np.shape(mag_ut):
@@ -448,7 +580,20 @@ def fit_magnetometer(mag_ut: np.ndarray, accel_m_s2: np.ndarray | None = None, *
         raise ValueError(f"t_s has shape {times.shape}, not ({np.shape(mag_ut)[0]},)")
     if accel is not None:
         if gyro is not None and times is not None:
-            up = smoothed_gravity(accel, gyro, times)[rows]
+            bias = gyro_bias_from_tilt(accel, gyro, times)
+            up = smoothed_gravity(accel, gyro - bias, times, GRAVITY_TIME_CONSTANT_S)[rows]
+            direct = accel[rows] / np.linalg.norm(accel[rows], axis=1, keepdims=True)
+            apart = np.degrees(np.arccos(np.clip(np.sum(up * direct, axis=1), -1.0, 1.0)))
+            if np.nanmedian(apart) > GYRO_DISAGREEMENT_DEG:
+                notes.append(f"the gyroscope does not follow the accelerometer (their gravity "
+                             f"directions differ by {np.nanmedian(apart):.1f} deg in the "
+                             "median): gravity from the accelerometer alone")
+                up = direct
+            else:
+                step = float(np.median(np.diff(np.asarray(t_s, float))))
+                dip_correlation = max(1.0, GRAVITY_TIME_CONSTANT_S / step) if step > 0 else 1.0
+                pairs_all = gyro_pairs(rows, np.asarray(gyro_rad_s, float) - bias,
+                                       np.asarray(t_s, float))
             gyro = None  # the gyroscope has done its part: a fast turn no longer matters
         else:
             norm = np.linalg.norm(accel, axis=1, keepdims=True)
@@ -457,8 +602,6 @@ def fit_magnetometer(mag_ut: np.ndarray, accel_m_s2: np.ndarray | None = None, *
         gyro = None if gyro is None else gyro[rows]
     times = None if times is None else times[rows]
 
-    reasons: list[str] = []
-    notes: list[str] = []
     keep = np.ones(len(x), dtype=bool)
     hard, soft, strength = _ellipsoid(x)
     matrix, sin_dip, method = soft, math.nan, "ellipsoid"
@@ -490,10 +633,18 @@ def fit_magnetometer(mag_ut: np.ndarray, accel_m_s2: np.ndarray | None = None, *
             turn = _closed_form_turn(u, a)
             start = turn @ soft
             sin_dip = float(-np.median(np.einsum("ij,ij->i", u @ turn.T, a)) / strength)
-            hard, full, sin_dip = _joint(xk, hard, start, strength, still, a, sin_dip)
+            pairs = None
+            if pairs_all is not None and len(pairs_all[0]) >= MIN_STILL_SAMPLES:
+                first, second, carried = pairs_all
+                both = keep[first] & keep[second]
+                position = np.cumsum(keep) - 1
+                pairs = (position[first[both]], position[second[both]], carried[both])
+            hard, full, sin_dip = _joint(xk, hard, start, strength, still, a, sin_dip, pairs,
+                                         dip_correlation)
             matrix, scale = _det_normalised(full)
             strength = strength / scale
-            method = "ellipsoid + gravity (joint)"
+            method = ("ellipsoid + gravity + gyroscope (joint)" if pairs is not None
+                      else "ellipsoid + gravity (joint)")
         elif accel is not None:
             reasons.append(f"too few samples at rest ({still_count}, at least "
                            f"{MIN_STILL_SAMPLES}) to find the turn against the accelerometer: "

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from app.core.earth_field import EarthField
+from app.core.magnetometer.fit import rotation_matrices
 from app.core.samples import STANDARD_GRAVITY_M_S2
 
 LIS3MDL_NOISE_UT = np.array([0.32, 0.32, 0.41])
@@ -163,9 +164,11 @@ def _smooth_noise(rng: np.random.Generator, n: int, width: int) -> np.ndarray:
 
 def hand_tour(unit: MagUnit, earth: EarthField, seed: int, seconds: float = 60.0,
               rate_hz: float = 100.0, mag_every: int = 1, rate_rad_s: float = 1.2,
-              linear_m_s2: float = 0.3) -> Tour:
+              linear_m_s2: float = 0.3, gyro_bias_rad_s: float = 0.01) -> Tour:
     """A tour by hand: the sensor turned continuously (a smooth random angular rate of about
-    ``rate_rad_s``) and shaken a little (``linear_m_s2`` RMS of linear acceleration)."""
+    ``rate_rad_s``) and shaken a little (``linear_m_s2`` RMS of linear acceleration); the
+    gyroscope reads with a constant bias of ``gyro_bias_rad_s`` per axis (an uncalibrated
+    LSM6DSOX: about half a degree per second)."""
     rng = np.random.default_rng(seed)
     n = int(seconds * rate_hz)
     width = max(1, int(0.4 * rate_hz))
@@ -173,14 +176,13 @@ def hand_tour(unit: MagUnit, earth: EarthField, seed: int, seconds: float = 60.0
     rotations = np.empty((n, 3, 3))
     current = random_rotations(1, rng)[0]
     dt = 1.0 / rate_hz
+    steps = rotation_matrices(omega * dt)
     for i in range(n):
         rotations[i] = current
-        angle = float(np.linalg.norm(omega[i])) * dt
-        if angle > 0:
-            current = current @ rotation_about(omega[i], angle)
+        current = current @ steps[i]
     linear = _smooth_noise(rng, n, width) * linear_m_s2 / math.sqrt(3.0)
     accel, mag, clean = _sensor_rows(unit, earth, rotations, linear, rng, mag_every, None, 1.0)
-    gyro = omega + rng.normal(scale=GYRO_NOISE_RAD_S, size=(n, 3))
+    gyro = omega + gyro_bias_rad_s + rng.normal(scale=GYRO_NOISE_RAD_S, size=(n, 3))
     return Tour(np.arange(n) * dt, accel, gyro, mag, rotations, clean)
 
 
