@@ -249,6 +249,10 @@ def test_calibrate_mag_writes_the_binding_json_and_a_summary(tour_file, tmp_path
     assert main(["calibrate-mag", str(tour_file), "--json", str(out)]) == 2
     assert out.read_bytes() == before
     assert "exists" in capsys.readouterr().err
+    # the recording itself is never the output, even with --overwrite
+    recorded = tour_file.read_bytes()
+    assert main(["calibrate-mag", str(tour_file), "--json", str(tour_file), "--overwrite"]) == 2
+    assert tour_file.read_bytes() == recorded
 
 
 def test_calibrate_mag_saves_into_the_devices_profile_keeping_its_other_terms(

@@ -108,6 +108,10 @@ def calibrate_recording(path: str | Path, place: Place | None = None,
                          f"calibration {calibration.name!r}; the field is fitted raw")
         else:
             inertial = None
+    if inertial is None:
+        notes.append("the recording carries no accelerometer/gyroscope calibration: their own "
+                     "axis errors (a few tenths of a degree) enter the turn; calibrate them "
+                     "first for the best result")
     block = recording.sample_block(inertial)
     expected = None
     day = when if when is not None else recording_date(recording.metadata)
