@@ -158,13 +158,23 @@ def test_a_half_sphere_tour_is_redo_for_coverage():
     assert any("too little coverage" in reason for reason in result.reasons)
 
 
-def test_a_magnet_passing_during_the_tour_is_redo_and_left_out():
-    tour = pose_tour(UNIT, EARTH, seed=6, disturbance_ut=40.0)
+@pytest.mark.parametrize("peak_ut", [40.0, 150.0])
+def test_a_magnet_passing_during_the_tour_is_redo_and_left_out(peak_ut):
+    tour = pose_tour(UNIT, EARTH, seed=6, disturbance_ut=peak_ut)
     result = fit_magnetometer(tour.mag_ut, tour.accel_m_s2, t_s=tour.t_s, expected=EARTH)
     assert result.verdict == "redo" and result.outliers > 10
     assert any("disturbance during the tour" in reason and "t = " in reason
                for reason in result.reasons)
     np.testing.assert_allclose(result.calibration.hard_iron_ut, UNIT.hard_iron_ut, atol=1.0)
+
+
+def test_a_noisy_field_as_near_a_running_motor_is_redo_for_its_residual():
+    tour = pose_tour(UNIT, EARTH, seed=10)
+    noisy = tour.mag_ut + np.random.default_rng(3).normal(scale=1.0, size=tour.mag_ut.shape)
+    result = fit_magnetometer(noisy, tour.accel_m_s2, expected=EARTH)
+    assert result.verdict == "redo" and result.calibration.fitness_ut > 0.7
+    assert any("residual is large" in reason for reason in result.reasons)
+    assert fit_magnetometer(tour.mag_ut, tour.accel_m_s2, expected=EARTH).verdict == "good"
 
 
 def test_a_field_far_from_the_wmm_is_redo():

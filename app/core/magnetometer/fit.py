@@ -60,8 +60,9 @@ OUTLIER_FLOOR_FRACTION = 0.02
 deviations and this fraction of the field."""
 DISTURBED_FRACTION = 0.01
 """More outliers than this fraction of the samples: a disturbance during the tour."""
-MAX_RESIDUAL_FRACTION = 0.03
-"""An RMS strength residual above this fraction of the field: redo."""
+MAX_RESIDUAL_UT = 0.7
+"""An RMS strength residual above this is redo: twice what the LIS3MDL's and LIS2MDL's own
+noise leave in their low-noise modes (about 0.35 uT); more is a disturbance such as a motor."""
 FIELD_TOLERANCE = 0.15
 """The fitted strength may differ from the WMM's by this fraction."""
 DIP_TOLERANCE_DEG = 5.0
@@ -265,6 +266,32 @@ def _ellipsoid(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         raise ValueError("the field samples do not lie on an ellipsoid: no calibration")
     soft, scale = _det_normalised(w)
     return hard, soft, 1.0 / scale
+
+
+SPHERE_TRIM_FRACTION = 0.1
+"""Before the ellipsoid, samples further than this fraction of the radius (or 6 robust
+standard deviations) off a sphere are set aside: soft iron of a few % stays inside, a magnet
+passing by does not."""
+
+
+def _sphere_keep(x: np.ndarray, rounds: int = 6) -> np.ndarray:
+    """Samples on a robustly fitted sphere (linear fit, trimmed and repeated): a strong
+    disturbance must not drag the ellipsoid's start away."""
+    keep = np.ones(len(x), dtype=bool)
+    for _ in range(rounds):
+        xs = x[keep]
+        design = np.column_stack([2.0 * xs, np.ones(len(xs))])
+        solution, *_ = np.linalg.lstsq(design, np.einsum("ij,ij->i", xs, xs), rcond=None)
+        centre = solution[:3]
+        radius = np.linalg.norm(x - centre, axis=1)
+        middle = float(np.median(radius[keep]))
+        limit = max(OUTLIER_SIGMAS * _robust_sigma(radius[keep]),
+                    SPHERE_TRIM_FRACTION * middle)
+        new = np.abs(radius - middle) <= limit
+        if np.count_nonzero(new) < MIN_FIELD_SAMPLES or np.array_equal(new, keep):
+            break
+        keep = new
+    return keep
 
 
 def fit_ellipsoid(mag_ut: np.ndarray) -> MagnetometerCalibration:
@@ -602,16 +629,16 @@ def fit_magnetometer(mag_ut: np.ndarray, accel_m_s2: np.ndarray | None = None, *
         gyro = None if gyro is None else gyro[rows]
     times = None if times is None else times[rows]
 
-    keep = np.ones(len(x), dtype=bool)
-    hard, soft, strength = _ellipsoid(x)
+    keep = _sphere_keep(x)
+    hard, soft, strength = _ellipsoid(x[keep])
     matrix, sin_dip, method = soft, math.nan, "ellipsoid"
     still_count = 0
     if accel is None:
         notes.append("no accelerometer: the turn between the magnetometer's axes and the "
                      "accelerometer's was not estimated (plain ellipsoid fit)")
-    for _ in range(2):  # fit, drop the samples off the sphere, fit again
+    for round_ in range(3):  # fit, drop the samples off the sphere, fit again
         xk = x[keep]
-        if not keep.all():
+        if round_ > 0:
             hard, soft, strength = _ellipsoid(xk)
             if method == "ellipsoid":
                 matrix = soft
@@ -681,9 +708,10 @@ def fit_magnetometer(mag_ut: np.ndarray, accel_m_s2: np.ndarray | None = None, *
                        f"sphere on {outliers} samples ({outliers / len(x):.1%}) by up to "
                        f"{abs(residual[worst]):.1f} uT{when} (a magnet, steel or a motor "
                        "nearby?); those samples were left out")
-    if fitness > MAX_RESIDUAL_FRACTION * strength:
+    if fitness > MAX_RESIDUAL_UT:
         reasons.append(f"the fit's residual is large: {fitness:.2f} uT RMS (more than "
-                       f"{MAX_RESIDUAL_FRACTION:.0%} of the field): a disturbance, or a field "
+                       f"{MAX_RESIDUAL_UT:g} uT, twice the chip's own noise): a disturbance "
+                       "(a motor nearby?), or a field "
                        "that changed during the tour")
     if expected is not None:
         if abs(strength - expected.total_ut) > FIELD_TOLERANCE * expected.total_ut:
