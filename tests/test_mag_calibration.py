@@ -150,6 +150,15 @@ def test_the_gyroscope_carries_gravity_through_a_shaken_hand_tour():
     assert np.sqrt(np.mean(angle(up) ** 2)) < 0.7 * np.sqrt(np.mean(angle(raw) ** 2))
 
 
+def test_a_gyroscope_that_does_not_follow_the_accelerometer_is_not_used(full_tour):
+    # the pose tour jumps between orientations while its gyroscope reads only noise
+    result = fit_magnetometer(full_tour.mag_ut, full_tour.accel_m_s2, t_s=full_tour.t_s,
+                              gyro_rad_s=full_tour.gyro_rad_s, expected=EARTH)
+    assert any("does not follow the accelerometer" in note for note in result.notes)
+    assert result.calibration.extra["method"] == "ellipsoid + gravity (joint)"
+    assert turn_error_deg(result.calibration.soft_iron, true_soft_iron(UNIT)) < 0.2
+
+
 # -- verdicts and refusals -----------------------------------------------------------------------
 def test_a_half_sphere_tour_is_redo_for_coverage():
     tour = pose_tour(UNIT, EARTH, seed=5, half_sphere=True)

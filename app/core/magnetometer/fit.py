@@ -611,10 +611,15 @@ def fit_magnetometer(mag_ut: np.ndarray, accel_m_s2: np.ndarray | None = None, *
             up = smoothed_gravity(accel, gyro - bias, times, GRAVITY_TIME_CONSTANT_S)[rows]
             direct = accel[rows] / np.linalg.norm(accel[rows], axis=1, keepdims=True)
             apart = np.degrees(np.arccos(np.clip(np.sum(up * direct, axis=1), -1.0, 1.0)))
-            if np.nanmedian(apart) > GYRO_DISAGREEMENT_DEG:
+            # compared where the accelerometer shows gravity alone: still and turning slowly
+            calm = (np.abs(np.linalg.norm(accel[rows], axis=1) - STANDARD_GRAVITY_M_S2)
+                    < 0.02 * STANDARD_GRAVITY_M_S2) & (np.linalg.norm(gyro[rows], axis=1) < 0.3)
+            calm &= np.isfinite(apart)
+            if (np.count_nonzero(calm) >= MIN_STILL_SAMPLES
+                    and np.median(apart[calm]) > GYRO_DISAGREEMENT_DEG):
                 notes.append(f"the gyroscope does not follow the accelerometer (their gravity "
-                             f"directions differ by {np.nanmedian(apart):.1f} deg in the "
-                             "median): gravity from the accelerometer alone")
+                             f"directions differ by {np.median(apart[calm]):.1f} deg in the "
+                             "median while still): gravity from the accelerometer alone")
                 up = direct
             else:
                 step = float(np.median(np.diff(np.asarray(t_s, float))))
