@@ -324,6 +324,52 @@ def test_calibrate_mag_refuses_bad_input_in_one_line(tmp_path, capsys):
     assert not (tmp_path / "o.json").exists()
 
 
+def record_simulator(url: str, path, seconds: float):
+    """``seconds`` of a simulator URL into a recording with the unit's true accelerometer
+    and gyroscope calibration in its header (as a calibrated device records); its unit."""
+    from app.core.evaluation import calibration_from_unit_errors
+    from drivers.registry import create_device
+
+    device = create_device(url)
+    info = device.open()
+    unit = device.unit_errors
+    writer = RecordingWriter(path, recording_metadata(
+        device=info, calibration=calibration_from_unit_errors(unit))).start()
+    try:
+        while True:
+            raw = device.read(1.0)
+            if raw is None or len(raw) == 0:
+                continue
+            writer.write(raw)
+            if float(raw.t_s[-1]) >= seconds:
+                break
+    finally:
+        device.close()
+        assert writer.close().state == "stopped"
+    return unit
+
+
+SIM_TOUR = "sim://magtour?seed=4&realtime=0&block=1024&date=2026-11-27"
+
+
+def test_calibrate_mag_finds_the_simulated_units_truth(tmp_path, capsys):
+    path = tmp_path / "magtour.csv"
+    unit = record_simulator(SIM_TOUR, path, 72.0)  # one round of the tour
+    out = tmp_path / "mag.json"
+    assert main(["calibrate-mag", str(path), "--json", str(out),
+                 "--place", "52.5125,13.3269"]) == 0
+    body = json.loads(out.read_text())["magnetometer"]
+    truth = unit.magnetometer
+    exact = np.linalg.inv(truth.matrix)
+    exact /= np.cbrt(np.linalg.det(exact))
+    cal = MagnetometerCalibration.from_json(body)
+    assert body["verdict"] == "good"
+    np.testing.assert_allclose(cal.hard_iron_ut, truth.hard_iron_ut, atol=0.5)
+    assert np.max(np.abs(cal.soft_iron - exact)) < 0.005
+    assert turn_error_deg(cal.soft_iron, exact) < 0.2
+    assert body["alignment_deg"] == pytest.approx(truth.alignment_deg, abs=0.3)
+
+
 def test_old_profiles_without_the_magnetometer_still_load(tmp_path):
     store = ProfileStore(tmp_path)
     path = store.save(make_profile("OLD-1", SensorCalibration(name="old"),
