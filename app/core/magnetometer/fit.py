@@ -11,17 +11,25 @@ comparison). :func:`fit_magnetometer` uses both, in the spirit of Kok and Schön
 likelihood calibration with inertial sensors (IEEE Sensors J. 2016), in three well-conditioned
 steps:
 
-1. an algebraic ellipsoid fit (hard iron, symmetric soft iron), refined geometrically;
+1. an algebraic ellipsoid fit (hard iron, symmetric soft iron) on the samples a trimmed
+   sphere fit keeps (a magnet passing by must not drag the start away), refined
+   geometrically;
 2. the turn, in closed form: with ``u`` the sphere-corrected field and ``a`` the unit gravity
-   direction of the samples at rest (accelerometer norm near g, and a slow gyroscope when one
-   is given), ``a' Q u`` must be constant, which is linear in the 9 entries of ``Q`` and the
-   constant: the null vector of that system, projected onto the rotations;
-   With a gyroscope and times, the gravity direction is the accelerometer's carried along
-   by the gyroscope and averaged forward and backward in time (:func:`smoothed_gravity`), so
-   the shaking of a hand tour hardly enters;
-3. a joint robust least-squares refinement of all 12 parameters and the dip, the strength
-   residuals and the dip residuals weighted by their own noise; samples far off the sphere
-   (a disturbance) are dropped and the fit is repeated once.
+   direction of the samples at rest (accelerometer norm near g), ``a' Q u`` must be constant,
+   which is linear in the 9 entries of ``Q`` and the constant: the null vector of that
+   system, projected onto the rotations;
+3. a joint robust least-squares refinement of all 12 parameters and the dip (Gauss-Newton
+   on the normal equations with soft-L1 weights), each kind of residual weighted by its own
+   noise; samples far off the sphere (a disturbance) are dropped and the fit is repeated.
+
+With a gyroscope and times (Kok and Schön's other inertial sensor) two things improve: the
+gravity direction is the accelerometer's carried along by the gyroscope (its bias found from
+the tilt first, :func:`gyro_bias_from_tilt`) and averaged forward and backward in time
+(:func:`smoothed_gravity`), so the shaking of a hand tour hardly enters; and the joint fit
+adds that the calibrated field must turn between samples 0.2 s apart as the gyroscope says
+(:func:`gyro_pairs`), which pins the turn without any accelerometer noise. The gyroscope shares
+the accelerometer's chip; a gyroscope that does not follow the accelerometer while still is
+not used (said in the notes).
 
 The overall scale is not observable from a magnetometer alone (the chip's gain and the field's
 strength trade against each other): the soft-iron matrix is normalised to determinant 1, so
@@ -579,9 +587,11 @@ def fit_magnetometer(mag_ut: np.ndarray, accel_m_s2: np.ndarray | None = None, *
 
     ``mag_ut`` (N, 3) raw field in uT, NaN rows where no field sample arrived;
     ``accel_m_s2`` (N, 3) the accelerometer on the same rows (without it there is no turn:
-    the result is the ellipsoid fit, said in ``notes``); ``gyro_rad_s`` (N, 3) optional, to
-    keep only slowly turning samples for the gravity direction; ``t_s`` optional, to name
-    when a disturbance happened; ``expected`` the local WMM field, for the verdict.
+    the result is the ellipsoid fit, said in ``notes``); ``gyro_rad_s`` (N, 3) and ``t_s``
+    (N,) optional: with both the gyroscope carries gravity and links the field samples (see
+    the module docstring; the gyroscope alone only keeps slowly turning samples at rest), and
+    ``t_s`` names when a disturbance happened; ``expected`` the local WMM field, for the
+    verdict.
 
     Raises ValueError (with the reason) for NaN-only input, too few field samples, a flat
     tour or samples that fit no ellipsoid.
