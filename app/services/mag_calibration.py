@@ -123,6 +123,7 @@ def calibrate_recording(path: str | Path, place: Place | None = None,
     else:
         notes.append("no place given: the field and dip were not compared with the WMM "
                      "(give --place LAT,LON)")
+    assert block.mag_ut is not None  # checked when the recording was read
     result = fit_magnetometer(block.mag_ut, block.accel_m_s2, t_s=block.t_s,
                               gyro_rad_s=block.gyro_rad_s, expected=expected)
     return MagCalibrationRun(result, str(path), dict(recording.device),
@@ -153,7 +154,7 @@ def save_to_profile(run: MagCalibrationRun, store: ProfileStore,
             else f"{existing.method} + magnetometer".strip(" +"),
             residuals={**existing.residuals, **residuals},
             notes=f"{existing.notes}; {note}".strip("; "),
-            **({"created_utc": created_utc} if created_utc else {}))
+            created_utc=created_utc or existing.created_utc)
     else:
         profile = make_profile(
             run.unique_id, SensorCalibration(name="magnetometer", magnetometer=magnetometer),

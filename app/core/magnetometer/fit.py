@@ -660,10 +660,11 @@ def fit_magnetometer(mag_ut: np.ndarray, accel_m_s2: np.ndarray | None = None, *
         if accel is None:
             still = np.zeros(len(xk), dtype=bool)
         else:
+            assert up is not None  # found with the accelerometer
             still = _still_rows(accel[keep], None if gyro is None else gyro[keep])
             still &= np.all(np.isfinite(up[keep]), axis=1)
         still_count = int(np.count_nonzero(still))
-        if accel is not None and still_count >= MIN_STILL_SAMPLES:
+        if accel is not None and up is not None and still_count >= MIN_STILL_SAMPLES:
             a = up[keep][still]
             spread = np.linalg.eigvalsh(np.cov(a.T))
             if spread[0] < 0.01:

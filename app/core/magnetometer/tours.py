@@ -133,7 +133,7 @@ def pose_tour(unit: MagUnit, earth: EarthField, seed: int, poses: int = 150,
     ``field_scale`` multiplies the earth's field (a place far from the WMM's value).
     """
     rng = np.random.default_rng(seed)
-    chosen = []
+    chosen: list[np.ndarray] = []
     while sum(len(c) for c in chosen) < poses:
         candidates = random_rotations(poses, rng)
         if half_sphere:
