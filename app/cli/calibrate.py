@@ -133,7 +133,7 @@ def print_truth(result: OfflineCalibration, unit_errors: dict[str, Any], out: Te
 def write_calibration_report(result, profile, stream, label: str, path: Path) -> None:
     """The report (:mod:`app.documents.calibration_report`, painted by Qt: loaded only now,
     a headless lab machine may not have Qt's graphics libraries)."""
-    lab.qt_for_documents()
+    _app = lab.qt_for_documents()
     from app.documents.calibration_report import report_from_offline, write_report
 
     report = report_from_offline(result, profile, stream.device, label, stream.unit_errors)

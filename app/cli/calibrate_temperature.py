@@ -250,7 +250,7 @@ def _existing_profile(args: argparse.Namespace, store: ProfileStore, stream: Cap
 def write_temperature_report(fit, calibration, profile, stream, label: str, lines,
                              path: Path) -> None:
     """The report (:mod:`app.documents.calibration_report`; Qt is loaded only now)."""
-    lab.qt_for_documents()
+    _app = lab.qt_for_documents()
     from app.documents.calibration_report import report_from_temperature, write_report
 
     report = report_from_temperature(fit, calibration, profile, stream.device, label,

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from app.cli.errors import finite
+from app.cli.errors import CommandError, finite
 from app.core.faults import FaultEvent
 from app.core.recording.errors import RecordingError
 from app.services.diagnosis import Diagnosis, diagnose_events
@@ -56,8 +56,7 @@ def diagnose_command(args: argparse.Namespace) -> int:
                 header_done = True
             print(_row(event), flush=True)
     except (RecordingError, DeviceError, OSError) as exc:
-        print(f"inclinometer diagnose: {exc}", file=sys.stderr)
-        return 2
+        raise CommandError(str(exc), command="diagnose") from None
     if not args.json:
         count = len(result.events)
         print(f"{args.source}: {result.samples} samples, {result.duration_s:.1f} s, "

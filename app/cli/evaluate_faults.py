@@ -19,7 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from app.cli.errors import finite
+from app.cli.errors import EXIT_FAILED, CommandError, finite
 from app.core.faults.evaluation import NOISE_MULTIPLES, THETAS, to_user_units, unit_of
 from app.core.faults.events import CHANNELS
 from app.core.recording.errors import RecordingError
@@ -129,8 +129,7 @@ def evaluate_faults_command(args: argparse.Namespace) -> int:
 
         result = run_fault_evaluation(sources, settings, progress)
     except (ValueError, RecordingError, DeviceError, OSError) as exc:
-        print(f"inclinometer evaluate-faults: {exc}", file=sys.stderr)
-        return 2
+        raise CommandError(str(exc), command="evaluate-faults") from None
     print_evaluation(result, out)
     document = result.as_json()
     if args.json is not None:
@@ -143,9 +142,8 @@ def evaluate_faults_command(args: argparse.Namespace) -> int:
                 write_output(args.json, text, inputs=_file_sources(args),
                              overwrite=args.overwrite, option="--json")
             except OSError as exc:
-                print(f"inclinometer evaluate-faults: "
-                      f"{write_error_message(exc, args.json, '--json')}", file=sys.stderr)
-                return 1
+                raise CommandError(write_error_message(exc, args.json, "--json"), EXIT_FAILED,
+                                   command="evaluate-faults") from None
     if args.png is not None:
         for path in save_curves(document, Path(args.png)):
             print(f"wrote {path}", file=out)

@@ -17,7 +17,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from app.cli.errors import one_line
+from app.cli.errors import CommandError, one_line
 from app.cli.recordings import check_recorded_calibration
 from app.core.joint.alignment import align_to
 from app.core.joint.offline import joint_angle_offline
@@ -82,9 +82,9 @@ def parse_axes(text: str) -> tuple[np.ndarray, np.ndarray] | None:
     return axes[0], axes[1]
 
 
-def _fail(message: str) -> int:
-    print(f"inclinometer joint: {message}", file=sys.stderr)
-    return EXIT_USAGE
+def _fail(message: str) -> CommandError:
+    """Input ``joint`` cannot use: ``inclinometer joint: MESSAGE``, exit 2."""
+    return CommandError(message, EXIT_USAGE, command="joint")
 
 
 def _vector(v: np.ndarray) -> str:
@@ -93,62 +93,31 @@ def _vector(v: np.ndarray) -> str:
 
 def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     out = sys.stdout if out is None else out
-    time_map = None
-    manifest = None
-    if str(args.first).lower().endswith(".json"):  # a session manifest names A, B and the joint
-
-        if args.second is not None:
-            return _fail("give a session manifest alone, or two recordings A.csv B.csv")
-        try:
-            session = load_session(args.first, allow_outside=args.allow_outside_paths)
-            first, second, config, time_map = session_joint_files(session)
-        except RecordingError as exc:
-            return _fail(str(exc))
-        except RecursionError:
-            return _fail(f"{args.first}: not a session manifest (its JSON is nested too deeply)")
-        except ValueError as exc:  # an integer of thousands of digits, a NUL in the name
-            return _fail(f"{args.first}: not a session manifest ({one_line(exc)})")
-        manifest, args.first, args.second = args.first, str(first), str(second)
-        if config.axes is not None and args.axis.strip().lower() == "auto":
-            args.axis = ":".join(",".join(repr(v) for v in a) for a in config.axes)
-    elif args.second is None:
-        return _fail("give two recordings (A.csv B.csv) or a session manifest (.session.json)")
+    manifest, time_map = _from_manifest(args)
     try:
         axes = parse_axes(args.axis)
     except ValueError as exc:
-        return _fail(str(exc))
+        raise _fail(str(exc)) from None
     target = Path(args.out)
     inputs = [args.first, args.second, manifest]
     try:
         check_output(target, inputs=inputs, overwrite=args.force, option="--out")
     except OutputRefused as exc:
-        return _fail(str(exc))
-    blocks = []
-    for name in (args.first, args.second):
-        try:
-            recording = read_recording(name)
-        except RecordingError as exc:
-            return _fail(str(exc))
-        except OSError as exc:
-            return _fail(f"{name}: cannot read the recording: {exc.strerror or exc}")
-        if len(recording) < 2:
-            return _fail(f"{name}: fewer than two samples")
-        check_recorded_calibration(recording.metadata, Path(name))
-        calibration = recording.calibration
-        blocks.append(recording.sample_block(calibration))
+        raise _fail(str(exc)) from None
+    blocks = [_calibrated_samples(name) for name in (args.first, args.second)]
     if time_map is not None:  # B's clock onto A's, as the manifest maps them
         blocks[1].t_s = time_map(blocks[1].t_s)
     first, other = blocks
     second, covered, how = align_to(first, other)
     rows = np.flatnonzero(covered)
     if len(rows) < 2:
-        return _fail("the two recordings do not overlap in time")
+        raise _fail("the two recordings do not overlap in time")
     part1 = _take(first, rows)
     part2 = _take(second, rows)
     try:
         result = joint_angle_offline(part1, part2, axes)
     except ValueError as exc:
-        return _fail(str(exc))
+        raise _fail(str(exc)) from None
     angle = np.full(len(first), np.nan)
     angle[rows] = result.angles.angle_deg
     info: dict[str, Any] = {
@@ -175,7 +144,7 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     try:
         write_output(target, text, inputs=inputs, overwrite=args.force, option="--out")
     except OSError as exc:
-        return _fail(write_error_message(exc, target, "--out"))
+        raise _fail(write_error_message(exc, target, "--out")) from None
     print(f"axis in A: {_vector(result.j1)}   axis in B: {_vector(result.j2)}"
           f"   ({info['axis_source']})", file=out)
     if estimate is not None:
@@ -191,6 +160,46 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     print(f"{target}: {len(angle)} rows ({int(known.sum())} with an angle), alignment: {how}",
           file=out)
     return 0
+
+
+def _from_manifest(args: argparse.Namespace) -> tuple[str | None, Any]:
+    """(the session manifest, the map of B's clock onto A's), both None for two recordings; a
+    manifest names A and B (``args.first``, ``args.second``) and may give the axes."""
+    if not str(args.first).lower().endswith(".json"):
+        if args.second is None:
+            raise _fail("give two recordings (A.csv B.csv) or a session manifest "
+                        "(.session.json)")
+        return None, None
+    if args.second is not None:
+        raise _fail("give a session manifest alone, or two recordings A.csv B.csv")
+    try:
+        session = load_session(args.first, allow_outside=args.allow_outside_paths)
+        first, second, config, time_map = session_joint_files(session)
+    except RecordingError as exc:
+        raise _fail(str(exc)) from None
+    except RecursionError:
+        raise _fail(f"{args.first}: not a session manifest (its JSON is nested too "
+                    "deeply)") from None
+    except ValueError as exc:  # an integer of thousands of digits, a NUL in the name
+        raise _fail(f"{args.first}: not a session manifest ({one_line(exc)})") from None
+    manifest, args.first, args.second = args.first, str(first), str(second)
+    if config.axes is not None and args.axis.strip().lower() == "auto":
+        args.axis = ":".join(",".join(repr(v) for v in a) for a in config.axes)
+    return manifest, time_map
+
+
+def _calibrated_samples(name: str) -> Any:
+    """A recording's samples with its recorded calibration applied."""
+    try:
+        recording = read_recording(name)
+    except RecordingError as exc:
+        raise _fail(str(exc)) from None
+    except OSError as exc:
+        raise _fail(f"{name}: cannot read the recording: {exc.strerror or exc}") from None
+    if len(recording) < 2:
+        raise _fail(f"{name}: fewer than two samples")
+    check_recorded_calibration(recording.metadata, Path(name))
+    return recording.sample_block(recording.calibration)
 
 
 def _take(block: Any, rows: np.ndarray) -> Any:

@@ -51,19 +51,16 @@ def failed(args: argparse.Namespace, message: str) -> CommandError:
                         command=getattr(args, "command", None) or "calibrate")
 
 
-def qt_for_documents() -> None:
-    """A QGuiApplication for painting a report (offscreen when there is no screen: a lab
-    script); Qt is loaded only when a report is asked for."""
+def qt_for_documents() -> Any:
+    """The QGuiApplication to paint a report with (offscreen when there is no screen: a lab
+    script); the caller holds it while it paints. Qt is loaded only when a report is asked
+    for."""
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
                                                  or os.environ.get("WAYLAND_DISPLAY")):
         os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     from PySide6.QtGui import QGuiApplication
 
-    global _qt_app
-    _qt_app = QGuiApplication.instance() or QGuiApplication(["inclinometer"])
-
-
-_qt_app = None
+    return QGuiApplication.instance() or QGuiApplication(["inclinometer"])
 
 
 def _settings_from_device(device: dict[str, Any], rate_hz: float, out: TextIO):

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import TextIO
 
-from app.cli.errors import EXIT_USAGE, finite
+from app.cli.errors import EXIT_FAILED, CommandError, finite
 from app.services.arm_recordings import record_arm
 from drivers.errors import DeviceError
 
@@ -39,11 +39,9 @@ def record_arm_command(args: argparse.Namespace, out: TextIO | None = None) -> i
         written = record_arm(args.url, args.duration, Path(args.directory),
                              overwrite=args.force)
     except (ValueError, DeviceError) as exc:
-        print(f"inclinometer record-arm: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        raise CommandError(str(exc), command="record-arm") from None
     except OSError as exc:
-        print(f"inclinometer record-arm: {exc.strerror or exc}", file=sys.stderr)
-        return 1
+        raise CommandError(exc.strerror or str(exc), EXIT_FAILED, command="record-arm") from None
     for item in written:
         print(f"{item.path}: sensor {item.sensor}, {item.samples} samples", file=out)
     return 0
