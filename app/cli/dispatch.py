@@ -114,7 +114,9 @@ def main(argv: list[str] | None = None,
     handler = getattr(args, "handler", None)
     if handler is None or args.smoke_test is not None:
         if start_gui is None:
-            parser.error("give a COMMAND (the window starts from 'inclinometer' itself)")
+            # Only an entry point installed before app.launcher existed calls this for the window.
+            parser.error("give a COMMAND (the window starts from app.launcher:main; an install "
+                         "made before it needs 'pip install -e .' again)")
         return start_gui(args)
     install_warning_format()
     return run_guarded(lambda: handler(args), argv, debug=args.debug)
