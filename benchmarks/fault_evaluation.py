@@ -20,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from app.cli_faults import print_evaluation, save_curves
+from app.cli.evaluate_faults import print_evaluation, save_curves
 from app.services.fault_evaluation import (
     FaultEvaluationSettings,
     resolve_fault_sources,

@@ -6,6 +6,6 @@ from app.frozen import prepare_frozen_environment
 
 prepare_frozen_environment()
 
-from app.cli import main  # noqa: E402
+from app.launcher import main  # noqa: E402
 
 sys.exit(main())

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from test_services import DEADLINE_S, parts, stream
 
-from app.cli_check import check_board
+from app.cli.check_board import check_board
 from app.core.devices import BoardStatus
 from app.core.recording import read_recording
 from app.services.board_health import (
@@ -285,7 +285,7 @@ def test_simulate_pty_injects_fifo_overruns_that_the_host_sees_explained(capsys)
     import threading
 
     from app.cli import build_parser
-    from app.cli_simulate import simulate_command
+    from app.cli.simulate import simulate_command
 
     bad = build_parser().parse_args(["simulate", "--pty", "--fifo-overrun", "soon"])
     assert simulate_command(bad, io.StringIO()) == 2

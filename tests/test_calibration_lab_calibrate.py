@@ -218,7 +218,7 @@ def test_report_from_calibrate(tour_csv, tmp_path, suffix, qapp, artifacts_dir, 
     # The preview is the document the PDF prints.
     from app.core.calibration_procedures import SensorSettings, make_profile
     from app.core.calibration_procedures.offline import calibrate_stream
-    from app.gui.calibration_report import render_preview, report_from_offline
+    from app.documents.calibration_report import render_preview, report_from_offline
 
     recording = read_recording(tour_csv)
     d = recording.device

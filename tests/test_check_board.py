@@ -13,7 +13,7 @@ import pytest
 from fwcore import FirmwareCore, PtyBoard
 
 from app.cli import build_parser
-from app.cli_check import check_board, check_command, clock_ppm_of
+from app.cli.check_board import check_board, check_command, clock_ppm_of
 from drivers import lsm6dsox
 from drivers.emulated_nucleo import EmulatedNucleo, NucleoFaults
 from drivers.link import protocol as p

@@ -7,7 +7,8 @@ import subprocess
 import sys
 
 from app import __version__
-from app.cli import list_devices, main
+from app.cli.devices import list_devices
+from app.launcher import main
 
 
 def test_version_flag_prints_the_version():

@@ -23,8 +23,8 @@ from hostile_corpus import (
     write_files,
 )
 
-import app.cli as cli
-import app.cli_errors as cli_errors
+import app.cli.devices as cli_devices
+import app.cli.errors as cli_errors
 from app.cli import main
 
 CASES = corpus_cases(Path("/corpus"))
@@ -148,7 +148,7 @@ def test_an_unexpected_error_is_one_line_naming_the_crash_log(tmp_path, monkeypa
         raise ZeroDivisionError("a bug")
 
     log = tmp_path / "logs" / "crash.log"
-    monkeypatch.setitem(cli._COMMANDS, "devices", broken)
+    monkeypatch.setattr(cli_devices, "run", broken)
     monkeypatch.setattr(cli_errors, "crash_log_path", lambda: log)
     monkeypatch.delenv(cli_errors.DEBUG_ENV, raising=False)
     line = assert_one_line(*run(["devices"], capsys), expected=1)

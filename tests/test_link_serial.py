@@ -460,7 +460,7 @@ def test_discovery_lists_the_emulated_board_with_its_usb_identity(boards):
     assert entry.kind == "serial"
     assert "0483:374B" in entry.description and board.usb_serial in entry.description
     assert "emulated NUCLEO" in entry.description
-    from app.cli import list_devices
+    from app.cli.devices import list_devices
 
     out = io.StringIO()
     list_devices(out)

@@ -88,9 +88,9 @@ def test_streamed_replay_writes_what_the_whole_file_replay_writes(wobble, tmp_pa
 
 def test_replay_all_leaves_the_offline_smoothers_out_of_a_long_recording(wobble, tmp_path,
                                                                         capsys, monkeypatch):
-    import app.cli_recording as cli_recording
+    import app.services.replay_export as replay_export
 
-    monkeypatch.setattr(cli_recording, "WHOLE_FILE_OFFLINE_BYTES", 0)
+    monkeypatch.setattr(replay_export, "WHOLE_FILE_OFFLINE_BYTES", 0)
     target = tmp_path / "all.csv"
     assert main(["replay", str(wobble), "--filter", "all", "--out", str(target)]) == 0
     printed = capsys.readouterr().out

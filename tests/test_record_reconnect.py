@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app import cli_recording
 from app.cli import main
+from app.cli import record as cli_recording
 from app.core.devices import DeviceInfo
 from app.core.recording import read_recording
 from app.core.samples import RawBlock, ScaleFactors

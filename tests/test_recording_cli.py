@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.cli import list_devices, main
+from app.cli import main
+from app.cli.devices import list_devices
 from app.core.evaluation import calibration_from_unit_errors
 from app.core.recording import RecordingWarning, read_recording
 from app.services.recorder import record_device

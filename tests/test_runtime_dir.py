@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from app.cli import build_parser
-from app.cli_simulate import simulate_command
+from app.cli.simulate import simulate_command
 from drivers.link import ports
 from drivers.link.ports import SerialPortInfo
 

@@ -351,7 +351,7 @@ def test_report_has_the_temperature_section(warmup_csv, tmp_path, qapp, artifact
     assert text.count("data:image/png;base64,") == 1  # the bias plot (no poses: no tilt plot)
     assert pdf_path.read_bytes()[:4] == b"%PDF"
     from app.core.calibration_procedures.temperature import fit_temperature as fit_fn
-    from app.gui.calibration_report import render_preview, report_from_temperature
+    from app.documents.calibration_report import render_preview, report_from_temperature
 
     recording = read_recording(warmup_csv)
     d = recording.device

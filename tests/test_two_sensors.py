@@ -407,7 +407,7 @@ def test_simulate_pty_serves_two_sensors() -> None:
     import io
 
     from app.cli import build_parser
-    from app.cli_simulate import simulate_command
+    from app.cli.simulate import simulate_command
 
     args = build_parser().parse_args(["simulate", "--pty", "--sensors", "2", "--odr", "208"])
     out, stop = io.StringIO(), threading.Event()

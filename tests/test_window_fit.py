@@ -29,7 +29,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app import cli
+from app import launcher
 from app.core.alarms import alarms_from_specs
 from app.core.recording import sample_recordings
 from app.core.screen_fit import Rect, fields_that_fit, first_window_rect, label_step
@@ -521,9 +521,9 @@ def test_alarm_option_starts_the_window_with_those_alarms(qtbot, tmp_path, monke
     started = {}
     monkeypatch.setattr("app.gui.application.run_gui",
                         lambda device, name, alarms: started.update(alarms=alarms) or 0)
-    assert cli.main(["--alarm", "tilt>2.0,hyst=0.2,delay=0.5", "--alarm", "|roll|>1"]) == 0
+    assert launcher.main(["--alarm", "tilt>2.0,hyst=0.2,delay=0.5", "--alarm", "|roll|>1"]) == 0
     assert started["alarms"] == alarms_from_specs(["tilt>2.0,hyst=0.2,delay=0.5", "|roll|>1"])
-    assert cli.main(["--alarm", "tilt>>2"]) == 2
+    assert launcher.main(["--alarm", "tilt>>2"]) == 2
     error = capsys.readouterr().err
     assert error.startswith("inclinometer: --alarm:") and error.count("\n") == 1
     window = open_window(qtbot, tmp_path, alarms=started["alarms"])

@@ -18,6 +18,7 @@ that profiles, recordings and ``inclinometer calibrate-temperature`` share.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -97,6 +98,29 @@ def temperature_to_json(model: TemperatureCompensation | None) -> dict[str, Any]
     for attribute, key in TEMPERATURE_KEYS.items():
         out[key] = np.asarray(getattr(model, attribute), float).tolist()
     return out
+
+
+def calibration_to_json(calibration: SensorCalibration) -> dict[str, Any]:
+    """The calibration's binding JSON keys, the one place they are written (recordings,
+    profiles, ``calibrate --out``, ``calibrate-temperature --out``): ``accel_bias_m_s2``,
+    ``accel_matrix``, ``gyro_bias_rad_s``, ``gyro_matrix`` and, only when there are some, the
+    temperature terms of :func:`temperature_to_json` and the magnetometer's
+    (:data:`MAG_KEY`: calibrate-mag's object)."""
+    return {
+        "accel_bias_m_s2": np.asarray(calibration.accel_bias_m_s2, float).tolist(),
+        "accel_matrix": np.asarray(calibration.accel_matrix, float).tolist(),
+        "gyro_bias_rad_s": np.asarray(calibration.gyro_bias_rad_s, float).tolist(),
+        "gyro_matrix": np.asarray(calibration.gyro_matrix, float).tolist(),
+        **temperature_to_json(calibration.temperature),
+        **({MAG_KEY: calibration.magnetometer.to_json()}
+           if calibration.magnetometer is not None else {}),
+    }
+
+
+def calibration_json_text(document: Mapping[str, Any]) -> str:
+    """A calibration document (a profile, a ``calibrate --out`` file) as the JSON text
+    written to disk: indented, no NaN (a NaN raises ValueError), a final newline."""
+    return json.dumps(document, indent=2, allow_nan=False) + "\n"
 
 
 def temperature_from_json(value: Mapping[str, Any]) -> TemperatureCompensation | None:

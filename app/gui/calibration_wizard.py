@@ -489,8 +489,8 @@ class ResultsPage(_Page):
         return not self.error and (not self.worse or self.insist.isChecked())
 
     def save_report(self, path: str | None = None) -> str | None:
-        """Write the calibration report (app.gui.calibration_report) for this result."""
-        from app.gui.calibration_report import report_from_parts, write_report
+        """Write the calibration report (app.documents.calibration_report) for this result."""
+        from app.documents.calibration_report import report_from_parts, write_report
 
         profile = self.profile()
         if self.fit is None or self.tilt_comparison is None or profile is None:

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from app.core.calibration import SensorCalibration
+from app.core.calibration import SensorCalibration, calibration_to_json
 from app.core.calibration_procedures.accel_fit import (
     AccelFit,
     CalibrationFitError,
@@ -296,10 +296,7 @@ def calibration_json(
     cal = result.calibration
     fit = result.fit
     return {
-        "accel_bias_m_s2": np.asarray(cal.accel_bias_m_s2, float).tolist(),
-        "accel_matrix": np.asarray(cal.accel_matrix, float).tolist(),
-        "gyro_bias_rad_s": np.asarray(cal.gyro_bias_rad_s, float).tolist(),
-        "gyro_matrix": np.asarray(cal.gyro_matrix, float).tolist(),
+        **calibration_to_json(cal),
         "format": JSON_FORMAT,
         "format_version": JSON_VERSION,
         "convention": "a_cal = A (a_raw - b_a), w_cal = G (w_raw - b_g); SI units",

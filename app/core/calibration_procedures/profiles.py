@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import json
 import math
 import os
 import re
@@ -47,8 +46,9 @@ from app.core.calibration import (
     MAG_KEY,
     MagnetometerCalibration,
     SensorCalibration,
+    calibration_json_text,
+    calibration_to_json,
     temperature_from_json,
-    temperature_to_json,
 )
 from app.core.calibration_procedures.level_reference import TareReference
 from app.core.version import __version__
@@ -172,17 +172,8 @@ class CalibrationProfile:
                 "accel_fs_g": self.settings.accel_fs_g,
                 "gyro_fs_dps": self.settings.gyro_fs_dps,
             },
-            "parameters": {
-                "accel_bias_m_s2": np.asarray(cal.accel_bias_m_s2, float).tolist(),
-                "accel_matrix": np.asarray(cal.accel_matrix, float).tolist(),
-                "gyro_bias_rad_s": np.asarray(cal.gyro_bias_rad_s, float).tolist(),
-                "gyro_matrix": np.asarray(cal.gyro_matrix, float).tolist(),
-                # Optional, within format 1: the temperature terms when there are some.
-                **temperature_to_json(cal.temperature),
-                # Optional, within format 1: the magnetometer's terms (calibrate-mag's JSON).
-                **({MAG_KEY: cal.magnetometer.to_json()} if cal.magnetometer is not None
-                   else {}),
-            },
+            # The binding keys; optional within format 1: the temperature terms.
+            "parameters": calibration_to_json(cal),
             "tare_quaternion": None if self.tare is None else self.tare.to_list(),
             "residuals": _jsonable(self.residuals),
             "notes": self.notes,
@@ -349,7 +340,7 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
 
 def write_profile_file(path: Path, profile: CalibrationProfile) -> None:
     """Write one profile as JSON, atomically."""
-    text = json.dumps(profile.to_json_dict(), indent=2, allow_nan=False) + "\n"
+    text = calibration_json_text(profile.to_json_dict())
     write_bytes_atomic(Path(path), text.encode("utf-8"))
 
 

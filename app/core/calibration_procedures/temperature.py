@@ -57,7 +57,8 @@ from typing import Any
 
 import numpy as np
 
-from app.core.calibration import SensorCalibration, TemperatureCompensation
+from app.core.calibration import SensorCalibration, TemperatureCompensation, calibration_to_json
+from app.core.calibration_procedures.offline import JSON_FORMAT, JSON_VERSION
 from app.core.calibration_procedures.profiles import SensorSettings
 from app.core.calibration_procedures.stillness import SensorNoise, StillnessDetector
 from app.core.samples import STANDARD_GRAVITY_M_S2, SampleBlock
@@ -462,3 +463,24 @@ __all__ = [
     "TemperatureFitError", "TemperatureTruth", "fit_temperature", "merge_temperature",
     "still_mask", "truth_of",
 ]
+
+
+def temperature_calibration_json(fit: Any, calibration: SensorCalibration, how: str,
+                                 device_unique_id: str, source: str,
+                                 created_utc: str) -> dict[str, Any]:
+    """The ``calibrate-temperature --out`` document: the binding calibration keys with the
+    temperature terms, then descriptive extras (as :func:`offline.calibration_json`)."""
+    return {
+        **calibration_to_json(calibration),
+        "format": JSON_FORMAT,
+        "format_version": JSON_VERSION,
+        "convention": ("a_cal = A (a_raw - b_a(T)), w_cal = G (w_raw - b_g(T)), b(T) = b + "
+                       "tc1 (T - T0) + tc2 (T - T0)^2 (T: die temperature, NaN: b); SI units"),
+        "name": calibration.name,
+        "method": "temperature",
+        "device_unique_id": device_unique_id,
+        "source": source,
+        "created_utc": created_utc,
+        "merged": how,
+        "temperature_fit": fit.summary(),
+    }

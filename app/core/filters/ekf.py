@@ -163,7 +163,7 @@ def _correct(quat, aux, d0, d1):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _ekf_kernel(
+def _ekf_kernel(  # noqa: C901 - one compiled pass: a split costs a call per sample
     accel, gyro, dt, quat, bias, cov, aux, gyro_var_density, scale_var, bias_var_density,
     accel_var_density, lp_tau, motion_gain, tilt0_var, estimate_bias, rest_gyro2, rest_accel2,
     rest_time, rest_clip, gravity, out, out_var,

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -580,26 +581,14 @@ def _joint(x: np.ndarray, hard: np.ndarray, matrix: np.ndarray, strength: float,
     return split(_gauss_newton(residuals_jacobian, start, robust_scale=3.0))
 
 
-def fit_magnetometer(mag_ut: np.ndarray, accel_m_s2: np.ndarray | None = None, *,
-                     t_s: np.ndarray | None = None, gyro_rad_s: np.ndarray | None = None,
-                     expected: EarthField | None = None) -> MagFitResult:
-    """Calibrate the magnetometer from a tour through every direction.
-
-    ``mag_ut`` (N, 3) raw field in uT, NaN rows where no field sample arrived;
-    ``accel_m_s2`` (N, 3) the accelerometer on the same rows (without it there is no turn:
-    the result is the ellipsoid fit, said in ``notes``); ``gyro_rad_s`` (N, 3) and ``t_s``
-    (N,) optional: with both the gyroscope carries gravity and links the field samples (see
-    the module docstring; the gyroscope alone only keeps slowly turning samples at rest), and
-    ``t_s`` names when a disturbance happened; ``expected`` the local WMM field, for the
-    verdict.
-
-    Raises ValueError (with the reason) for NaN-only input, too few field samples, a flat
-    tour or samples that fit no ellipsoid.
-    """
-    x, rows = _field_rows(mag_ut)
-    _check_spread(x)
-    reasons: list[str] = []
-    notes: list[str] = []
+def _inertial_inputs(
+    mag_ut: np.ndarray, rows: np.ndarray, accel_m_s2: np.ndarray | None,
+    gyro_rad_s: np.ndarray | None, t_s: np.ndarray | None, notes: list[str],
+) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None, Any, float,
+           np.ndarray | None]:
+    """The accelerometer, gyroscope, gravity direction ("up"), gyroscope-linked sample pairs,
+    the dip's correlation length and the times, on the field's rows (``rows``); shapes are
+    checked against the field's (ValueError). Notes what it decided in ``notes``."""
     accel = gyro = up = pairs_all = None
     dip_correlation = 1.0
     if accel_m_s2 is not None:
@@ -643,6 +632,31 @@ def fit_magnetometer(mag_ut: np.ndarray, accel_m_s2: np.ndarray | None = None, *
         accel = accel[rows]
         gyro = None if gyro is None else gyro[rows]
     times = None if times is None else times[rows]
+    return accel, gyro, up, pairs_all, dip_correlation, times
+
+
+def fit_magnetometer(mag_ut: np.ndarray, accel_m_s2: np.ndarray | None = None, *,
+                     t_s: np.ndarray | None = None, gyro_rad_s: np.ndarray | None = None,
+                     expected: EarthField | None = None) -> MagFitResult:
+    """Calibrate the magnetometer from a tour through every direction.
+
+    ``mag_ut`` (N, 3) raw field in uT, NaN rows where no field sample arrived;
+    ``accel_m_s2`` (N, 3) the accelerometer on the same rows (without it there is no turn:
+    the result is the ellipsoid fit, said in ``notes``); ``gyro_rad_s`` (N, 3) and ``t_s``
+    (N,) optional: with both the gyroscope carries gravity and links the field samples (see
+    the module docstring; the gyroscope alone only keeps slowly turning samples at rest), and
+    ``t_s`` names when a disturbance happened; ``expected`` the local WMM field, for the
+    verdict.
+
+    Raises ValueError (with the reason) for NaN-only input, too few field samples, a flat
+    tour or samples that fit no ellipsoid.
+    """
+    x, rows = _field_rows(mag_ut)
+    _check_spread(x)
+    reasons: list[str] = []
+    notes: list[str] = []
+    accel, gyro, up, pairs_all, dip_correlation, times = _inertial_inputs(
+        mag_ut, rows, accel_m_s2, gyro_rad_s, t_s, notes)
 
     keep = _sphere_keep(x)
     hard, soft, strength = _ellipsoid(x[keep])

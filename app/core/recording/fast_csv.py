@@ -192,7 +192,7 @@ def _is_digit(c: int) -> bool:
 
 
 @numba.njit(cache=True, inline="always")
-def _parse_number(
+def _parse_number(  # noqa: C901 - inlined into the compiled CSV loop, byte by byte
     buf: np.ndarray, i: int, bits_out: np.ndarray, values_out: np.ndarray, cell: int,
     pow5_high: np.ndarray, pow5_low: np.ndarray, powers10: np.ndarray,
 ) -> tuple[int, int]:

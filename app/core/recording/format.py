@@ -27,8 +27,8 @@ from app.core.calibration import (
     MagnetometerCalibration,
     SensorCalibration,
     temperature_from_json,
-    temperature_to_json,
 )
+from app.core.calibration import calibration_to_json as calibration_parameters_json
 from app.core.version import __version__
 
 T = TypeVar("T")
@@ -155,18 +155,20 @@ def metadata_entries(metadata: Mapping[str, Any], key: str, parse: Callable[[Any
 
 def calibration_to_json(calibration: SensorCalibration) -> dict[str, Any]:
     """The calibration's parameters, as a profile's ``parameters`` plus its name."""
-    return {
-        "name": calibration.name,
-        "accel_bias_m_s2": np.asarray(calibration.accel_bias_m_s2, float).tolist(),
-        "accel_matrix": np.asarray(calibration.accel_matrix, float).tolist(),
-        "gyro_bias_rad_s": np.asarray(calibration.gyro_bias_rad_s, float).tolist(),
-        "gyro_matrix": np.asarray(calibration.gyro_matrix, float).tolist(),
-        # Optional (a v1 extension): the temperature terms, only when there are some.
-        **temperature_to_json(calibration.temperature),
-        # Optional (a v1 extension): the magnetometer's terms, only when there are some.
-        **({MAG_KEY: calibration.magnetometer.to_json()}
-           if calibration.magnetometer is not None else {}),
-    }
+    return {"name": calibration.name, **calibration_parameters_json(calibration)}
+
+
+def recorded_calibration_problem(metadata: Mapping[str, Any]) -> str | None:
+    """Why a recording's ``calibration`` key cannot be used (None: it can, or there is none);
+    a command then refuses rather than silently use the samples uncalibrated."""
+    value = metadata.get(KEY_CALIBRATION)
+    if value is None:
+        return None
+    try:
+        calibration_from_json(value)
+    except (ValueError, TypeError, KeyError) as exc:
+        return str(exc)
+    return None
 
 
 def calibration_from_json(value: Any) -> SensorCalibration:

@@ -1,5 +1,4 @@
-"""``inclinometer joint A.csv B.csv --out J.csv [--axis auto|AX,AY,AZ:BX,BY,BZ]`` and
-``inclinometer record-arm "sim://arm?..." --duration S DIR``.
+"""``inclinometer joint A.csv B.csv --out J.csv [--axis auto|AX,AY,AZ:BX,BY,BZ]``.
 
 The angle of the hinge between the sensor of recording A and that of recording B
 (:mod:`app.core.joint`), one row per row of A. Output: ``# inclinometer-joint 1``, ``# key:
@@ -18,8 +17,16 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from app.cli_errors import finite
+from app.cli.errors import CommandError, one_line
+from app.cli.recordings import check_recorded_calibration
+from app.core.joint.alignment import align_to
+from app.core.joint.offline import joint_angle_offline
+from app.core.recording.errors import RecordingError
+from app.core.recording.reader import read_recording
+from app.core.recording.session import load_session, session_joint_files
+from app.core.recording.writer import format_table
 from app.core.safe_output import OutputRefused, check_output, write_error_message, write_output
+from app.core.samples import SampleBlock
 
 EXIT_USAGE = 2
 MAGIC = "# inclinometer-joint 1"
@@ -27,18 +34,16 @@ AXIS_SPREAD_LIMIT_DEG = 2.0
 """An axis whose quarter-by-quarter estimates differ more than this is reported as poor."""
 
 
-def add_joint_parser(commands: argparse._SubParsersAction) -> None:
-    joint = commands.add_parser(
-        "joint",
-        help="the angle of a hinge between two sensors' recordings",
-        description=(
+def add_arguments(joint: argparse.ArgumentParser) -> None:
+    """The options of ``joint``; it runs :func:`joint_command`."""
+    joint.set_defaults(handler=joint_command)
+    joint.description = (
             "Estimate the angle of a hinge joint between the sensors of two recordings "
             "(format v1, e.g. sim://arm's). Each link's 6D orientation (VQF), the hinge "
             "axis from the gyroscopes (or --axis), the heading offset between the two "
             "orientations from the hinge, fused with the gyroscopes' rate about the axis. "
             "Writes t and joint_deg, one row per row of A; B is interpolated to A's times "
             "when their rows differ."
-        ),
     )
     joint.add_argument("first", metavar="A.csv", help="the recording of the sensor on link 1, "
                        "or a session manifest (NAME.session.json) instead of A and B")
@@ -55,44 +60,6 @@ def add_joint_parser(commands: argparse._SubParsersAction) -> None:
     joint.add_argument("--allow-outside-paths", action="store_true",
                        help="let a session manifest name files outside its folder (absolute "
                             "or ../ paths); by default they are refused")
-    arm = commands.add_parser(
-        "record-arm",
-        help="record a simulated measuring arm: one v1 file per sensor, with the truth",
-        description=(
-            "Run every sensor of one sim://arm (same seed: one arm) as fast as possible and "
-            "write DIR/sensor0.csv, sensor1.csv, ...: raw samples, the true orientation and, "
-            "from sensor 1 on, joint_ref_deg, the true angle of the hinge between sensor K-1 "
-            "and K; the true axes are in the 'arm' metadata key."
-        ),
-    )
-    arm.add_argument("url", metavar="URL", help="a sim://arm URL, e.g. "
-                     "'sim://arm?links=3&seed=4&odr=208' (sensor= is set for each file)")
-    arm.add_argument("directory", metavar="DIR", help="where to write the files")
-    arm.add_argument("--duration", type=float, default=180.0, metavar="S",
-                     help="seconds of device time (default %(default)g)")
-    arm.add_argument("--overwrite", "--force", dest="force", action="store_true",
-                     help="replace existing files")
-
-
-def record_arm_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
-    """The ``record-arm`` sub-command."""
-    from app.services.arm_recordings import record_arm
-    from drivers.errors import DeviceError
-
-    out = sys.stdout if out is None else out
-    finite(args.duration, "--duration", positive=True, maximum=86400.0)
-    try:
-        written = record_arm(args.url, args.duration, Path(args.directory),
-                             overwrite=args.force)
-    except (ValueError, DeviceError) as exc:
-        print(f"inclinometer record-arm: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except OSError as exc:
-        print(f"inclinometer record-arm: {exc.strerror or exc}", file=sys.stderr)
-        return 1
-    for item in written:
-        print(f"{item.path}: sensor {item.sensor}, {item.samples} samples", file=out)
-    return 0
 
 
 def parse_axes(text: str) -> tuple[np.ndarray, np.ndarray] | None:
@@ -115,9 +82,9 @@ def parse_axes(text: str) -> tuple[np.ndarray, np.ndarray] | None:
     return axes[0], axes[1]
 
 
-def _fail(message: str) -> int:
-    print(f"inclinometer joint: {message}", file=sys.stderr)
-    return EXIT_USAGE
+def _fail(message: str) -> CommandError:
+    """Input ``joint`` cannot use: ``inclinometer joint: MESSAGE``, exit 2."""
+    return CommandError(message, EXIT_USAGE, command="joint")
 
 
 def _vector(v: np.ndarray) -> str:
@@ -125,72 +92,32 @@ def _vector(v: np.ndarray) -> str:
 
 
 def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
-    from app.cli_errors import one_line
-    from app.cli_recording import check_recorded_calibration
-    from app.core.joint.alignment import align_to
-    from app.core.joint.offline import joint_angle_offline
-    from app.core.recording.errors import RecordingError
-    from app.core.recording.reader import read_recording
-    from app.core.recording.writer import format_table
-
     out = sys.stdout if out is None else out
-    time_map = None
-    manifest = None
-    if str(args.first).lower().endswith(".json"):  # a session manifest names A, B and the joint
-        from app.core.recording.session import load_session, session_joint_files
-
-        if args.second is not None:
-            return _fail("give a session manifest alone, or two recordings A.csv B.csv")
-        try:
-            session = load_session(args.first, allow_outside=args.allow_outside_paths)
-            first, second, config, time_map = session_joint_files(session)
-        except RecordingError as exc:
-            return _fail(str(exc))
-        except RecursionError:
-            return _fail(f"{args.first}: not a session manifest (its JSON is nested too deeply)")
-        except ValueError as exc:  # an integer of thousands of digits, a NUL in the name
-            return _fail(f"{args.first}: not a session manifest ({one_line(exc)})")
-        manifest, args.first, args.second = args.first, str(first), str(second)
-        if config.axes is not None and args.axis.strip().lower() == "auto":
-            args.axis = ":".join(",".join(repr(v) for v in a) for a in config.axes)
-    elif args.second is None:
-        return _fail("give two recordings (A.csv B.csv) or a session manifest (.session.json)")
+    manifest, time_map = _from_manifest(args)
     try:
         axes = parse_axes(args.axis)
     except ValueError as exc:
-        return _fail(str(exc))
+        raise _fail(str(exc)) from None
     target = Path(args.out)
     inputs = [args.first, args.second, manifest]
     try:
         check_output(target, inputs=inputs, overwrite=args.force, option="--out")
     except OutputRefused as exc:
-        return _fail(str(exc))
-    blocks = []
-    for name in (args.first, args.second):
-        try:
-            recording = read_recording(name)
-        except RecordingError as exc:
-            return _fail(str(exc))
-        except OSError as exc:
-            return _fail(f"{name}: cannot read the recording: {exc.strerror or exc}")
-        if len(recording) < 2:
-            return _fail(f"{name}: fewer than two samples")
-        check_recorded_calibration(recording.metadata, Path(name))
-        calibration = recording.calibration
-        blocks.append(recording.sample_block(calibration))
+        raise _fail(str(exc)) from None
+    blocks = [_calibrated_samples(name) for name in (args.first, args.second)]
     if time_map is not None:  # B's clock onto A's, as the manifest maps them
         blocks[1].t_s = time_map(blocks[1].t_s)
     first, other = blocks
     second, covered, how = align_to(first, other)
     rows = np.flatnonzero(covered)
     if len(rows) < 2:
-        return _fail("the two recordings do not overlap in time")
+        raise _fail("the two recordings do not overlap in time")
     part1 = _take(first, rows)
     part2 = _take(second, rows)
     try:
         result = joint_angle_offline(part1, part2, axes)
     except ValueError as exc:
-        return _fail(str(exc))
+        raise _fail(str(exc)) from None
     angle = np.full(len(first), np.nan)
     angle[rows] = result.angles.angle_deg
     info: dict[str, Any] = {
@@ -217,7 +144,7 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     try:
         write_output(target, text, inputs=inputs, overwrite=args.force, option="--out")
     except OSError as exc:
-        return _fail(write_error_message(exc, target, "--out"))
+        raise _fail(write_error_message(exc, target, "--out")) from None
     print(f"axis in A: {_vector(result.j1)}   axis in B: {_vector(result.j2)}"
           f"   ({info['axis_source']})", file=out)
     if estimate is not None:
@@ -235,8 +162,46 @@ def joint_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     return 0
 
 
-def _take(block: Any, rows: np.ndarray) -> Any:
-    from app.core.samples import SampleBlock
+def _from_manifest(args: argparse.Namespace) -> tuple[str | None, Any]:
+    """(the session manifest, the map of B's clock onto A's), both None for two recordings; a
+    manifest names A and B (``args.first``, ``args.second``) and may give the axes."""
+    if not str(args.first).lower().endswith(".json"):
+        if args.second is None:
+            raise _fail("give two recordings (A.csv B.csv) or a session manifest "
+                        "(.session.json)")
+        return None, None
+    if args.second is not None:
+        raise _fail("give a session manifest alone, or two recordings A.csv B.csv")
+    try:
+        session = load_session(args.first, allow_outside=args.allow_outside_paths)
+        first, second, config, time_map = session_joint_files(session)
+    except RecordingError as exc:
+        raise _fail(str(exc)) from None
+    except RecursionError:
+        raise _fail(f"{args.first}: not a session manifest (its JSON is nested too "
+                    "deeply)") from None
+    except ValueError as exc:  # an integer of thousands of digits, a NUL in the name
+        raise _fail(f"{args.first}: not a session manifest ({one_line(exc)})") from None
+    manifest, args.first, args.second = args.first, str(first), str(second)
+    if config.axes is not None and args.axis.strip().lower() == "auto":
+        args.axis = ":".join(",".join(repr(v) for v in a) for a in config.axes)
+    return manifest, time_map
 
+
+def _calibrated_samples(name: str) -> Any:
+    """A recording's samples with its recorded calibration applied."""
+    try:
+        recording = read_recording(name)
+    except RecordingError as exc:
+        raise _fail(str(exc)) from None
+    except OSError as exc:
+        raise _fail(f"{name}: cannot read the recording: {exc.strerror or exc}") from None
+    if len(recording) < 2:
+        raise _fail(f"{name}: fewer than two samples")
+    check_recorded_calibration(recording.metadata, Path(name))
+    return recording.sample_block(recording.calibration)
+
+
+def _take(block: Any, rows: np.ndarray) -> Any:
     return SampleBlock(block.t_s[rows], block.accel_m_s2[rows], block.gyro_rad_s[rows],
                        block.temp_degc[rows], block.gap[rows])

@@ -10,22 +10,23 @@ from __future__ import annotations
 import argparse
 import sys
 
-from app.cli_errors import finite
+from app.cli.errors import CommandError, finite
 from app.core.faults import FaultEvent
+from app.core.recording.errors import RecordingError
+from app.services.diagnosis import Diagnosis, diagnose_events
+from drivers.errors import DeviceError
 
 MAX_SECONDS = 7 * 86400.0
 """The longest ``--seconds`` (a week of device time)."""
 
 
-def add_diagnose_parser(commands: argparse._SubParsersAction) -> None:
-    """Register ``diagnose``."""
-    parser = commands.add_parser(
-        "diagnose", help="detect sensor faults (stuck, dead, spikes, noise, bias, ...) in a "
-                         "recording or a device's stream",
-        description="Run the sensor fault detector over SOURCE (a recording or a device URL) "
-                    "and list the fault events (docs/fault-detection.md). Exit status 0 "
-                    "whether or not there are faults, 2 when the source cannot be read.",
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``diagnose``; it runs :func:`diagnose_command`."""
+    parser.set_defaults(handler=diagnose_command)
+    parser.description = ("Run the sensor fault detector over SOURCE (a recording or a device "
+                          "URL) and list the fault events (docs/fault-detection.md). Exit "
+                          "status 0 whether or not there are faults, 2 when the source cannot "
+                          "be read.")
     parser.add_argument("source", metavar="SOURCE", help="recording file or device URL")
     parser.add_argument("--seconds", type=float, default=None, metavar="N",
                         help="read at most N seconds (default: a whole recording, 10 s of a "
@@ -41,10 +42,6 @@ def _row(event: FaultEvent) -> str:
 
 def diagnose_command(args: argparse.Namespace) -> int:
     """Run ``diagnose``; returns the exit status."""
-    from app.core.recording.errors import RecordingError
-    from app.services.diagnosis import Diagnosis, diagnose_events
-    from drivers.errors import DeviceError
-
     if args.seconds is not None:
         finite(args.seconds, "--seconds", positive=True, maximum=MAX_SECONDS)
     result = Diagnosis()
@@ -59,8 +56,7 @@ def diagnose_command(args: argparse.Namespace) -> int:
                 header_done = True
             print(_row(event), flush=True)
     except (RecordingError, DeviceError, OSError) as exc:
-        print(f"inclinometer diagnose: {exc}", file=sys.stderr)
-        return 2
+        raise CommandError(str(exc), command="diagnose") from None
     if not args.json:
         count = len(result.events)
         print(f"{args.source}: {result.samples} samples, {result.duration_s:.1f} s, "

@@ -24,6 +24,8 @@ from pathlib import Path
 
 EXIT_USAGE = 2
 EXIT_BUG = 1
+EXIT_FAILED = 1
+"""The command ran but gives no result (data that does not calibrate, a full disk)."""
 DEBUG_ENV = "INCLINOMETER_DEBUG"
 CRASH_LOG_NAME = "crash.log"
 CRASH_LOG_MAX_BYTES = 1 << 20
@@ -31,11 +33,14 @@ MESSAGE_MAX_CHARS = 600
 
 
 class CommandError(Exception):
-    """Input a command cannot use: one line for the user and an exit status (default 2)."""
+    """Input a command cannot use, or data that gives no result: one line for the user and an
+    exit status (default 2, :data:`EXIT_USAGE`). ``command`` names the sub-command in the
+    line (``inclinometer calibrate: MESSAGE``) for the commands that always did."""
 
-    def __init__(self, message: str, code: int = EXIT_USAGE) -> None:
+    def __init__(self, message: str, code: int = EXIT_USAGE, command: str = "") -> None:
         super().__init__(message)
         self.code = code
+        self.command = command
 
 
 def _expected() -> tuple[type[BaseException], ...]:
@@ -129,7 +134,9 @@ def run_guarded(command: Callable[[], int], argv: list[str], debug: bool = False
     except _expected() as exc:
         if debug_wanted(debug):
             raise
-        print(f"inclinometer: {one_line(exc)}", file=sys.stderr)
+        where = f"inclinometer {exc.command}" if isinstance(exc, CommandError) and (
+            exc.command) else "inclinometer"
+        print(f"{where}: {one_line(exc)}", file=sys.stderr)
         return exc.code if isinstance(exc, CommandError) else EXIT_USAGE
     except Exception as exc:
         if debug_wanted(debug):

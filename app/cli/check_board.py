@@ -29,7 +29,12 @@ from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
-from app.cli_errors import finite, printable
+from app.cli.errors import finite, printable
+from app.core.lookalike import GIVE_UP_SECONDS, LookAlikeCheck
+from app.core.samples import convert_raw_block
+from drivers import lsm6dsox
+from drivers.errors import DeviceError, SettingRefusedError
+from drivers.serial_link import SerialLinkDevice
 
 if TYPE_CHECKING:
     from app.core.devices import BoardStatus
@@ -55,12 +60,10 @@ HEALTH_PROBLEMS = ("uart_tx_dropped_bytes", "uart_rx_errors", "i2c_recoveries",
 """Board counters whose rise during the check fails it."""
 
 
-def add_check_parser(commands: argparse._SubParsersAction) -> None:
-    check = commands.add_parser(
-        "check-board",
-        help="check a NUCLEO board running the Inclinometer firmware, rate by rate",
-        description=__doc__.splitlines()[0].split(": ", 1)[1],
-    )
+def add_arguments(check: argparse.ArgumentParser) -> None:
+    """The options of ``check-board``; it runs :func:`check_command`."""
+    check.set_defaults(handler=check_command)
+    check.description = __doc__.splitlines()[0].split(": ", 1)[1]
     check.add_argument("port", metavar="PORT", help="its serial port (/dev/ttyACM0, COM5)")
     check.add_argument("--seconds", type=float, default=CHECK_SECONDS, metavar="S",
                        help="streaming time per rate (default %(default)g)")
@@ -148,10 +151,6 @@ def clock_ppm_of(arrivals: list[tuple[float, float]]) -> float:
 
 def check_rate(port: str, odr_hz: float, seconds: float) -> RateResult:
     """Stream ``odr_hz`` for ``seconds`` (at least :data:`MIN_SAMPLES` samples)."""
-    from drivers import lsm6dsox
-    from drivers.errors import SettingRefusedError
-    from drivers.serial_link import SerialLinkDevice
-
     device = SerialLinkDevice(f"serial://{port}?odr={odr_hz:g}")
     try:
         try:
@@ -200,9 +199,6 @@ def check_rate(port: str, odr_hz: float, seconds: float) -> RateResult:
 def at_rest_line(device: Device) -> str:
     """|a| while the board lies still: near 0.5 g or 2 g is a look-alike part (WHO_AM_I 0x6C
     answers for the LSM6DSO32 too, whose ranges are double)."""
-    from app.core.lookalike import GIVE_UP_SECONDS, LookAlikeCheck
-    from app.core.samples import convert_raw_block
-
     check = LookAlikeCheck()
     warning = None
     deadline = time.monotonic() + min(GIVE_UP_SECONDS, AT_REST_SECONDS)
@@ -219,8 +215,6 @@ def at_rest_line(device: Device) -> str:
 
 def request_board_status(port: str) -> BoardStatus | None:
     """The board's STATUS now (None: its firmware predates STATUS). Raises DeviceError."""
-    from drivers.serial_link import SerialLinkDevice
-
     device = SerialLinkDevice(f"serial://{port}")
     try:
         device.open()
@@ -255,9 +249,6 @@ def health_report(start: BoardStatus | None, end: BoardStatus | None,
 def check_board(port: str, rates: list[float], seconds: float, self_test: bool,
                 out: TextIO) -> bool:
     """Run the checks, print a report to ``out``; True when everything passed."""
-    from drivers.errors import DeviceError
-    from drivers.serial_link import SerialLinkDevice
-
     ok = True
     device = SerialLinkDevice(f"serial://{port}")
     try:
@@ -345,8 +336,6 @@ def check_board(port: str, rates: list[float], seconds: float, self_test: bool,
 
 def check_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """Run the ``check-board`` sub-command."""
-    from drivers import lsm6dsox
-
     out = sys.stdout if out is None else out
     finite(args.seconds, "--seconds", positive=True, maximum=3600.0)
     rates = list(lsm6dsox.ODR_LABELS_HZ.values())

@@ -25,9 +25,10 @@ from typing import Any
 from PySide6.QtCore import QPointF, QRectF, Qt
 from PySide6.QtGui import QColor, QFont, QGuiApplication, QImage, QPainter, QPainterPath, QPen
 
-from app.gui.theme import AXIS_X, AXIS_Y, AXIS_Z
-
 WIDTH, HEIGHT = 1280, 560
+AXIS_X, AXIS_Y, AXIS_Z = "#e86a5f", "#6cc77a", "#5b9be6"
+"""The x, y and z axes' colours (the dark theme's, app/gui/theme.py, as these curves always
+had); on paper whatever the window's theme."""
 BACKGROUND = "#ffffff"
 INK = "#202428"
 GRID = "#dde1e5"

@@ -12,18 +12,18 @@ import sys
 import threading
 from typing import TextIO
 
-from app.cli_errors import CommandError
+from app.cli.errors import CommandError
+from drivers import lsm6dsox
+from drivers.errors import DeviceError
 
 
-def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
-    simulate = commands.add_parser(
-        "simulate",
-        help="serve an emulated NUCLEO board (link protocol v1) on a pseudo-terminal",
-        description=(
-            "Serve the simulator as a NUCLEO board running the Inclinometer firmware would: "
-            "protocol v1 (docs/protocol.md) on a new pseudo-terminal, whose name is printed "
-            "first. Connect with 'inclinometer --device PORT'. Linux and macOS. Ctrl-C stops."
-        ),
+def add_arguments(simulate: argparse.ArgumentParser) -> None:
+    """The options of ``simulate``; it runs :func:`simulate_command`."""
+    simulate.set_defaults(handler=simulate_command)
+    simulate.description = (
+        "Serve the simulator as a NUCLEO board running the Inclinometer firmware would: "
+        "protocol v1 (docs/protocol.md) on a new pseudo-terminal, whose name is printed "
+        "first. Connect with 'inclinometer --device PORT'. Linux and macOS. Ctrl-C stops."
     )
     simulate.add_argument("--pty", action="store_true",
                           help="serve on a new pseudo-terminal and print its name")
@@ -57,8 +57,6 @@ def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
 
 def check_arguments(args: argparse.Namespace) -> None:
     """CommandError for a number no board has (before a port is opened)."""
-    from drivers import lsm6dsox
-
     problem = lsm6dsox.odr_problem(args.odr)
     if problem is not None:
         raise CommandError(f"--odr {args.odr:g} {problem}")
@@ -84,9 +82,7 @@ def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
               f"{args.fifo_overrun!r}", file=sys.stderr)
         return 2
     try:
-        from drivers import lsm6dsox
         from drivers.emulated_nucleo import EmulatedNucleo, NucleoFaults
-        from drivers.errors import DeviceError
 
         board = EmulatedNucleo(
             args.scenario, odr_hz=args.odr, accel_fs_g=args.accel_fs, gyro_fs_dps=args.gyro_fs,

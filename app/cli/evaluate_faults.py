@@ -13,13 +13,23 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from app.cli_errors import finite
+from app.cli.errors import EXIT_FAILED, CommandError, finite
+from app.core.faults.evaluation import NOISE_MULTIPLES, THETAS, to_user_units, unit_of
+from app.core.faults.events import CHANNELS
+from app.core.recording.errors import RecordingError
 from app.core.safe_output import check_output, write_error_message, write_output
+from app.services.fault_evaluation import (
+    FaultEvaluationSettings,
+    resolve_fault_sources,
+    run_fault_evaluation,
+)
+from drivers.errors import DeviceError
 
 if TYPE_CHECKING:
     from app.core.faults.evaluation import GroupSummary, SourceSweep
@@ -40,15 +50,10 @@ def _numbers(kind: type, name: str):
     return parse
 
 
-def add_evaluate_faults_parser(commands: argparse._SubParsersAction) -> None:
-    """Register ``evaluate-faults``."""
-    from app.core.faults.evaluation import NOISE_MULTIPLES, THETAS
-
-    parser = commands.add_parser(
-        "evaluate-faults",
-        help="measure the fault detector as in the thesis: NDR and FDI with noise injected "
-             "into one channel at a time, false alarms on clean data",
-        description=(
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``evaluate-faults``; it runs :func:`evaluate_faults_command`."""
+    parser.set_defaults(handler=evaluate_faults_command)
+    parser.description = (
             "Inject Gaussian noise of growing sigma (multiples of each channel's own noise per "
             "sample: the datasheet's for a known sensor, else estimated at rest) into one "
             "channel at a time of clean sources, from --onset to the end, and print NDR(sigma) "
@@ -57,8 +62,7 @@ def add_evaluate_faults_parser(commands: argparse._SubParsersAction) -> None:
             "flagged on the injected channel reaches theta; the median over the sources) and "
             "the false alarms on the clean sources (detector events per hour). Sources are "
             "grouped: 'simulator' and each recording folder. Exit status 2 when a source "
-            "cannot be read."),
-    )
+            "cannot be read.")
     parser.add_argument(
         "sources", metavar="SOURCE", nargs="*", default=["scenarios"],
         help="'scenarios' (every simulator scenario but the interactive one; the default), "
@@ -100,15 +104,6 @@ MAX_SECONDS = 86400.0
 
 def evaluate_faults_command(args: argparse.Namespace) -> int:
     """Run ``evaluate-faults``; returns the exit status."""
-    from app.core.faults.events import CHANNELS
-    from app.core.recording.errors import RecordingError
-    from app.services.fault_evaluation import (
-        FaultEvaluationSettings,
-        resolve_fault_sources,
-        run_fault_evaluation,
-    )
-    from drivers.errors import DeviceError
-
     for option, value in (("--seconds", args.seconds), ("--onset", args.onset),
                           ("--clean-seconds", args.clean_seconds)):
         finite(value, option, minimum=0.0, maximum=MAX_SECONDS)
@@ -134,8 +129,7 @@ def evaluate_faults_command(args: argparse.Namespace) -> int:
 
         result = run_fault_evaluation(sources, settings, progress)
     except (ValueError, RecordingError, DeviceError, OSError) as exc:
-        print(f"inclinometer evaluate-faults: {exc}", file=sys.stderr)
-        return 2
+        raise CommandError(str(exc), command="evaluate-faults") from None
     print_evaluation(result, out)
     document = result.as_json()
     if args.json is not None:
@@ -148,9 +142,8 @@ def evaluate_faults_command(args: argparse.Namespace) -> int:
                 write_output(args.json, text, inputs=_file_sources(args),
                              overwrite=args.overwrite, option="--json")
             except OSError as exc:
-                print(f"inclinometer evaluate-faults: "
-                      f"{write_error_message(exc, args.json, '--json')}", file=sys.stderr)
-                return 1
+                raise CommandError(write_error_message(exc, args.json, "--json"), EXIT_FAILED,
+                                   command="evaluate-faults") from None
     if args.png is not None:
         for path in save_curves(document, Path(args.png)):
             print(f"wrote {path}", file=out)
@@ -163,13 +156,12 @@ def _file_sources(args: argparse.Namespace) -> list[Path]:
 
 
 def save_curves(document: dict, directory: Path) -> list[Path]:
-    """The curves through Qt (a QGuiApplication is made when none runs, offscreen is fine)."""
-    import os
-
+    """The curves through Qt's painting (:mod:`app.documents.fault_plots`; a QGuiApplication
+    is made when none runs, offscreen without a screen). Qt is loaded only for ``--png``."""
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
                                                  or os.environ.get("WAYLAND_DISPLAY")):
         os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")  # no screen needed
-    from app.gui.fault_plots import save_fault_curves
+    from app.documents.fault_plots import save_fault_curves
 
     return save_fault_curves(document, directory)
 
@@ -187,9 +179,6 @@ def print_evaluation(result: FaultEvaluation, out: TextIO) -> None:
 
 
 def print_group(group: GroupSummary, sweeps: Sequence[SourceSweep], out: TextIO) -> None:
-    from app.core.faults.evaluation import to_user_units, unit_of
-    from app.core.faults.events import CHANNELS
-
     rates = "/".join(f"{r:.4g}" for r in sorted(set(group.rates_hz)))
     swept = sum(w.duration_s for w in sweeps)
     print(f"\n== {group.name}: {len(sweeps)} source(s), {swept / 60:.1f} min swept at "

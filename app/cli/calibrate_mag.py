@@ -20,7 +20,7 @@ from typing import TextIO
 
 import numpy as np
 
-from app.cli_errors import CommandError, check_output_folder
+from app.cli.errors import CommandError, check_output_folder
 from app.core.devices import printable
 from app.core.safe_output import OutputRefused, check_output, write_error_message, write_output
 
@@ -33,19 +33,17 @@ class _Usage(CommandError):
     """Bad arguments or an unreadable input: exit 2."""
 
 
-def add_parser(commands: argparse._SubParsersAction) -> None:
-    """Register ``calibrate-mag``."""
-    parser = commands.add_parser(
-        COMMAND, help="calibrate the magnetometer from a recorded tour (hard iron, soft "
-                      "iron and its turn against the accelerometer)",
-        description="Fit the magnetometer of RECORDING (a tour through every direction, with "
-                    "mx,my,mz and the accelerometer): hard iron, the full soft-iron matrix and "
-                    "the turn between the magnetometer's axes and the accelerometer's, from "
-                    "the field's constant strength and its constant dip to gravity. Prints the "
-                    "result and a verdict (good / redo, with the reasons), writes the JSON "
-                    "{\"magnetometer\": {...}}. The model: m = soft_iron (raw - hard_iron), in "
-                    "the accelerometer's frame.",
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``calibrate-mag``; it runs :func:`run`."""
+    parser.set_defaults(handler=run)
+    parser.description = (
+        "Fit the magnetometer of RECORDING (a tour through every direction, with "
+        "mx,my,mz and the accelerometer): hard iron, the full soft-iron matrix and "
+        "the turn between the magnetometer's axes and the accelerometer's, from "
+        "the field's constant strength and its constant dip to gravity. Prints the "
+        "result and a verdict (good / redo, with the reasons), writes the JSON "
+        "{\"magnetometer\": {...}}. The model: m = soft_iron (raw - hard_iron), in "
+        "the accelerometer's frame.")
     parser.add_argument("recording", metavar="RECORDING", help="the recorded tour (CSV)")
     parser.add_argument("--json", metavar="OUT", help="write the calibration JSON to OUT")
     parser.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
