@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Any
 
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QApplication
@@ -15,8 +15,9 @@ from app.gui.alarm_panel import AlarmPanel
 from app.gui.measurement_log_panel import MeasurementLogPanel
 from app.services.stream_status import StreamStatus
 
-if TYPE_CHECKING:
-    from app.gui.main_window import MainWindow
+MainWindow = Any
+"""The window this part works for (not imported: the parts sit below
+:mod:`app.gui.main_window`, which assembles them)."""
 
 
 class AlarmsAndLog:

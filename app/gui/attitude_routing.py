@@ -5,10 +5,11 @@ can see it."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import Any
 
-if TYPE_CHECKING:
-    from app.gui.main_window import MainWindow
+MainWindow = Any
+"""The window this part works for (not imported: the parts sit below
+:mod:`app.gui.main_window`, which assembles them)."""
 
 
 class AttitudeRouting:

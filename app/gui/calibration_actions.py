@@ -4,7 +4,7 @@ from files."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from app.core.calibration_procedures import ProfileError
 from app.core.calibration_procedures.profiles import read_profile_file
@@ -13,7 +13,10 @@ from app.gui.calibration_wizard import CalibrationWizard
 
 if TYPE_CHECKING:
     from app.gui.allan_page import AllanPage
-    from app.gui.main_window import MainWindow
+
+MainWindow = Any
+"""The window this part works for (not imported: the parts sit below
+:mod:`app.gui.main_window`, which assembles them)."""
 
 
 class CalibrationActions:

@@ -3,7 +3,7 @@ status, the filter, the board's own messages, the self-test and the fault detect
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any
 from urllib.parse import urlsplit
 
 from app.core.devices import DeviceInfo
@@ -13,8 +13,9 @@ from app.services.devices import is_replay_url
 from app.services.replay_control import replay_caption
 from app.services.stream_status import StreamStatus
 
-if TYPE_CHECKING:
-    from app.gui.main_window import MainWindow
+MainWindow = Any
+"""The window this part works for (not imported: the parts sit below
+:mod:`app.gui.main_window`, which assembles them)."""
 
 DEVICE_MESSAGE_WARNING = 2
 DEVICE_MESSAGE_ERROR = 3

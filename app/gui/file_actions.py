@@ -7,14 +7,15 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Any
 
 from app.gui import file_dialogs
 from app.services.devices import replay_url
 from app.services.recording_control import recording_cost
 
-if TYPE_CHECKING:
-    from app.gui.main_window import MainWindow
+MainWindow = Any
+"""The window this part works for (not imported: the parts sit below
+:mod:`app.gui.main_window`, which assembles them)."""
 
 RECORDING_FILTER = "Recordings (*.csv)"
 COMPRESSED_RECORDING_FILTER = "Compressed recordings (*.csv.gz)"

@@ -6,14 +6,15 @@ and state, and which bars were shown.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from PySide6.QtCore import Qt
 
 from app.gui.level_view import INSTRUMENT_MAX_PX, READOUT_MAX_PX, READOUT_MIN_PX
 
-if TYPE_CHECKING:
-    from app.gui.main_window import MainWindow
+MainWindow = Any
+"""The window this part works for (not imported: the parts sit below
+:mod:`app.gui.main_window`, which assembles them)."""
 
 
 class InstrumentMode:
