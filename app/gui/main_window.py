@@ -344,20 +344,11 @@ class MainWindow(QMainWindow):
     def import_profile(self, path: str | None = None) -> None:
         self.calibration.import_profile(path)
 
-    def export_profile(self, path: str | None = None) -> None:
-        self.calibration.export_profile(path)
-
     def apply_alarms(self, config: AlarmConfig) -> None:
         self.alarms.apply(config)
 
     def _show_joint(self, then) -> None:
         self.attitudes.show_joint(then)
-
-    def raise_dock(self, dock) -> None:
-        self.dock_layout.raise_dock(dock)
-
-    def tidy_tab_bars(self) -> None:
-        self.dock_layout.tidy_tab_bars()
 
     def fit_to_screen(self, available: QRect | None = None) -> None:
         """Take the screen's available area: never larger than it."""
