@@ -205,20 +205,12 @@ class MainWindow(QMainWindow):
             signal.connect(slot)
 
     def _restore_settings(self) -> None:
-        remembered = self.window_settings
-        geometry = remembered.geometry()
-        if geometry is None or not self.restoreGeometry(geometry):
-            self.fit_to_screen()
-        state = remembered.dock_state()
-        if state is not None:
-            self.restoreState(state)
-        for combo, key in ((self.unit_combo, "unit"), (self.averaging_combo, "averaging_s"),
-                           (self.range_combo, "range_deg")):
-            remembered.choose(combo, key)
+        self.window_settings.restore_layout(self)
+        for combo in self.window_settings.restore_display(self.level_view):
             combo.currentIndexChanged.connect(self._on_display_changed)
         self._on_display_changed()
-        self.plots_dock.choose_window(remembered.plot_window_s())
-        self.set_theme(remembered.theme())
+        self.plots_dock.choose_window(self.window_settings.plot_window_s())
+        self.set_theme(self.window_settings.theme())
 
     def _start_session(self, filter_name: str | None, device_url: str | None) -> None:
         """The remembered (or given) filter, comparisons and device; the frames start."""

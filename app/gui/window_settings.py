@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from PySide6.QtCore import QByteArray, QRect
 from PySide6.QtGui import QGuiApplication
-from PySide6.QtWidgets import QComboBox, QWidget
+from PySide6.QtWidgets import QComboBox, QMainWindow, QWidget
 
 from app.core.filters import DEFAULT_FILTER, FILTERS, ONLINE_FILTERS
 from app.core.screen_fit import Rect, first_window_rect
@@ -40,7 +40,25 @@ class WindowSettings:
         self.sections.set_value("geometry", geometry)
         self.sections.set_value("window_state", state)
 
+    def restore_layout(self, window: QMainWindow) -> None:
+        """The remembered size and docks (a size that cannot be restored: the screen's)."""
+        geometry = self.geometry()
+        if geometry is None or not window.restoreGeometry(geometry):
+            fit_to_screen(window)
+        state = self.dock_state()
+        if state is not None:
+            window.restoreState(state)
+
     # -- display --------------------------------------------------------------------------------
+    def restore_display(self, view) -> list[QComboBox]:
+        """Select the remembered units, averaging and range in ``view`` (a LevelView);
+        returns those controls."""
+        combos = {"unit": view.unit_combo, "averaging_s": view.averaging_combo,
+                  "range_deg": view.range_combo}
+        for key, combo in combos.items():
+            self.choose(combo, key)
+        return list(combos.values())
+
     def choose(self, combo: QComboBox, key: str) -> None:
         """Select the remembered item of a display control (its default when none fits)."""
         default = DISPLAY_DEFAULTS[key]
