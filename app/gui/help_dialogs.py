@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import html
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy
@@ -19,6 +19,7 @@ from PySide6.QtWidgets import (
     QDialog,
     QDialogButtonBox,
     QHeaderView,
+    QMainWindow,
     QMenu,
     QMenuBar,
     QTableWidget,
@@ -225,3 +226,35 @@ def about_dialog(paths: dict[str, str], parent: QWidget | None = None) -> QDialo
     width = int(document.idealWidth()) + 60
     dialog.resize(max(480, width), int(document.size().height()) + 110)
     return dialog
+
+
+class HelpWindows:
+    """Help's dialogs for ``window``: each made once, then brought to the front (About is
+    made afresh: the paths it lists may have changed)."""
+
+    def __init__(self, window: QMainWindow, file_paths: Callable[[], dict[str, str]]) -> None:
+        self.window = window
+        self.file_paths = file_paths
+        self.dialogs: dict[str, QDialog] = {}
+
+    def show(self, name: str, build: Callable[[], QDialog]) -> QDialog:
+        dialog = self.dialogs.get(name)
+        if dialog is None:
+            dialog = build()
+            self.dialogs[name] = dialog
+        dialog.show()
+        dialog.raise_()
+        return dialog
+
+    def user_guide(self) -> QDialog:
+        return self.show("guide", lambda: user_guide(self.window))
+
+    def shortcut_sheet(self) -> QDialog:
+        return self.show("shortcuts", lambda: ShortcutSheet(self.window.menuBar(), self.window))
+
+    def about(self) -> QDialog:
+        old = self.dialogs.pop("about", None)
+        if old is not None:
+            old.close()
+            old.deleteLater()
+        return self.show("about", lambda: about_dialog(self.file_paths(), self.window))

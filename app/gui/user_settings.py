@@ -233,13 +233,20 @@ def write_json(settings: QSettings, key: str, value: Any) -> None:
 
 
 class SettingsSections:
-    """Named parts of the settings that a component saves and loads as a dict.
+    """The app's one way to its settings: named sections, and single keys.
+
+    Sections are named parts of the settings that a component saves and loads as a dict.
 
     Register with ``sections.register("alarms", config.to_dict, load)``: ``load(dict)`` is
     called at once with the stored dict, if there is one; a ``load`` that raises
     ``ValueError``, ``KeyError`` or ``TypeError`` leaves the component as it is and
     ``report`` gets a message. Every registered section is saved by :meth:`save_all` (the
     main window calls it when it closes) or one at a time by :meth:`save`.
+
+    Single keys (the window's ``unit``, ``geometry``, ``filter_parameters/NAME``, ...: the
+    names :data:`VALUE_KINDS` lists, as they always were) are read with :meth:`value`,
+    :meth:`number`, :meth:`text` and :meth:`json`, and written with :meth:`set_value` and
+    :meth:`set_json`.
     """
 
     PREFIX = "sections/"
@@ -291,3 +298,40 @@ class SettingsSections:
         """Store every registered section."""
         for name in self._savers:
             self.save(name)
+
+    # -- single keys --------------------------------------------------------------------------
+    def value(self, key: str) -> Any:
+        """The stored value of ``key`` as Qt reads it (None: absent)."""
+        return self.settings.value(key)
+
+    def has(self, key: str) -> bool:
+        return self.settings.value(key) is not None
+
+    def text(self, key: str, default: str) -> str:
+        """``key`` as text (``default`` when absent)."""
+        return str(self.settings.value(key, default))
+
+    def number(self, key: str, default: float, kind: type = float) -> Any:
+        """``key`` as ``kind`` (int or float); ``default`` when absent or not a number."""
+        try:
+            return kind(self.settings.value(key, default))
+        except (TypeError, ValueError):
+            return default
+
+    def json(self, key: str) -> Any:
+        """``key`` stored as JSON text (None if absent or not JSON)."""
+        return read_json(self.settings, key)
+
+    def set_value(self, key: str, value: Any) -> None:
+        self.settings.setValue(key, value)
+
+    def set_json(self, key: str, value: Any) -> None:
+        write_json(self.settings, key, value)
+
+    def file_name(self) -> str:
+        """Where the settings are kept."""
+        return self.settings.fileName()
+
+    def sync(self) -> None:
+        """Write everything to the file now."""
+        self.settings.sync()

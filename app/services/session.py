@@ -1,62 +1,90 @@
 """The GUI-side handle on a device session: starts the worker thread and forwards requests.
 
 Views hold a :class:`DeviceSession`; they never touch the worker, the device or a driver.
+
+The forwarding is generated, not copied by hand: every signal :class:`DeviceWorker`
+declares is re-declared on the session under the same name and signature (read from the
+worker's Qt meta-object) and forwarded, and each request signal in :data:`REQUESTS` is
+declared with the signature of the worker slot it feeds. A signal added to the worker is
+forwarded without touching this file; a request needs one line in :data:`REQUESTS`.
 """
 
 from __future__ import annotations
 
-from PySide6.QtCore import QMetaObject, QObject, Qt, QThread, Signal
+from PySide6.QtCore import QMetaMethod, QMetaObject, QObject, Qt, QThread, Signal
 
 from app.core.calibration_procedures import ProfileStore
 from app.core.devices import DeviceInfo
 from app.core.pipeline import Pipeline
 from app.services.worker import DeviceWorker
 
+REQUESTS: dict[str, str] = {
+    "requestConnect": "connect_device",  # url
+    "requestDisconnect": "disconnect_device",
+    "requestFilter": "set_filter",  # name
+    "requestFilterParameter": "set_filter_parameter",  # name, value
+    "requestSimulatorTarget": "set_simulator_target",  # roll, pitch (degrees)
+    "requestComparisons": "set_comparisons",  # filter names
+    "requestProfile": "use_profile",  # CalibrationProfile to apply and store
+    "requestNoCalibration": "use_no_calibration",  # run uncalibrated, remembered
+    "requestStoredProfile": "use_stored_profile",  # the device's stored profile again
+    "requestDeleteProfile": "delete_profile",  # the stored profile to history
+    "requestTare": "tare",
+    "requestClearTare": "clear_tare",
+    "requestTareReference": "set_tare",  # TareReference
+    "requestStartRecording": "start_recording",  # path, note
+    "requestStopRecording": "stop_recording",
+    "requestReplayControl": "replay_control",  # name, value
+    "requestSelfTest": "run_self_test",
+    "requestHealthReset": "reset_health",
+    "requestAlarms": "set_alarms",  # AlarmConfig
+}
+"""The session's request signals and the worker slots they are queued to (GUI -> worker)."""
 
-class DeviceSession(QObject):
+_PYTHON_TYPES: dict[str, type] = {
+    "PyObject": object, "QString": str, "int": int, "double": float, "bool": bool,
+    "QVariantList": list, "QVariantMap": dict,
+}
+"""Qt's names of the argument types that the worker's signals and slots use."""
+
+
+def _methods(cls: type[QObject], kind: QMetaMethod.MethodType) -> dict[str, tuple[type, ...]]:
+    """``cls``'s own signals or slots (not QObject's): name -> argument types."""
+    meta = cls.staticMetaObject
+    found: dict[str, tuple[type, ...]] = {}
+    for index in range(meta.methodOffset(), meta.methodCount()):
+        method = meta.method(index)
+        if method.methodType() != kind:
+            continue
+        names = [bytes(name).decode() for name in method.parameterTypes()]
+        unknown = [name for name in names if name not in _PYTHON_TYPES]
+        if unknown:
+            raise TypeError(f"{cls.__name__}.{bytes(method.name()).decode()}: argument type "
+                            f"{unknown[0]} has no Python type in session._PYTHON_TYPES")
+        found[bytes(method.name()).decode()] = tuple(_PYTHON_TYPES[name] for name in names)
+    return found
+
+
+EVENTS: dict[str, tuple[type, ...]] = _methods(DeviceWorker, QMetaMethod.MethodType.Signal)
+"""The worker's signals (worker -> GUI), each forwarded under its own name."""
+_SLOTS = _methods(DeviceWorker, QMetaMethod.MethodType.Slot)
+_missing = sorted(slot for slot in REQUESTS.values() if slot not in _SLOTS)
+if _missing:
+    raise TypeError(f"DeviceWorker has no slot {', '.join(_missing)} (session.REQUESTS)")
+
+_SessionSignals = type("_SessionSignals", (QObject,), {
+    **{name: Signal(*types) for name, types in EVENTS.items()},
+    **{request: Signal(*_SLOTS[slot]) for request, slot in REQUESTS.items()},
+})
+
+
+class DeviceSession(_SessionSignals):  # type: ignore[misc, valid-type]
     """The GUI-side handle: starts the worker thread and forwards requests to it.
 
     Every request is a queued signal, so the GUI thread never blocks on the device. The
-    worker's events are re-emitted by the session's own signals in the GUI thread; connect
-    to those, never to the worker's.
+    worker's events (:data:`EVENTS`: ``connected``, ``status``, ``error``, ...) are re-emitted
+    by the session's own signals in the GUI thread; connect to those, never to the worker's.
     """
-
-    connected = Signal(object)  # DeviceInfo
-    disconnected = Signal(str)
-    error = Signal(str)
-    notice = Signal(str)  # information (not an error) for the user
-    status = Signal(object)  # StreamStatus
-    filterChanged = Signal(str, dict)
-    comparisonsChanged = Signal(list)
-    calibrationChanged = Signal(object)
-    tareChanged = Signal(object)
-    reconnecting = Signal(str)
-    recordingChanged = Signal(object)
-    deviceMessage = Signal(int, str)
-    selfTestAvailable = Signal(bool)
-    selfTestFinished = Signal(object, str)
-    faultEvents = Signal(list)  # FaultEvents, as the detector declares them
-    alarmEvents = Signal(list)  # AlarmEvents: the alarms' crossings
-
-    requestConnect = Signal(str)
-    requestDisconnect = Signal()
-    requestFilter = Signal(str)
-    requestFilterParameter = Signal(str, object)
-    requestSimulatorTarget = Signal(float, float)
-    requestComparisons = Signal(list)
-    requestProfile = Signal(object)  # CalibrationProfile to apply and store
-    requestNoCalibration = Signal()  # run uncalibrated, remembered for the device
-    requestStoredProfile = Signal()  # apply the device's stored profile again
-    requestDeleteProfile = Signal()  # delete the device's stored profile (to history)
-    requestTare = Signal()
-    requestClearTare = Signal()
-    requestTareReference = Signal(object)  # TareReference
-    requestStartRecording = Signal(str, str)  # path, note
-    requestStopRecording = Signal()
-    requestReplayControl = Signal(str, object)
-    requestSelfTest = Signal()
-    requestHealthReset = Signal()
-    requestAlarms = Signal(object)  # AlarmConfig
 
     def __init__(
         self,
@@ -72,43 +100,11 @@ class DeviceSession(QObject):
         self.thread.setObjectName("device-worker")
         self.worker.moveToThread(self.thread)
         self.thread.started.connect(self.worker.start)
-        self.requestConnect.connect(self.worker.connect_device)
-        self.requestDisconnect.connect(self.worker.disconnect_device)
-        self.requestFilter.connect(self.worker.set_filter)
-        self.requestFilterParameter.connect(self.worker.set_filter_parameter)
-        self.requestSimulatorTarget.connect(self.worker.set_simulator_target)
-        self.requestComparisons.connect(self.worker.set_comparisons)
-        self.requestProfile.connect(self.worker.use_profile)
-        self.requestNoCalibration.connect(self.worker.use_no_calibration)
-        self.requestStoredProfile.connect(self.worker.use_stored_profile)
-        self.requestDeleteProfile.connect(self.worker.delete_profile)
-        self.requestTare.connect(self.worker.tare)
-        self.requestClearTare.connect(self.worker.clear_tare)
-        self.requestTareReference.connect(self.worker.set_tare)
-        self.requestStartRecording.connect(self.worker.start_recording)
-        self.requestStopRecording.connect(self.worker.stop_recording)
-        self.requestReplayControl.connect(self.worker.replay_control)
-        self.requestSelfTest.connect(self.worker.run_self_test)
-        self.requestHealthReset.connect(self.worker.reset_health)
-        self.requestAlarms.connect(self.worker.set_alarms)
+        for request, slot in REQUESTS.items():
+            getattr(self, request).connect(getattr(self.worker, slot))
         self.device_info: DeviceInfo | None = None
-        # Queued into the GUI thread (this object lives there).
-        self.worker.connected.connect(self.connected)
-        self.worker.disconnected.connect(self.disconnected)
-        self.worker.error.connect(self.error)
-        self.worker.notice.connect(self.notice)
-        self.worker.status.connect(self.status)
-        self.worker.filterChanged.connect(self.filterChanged)
-        self.worker.comparisonsChanged.connect(self.comparisonsChanged)
-        self.worker.calibrationChanged.connect(self.calibrationChanged)
-        self.worker.tareChanged.connect(self.tareChanged)
-        self.worker.reconnecting.connect(self.reconnecting)
-        self.worker.recordingChanged.connect(self.recordingChanged)
-        self.worker.deviceMessage.connect(self.deviceMessage)
-        self.worker.selfTestAvailable.connect(self.selfTestAvailable)
-        self.worker.selfTestFinished.connect(self.selfTestFinished)
-        self.worker.faultEvents.connect(self.faultEvents)
-        self.worker.alarmEvents.connect(self.alarmEvents)
+        for event in EVENTS:  # queued into the GUI thread (this object lives there)
+            getattr(self.worker, event).connect(getattr(self, event))
         self.connected.connect(self._on_connected)
         self.disconnected.connect(self._on_disconnected)
         self.thread.start()

@@ -1,0 +1,84 @@
+"""The window's centre: the banners, the bubble level with the readouts beside it, the
+display controls (units, averaging, range, Hold) and the simulator-truth line."""
+
+from __future__ import annotations
+
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import (
+    QComboBox,
+    QHBoxLayout,
+    QPushButton,
+    QSizePolicy,
+    QVBoxLayout,
+    QWidget,
+)
+
+from app.core.readout import SLOPE_UNITS
+from app.gui.banner import MessageBanner
+from app.gui.bubble_level import BubbleLevel
+from app.gui.elided_label import ElidedLabel
+from app.gui.readouts import TiltReadouts
+
+READOUT_MIN_PX, READOUT_MAX_PX = 28, 96
+"""Smallest and largest digits beside the level in the usual layout."""
+INSTRUMENT_MAX_PX = 400
+"""Largest digits in the full-screen instrument mode (they fill the half screen)."""
+AVERAGING_S = (0.05, 0.2, 0.5, 1.0, 2.0, 5.0)
+LEVEL_RANGES_DEG = (0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 90.0)
+
+
+class LevelView(QWidget):
+    """The central widget; its parts are attributes (the window hands them on)."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.banner = MessageBanner()
+        self.alarm_banner = MessageBanner()
+        self.level = BubbleLevel()
+        self.readouts = TiltReadouts()
+        self.truth_label = ElidedLabel()
+        self.truth_label.setObjectName("dimLabel")
+        self.truth_label.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        outer = QVBoxLayout(self)
+        outer.setContentsMargins(12, 8, 12, 8)
+        outer.addWidget(self.banner)
+        outer.addWidget(self.alarm_banner)
+        self.row = QHBoxLayout()
+        self.level.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
+        self.row.addWidget(self.level, 3)
+        side = QVBoxLayout()
+        # The digits grow into the height beside the level (no empty space under them).
+        self.readouts.setAutoScale(True, READOUT_MAX_PX, READOUT_MIN_PX, (2, 1))
+        side.addWidget(self.readouts, 1)
+        side.addWidget(self._build_controls())
+        self.row.addLayout(side, 2)
+        outer.addLayout(self.row, 1)
+        outer.addWidget(self.truth_label)
+
+    def _build_controls(self) -> QWidget:
+        self.controls = QWidget()
+        controls = QHBoxLayout(self.controls)
+        controls.setContentsMargins(0, 0, 0, 0)
+        self.unit_combo = QComboBox()
+        for unit in SLOPE_UNITS.values():
+            self.unit_combo.addItem(unit.title, unit.key)
+        self.unit_combo.setToolTip("Units of roll, pitch and tilt")
+        self.averaging_combo = QComboBox()
+        for seconds in AVERAGING_S:
+            self.averaging_combo.addItem(f"avg {seconds:g} s", seconds)
+        self.averaging_combo.setToolTip("The readouts show the mean over this time")
+        self.range_combo = QComboBox()
+        for degrees in LEVEL_RANGES_DEG:
+            self.range_combo.addItem(f"±{degrees:g}°", degrees)
+        self.range_combo.setToolTip("Full scale of the bubble level")
+        self.hold_button = QPushButton("Hold")
+        self.hold_button.setCheckable(True)
+        self.hold_button.setToolTip("Freeze the readouts (H)")
+        for widget in (self.unit_combo, self.averaging_combo, self.range_combo, self.hold_button):
+            controls.addWidget(widget)
+        return self.controls
+
+    def set_level_share(self, level: int, side: int) -> None:
+        """How the width is shared between the bubble and the readouts' column."""
+        self.row.setStretch(0, level)
+        self.row.setStretch(1, side)
