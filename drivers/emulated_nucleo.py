@@ -81,7 +81,7 @@ from drivers.sim.error_model import unique_id_for_seed
 
 log = logging.getLogger(__name__)
 
-FIRMWARE_VERSION = (1, 1, 0)
+FIRMWARE_VERSION = (1, 2, 0)
 USB_VID = 0x0483
 USB_PID = 0x374B
 TX_BUFFER_BYTES = 16 * 1024

@@ -105,6 +105,9 @@ class LinkCounters:
     mag_late: int = 0
     """Field samples that arrived after the rows of their time had been delivered (dropped:
     placed on a later row they would carry the wrong time)."""
+    mag_early: int = 0
+    """Field samples from before the stream's first accelerometer row (the board reads the
+    field while the accelerometer's turn-on transient is discarded): dropped."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -201,6 +204,7 @@ class LinkDecoder:
         self._mag_samples = 0
         self._mag_gaps = 0
         self._mag_late = 0
+        self._mag_early = 0
         self._clear_batch()
         if config is not None:
             self._apply_config(config)
@@ -239,7 +243,7 @@ class LinkDecoder:
             dropped_samples=self._dropped, link_gaps=self._link_gaps,
             link_lost_samples=self._link_lost, other_sensor_packets=self._other_sensor,
             mag_samples=self._mag_samples, mag_seq_gaps=self._mag_gaps,
-            mag_late=self._mag_late,
+            mag_late=self._mag_late, mag_early=self._mag_early,
         )
 
     def take_gap_reports(self) -> list[GapReport]:
@@ -419,10 +423,14 @@ class LinkDecoder:
         # Times are whole ticks: a sample within half a tick of a row is taken at that row.
         tolerance = 0.5 * self._tick_s + 1e-9
         rows = np.searchsorted(t_s, times - tolerance, side="left")
-        late = times <= self._mag_floor_s + tolerance  # its row was delivered already
+        if self._mag_floor_s == -math.inf:  # the stream's first rows: nothing before them
+            late = times < t_s[0] - tolerance
+            self._mag_early += int(np.count_nonzero(late))
+        else:
+            late = times <= self._mag_floor_s + tolerance  # its row was delivered already
+            self._mag_late += int(np.count_nonzero(late))
         placed = ~late & (rows < t_s.shape[0])
         mag[rows[placed]] = xyz[placed]  # in order: two on one row keep the later
-        self._mag_late += int(np.count_nonzero(late))
         self._mag_samples += int(np.count_nonzero(placed))
         waiting = ~late & ~placed
         self._mag_pending = []
