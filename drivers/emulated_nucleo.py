@@ -32,10 +32,13 @@ A magnetometer (``mag="lis3mdl"`` or ``"lis2mdl"``, docs/protocol.md "A magnetom
 the sensor"): the board describes it in MAGNETOMETER after CONFIG and streams its field samples
 in MAG_SAMPLES at the chip's rate for the accelerometer's (:meth:`ChipSpec.rate_for`), each
 timed in sensor 0's ticks on the accelerometer row it was taken with, and sent before the
-SAMPLES packet that holds that row. The field comes from the simulator's ``mag_raw`` when it
-has one; otherwise it is the World Magnetic Model's field (:mod:`app.core.earth_field`, at
-the simulator's place) turned into the sensor frame by the simulated true orientation and
-quantised to the chip's counts (an ideal chip: no hard or soft iron, no noise). A rate that
+SAMPLES packet that holds that row. The field is the simulator's magnetometer
+(``sim://...&mag=lis3mdl|lis2mdl``, :mod:`drivers.sim.magnetometer`): the World Magnetic
+Model's field at the simulator's place on :data:`MAG_FIELD_DATE`, seen in the true orientation
+through the unit's hard and soft iron, its turn against the accelerometer and the datasheet
+noise (``errors=False`` and ``noise=False`` switch them off, as for the accelerometer). Below
+the chip's own rate the board takes every k-th of those samples, at the rate MAGNETOMETER
+announces. A rate that
 leaves no room for the field samples on the UART or the I2C bus pauses the magnetometer
 (MAGNETOMETER flags bit 1 and a LOG), as the firmware does. STATUS is then version 2 (the
 magnetometer's I2C errors and samples read).
@@ -52,6 +55,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import datetime as dt
 import hashlib
 import logging
 import math
@@ -65,8 +69,6 @@ from dataclasses import dataclass
 import numpy as np
 from cobs import cobs
 
-from app.core import quaternion
-from app.core.earth_field import DEFAULT_PLACE, earth_field
 from app.core.samples import RawBlock
 from drivers import lsm6dsox, magnetometers
 from drivers.link import protocol as p
@@ -167,13 +169,8 @@ def mag_fits(odr_hz: float, mag_hz: float, baud: int | None, bus_hz: int | None,
     return link_ok and bus_ok
 
 
-MAG_FIELD_YEAR = 2026.5
+MAG_FIELD_DATE = dt.date(2026, 7, 2)
 """The date of the WMM field the emulated magnetometer sees (fixed: recordings repeat)."""
-
-
-def _earth_field_enu() -> np.ndarray:
-    """The WMM field at the simulator's place, in the earth frame (ENU, uT)."""
-    return earth_field(DEFAULT_PLACE, MAG_FIELD_YEAR).enu_magnetic_ut()
 
 
 def usb_serial_for_seed(seed: int) -> str:
@@ -553,6 +550,8 @@ class EmulatedNucleo:
                f"&accel_fs={accel_fs_g}&gyro_fs={gyro_fs_dps}&seed={seed}&realtime=0"
                f"&block={SIM_BLOCK}&errors={int(self.errors)}&noise={int(self.noise)}"
                "&settling=1")
+        if self.mag is not None and seed == self.seed:  # beside sensor 0 only
+            url += f"&mag={self.mag.name.lower()}&date={MAG_FIELD_DATE.isoformat()}"
         sim = SimulatedDevice(url, **self.scenario_params)
         sim.open()
         # The simulated chip starts with its turn-on transient; the firmware drops it, as
@@ -752,25 +751,22 @@ class EmulatedNucleo:
 
     # -- samples --------------------------------------------------------------------------------
     def _field_counts(self, raw: RawBlock) -> np.ndarray:
-        """(n, 3) the magnetometer's counts on the simulator's rows: the simulator's own
-        field when it has one, else the WMM field seen in the true orientation; NaN on rows
-        the chip takes no sample at (its rate for the accelerometer's)."""
+        """(n, 3) the magnetometer's counts on the simulator's rows, NaN where the chip took
+        no sample: the simulator's magnetometer (same chip, same counts), thinned to the rate
+        MAGNETOMETER announces when the accelerometer is slower than the chip."""
         mag = self.mag
         assert mag is not None
-        n = len(raw)
-        if raw.mag_raw is not None:  # the simulator's magnetometer: rescaled to this chip
-            field_ut = np.asarray(raw.mag_raw, dtype=float) * raw.scale.mag_ut_per_lsb
-            return np.clip(np.rint(field_ut / mag.ut_per_lsb), -32768, 32767)
-        counts = np.full((n, 3), np.nan)
-        if raw.reference_quat is None:
-            return counts
-        rows = self._mag_row + np.arange(n)
-        ratio = self.mag_rate_hz / lsm6dsox.ODR_RATES_HZ[self._settings[0]]
-        taken = np.floor(rows * ratio) != np.floor((rows - 1) * ratio)
-        field = _earth_field_enu()
-        sensor_ut = quaternion.rotate_inverse(raw.reference_quat[taken],
-                                              np.broadcast_to(field, (int(taken.sum()), 3)))
-        counts[taken] = np.clip(np.rint(sensor_ut / mag.ut_per_lsb), -32768, 32767)
+        if raw.mag_raw is None:
+            raise RuntimeError("the simulator delivered no magnetometer")
+        counts = np.array(raw.mag_raw, dtype=float)
+        if abs(raw.scale.mag_ut_per_lsb / mag.ut_per_lsb - 1.0) > 1e-4:  # another sensitivity
+            counts = np.clip(np.rint(counts * raw.scale.mag_ut_per_lsb / mag.ut_per_lsb),
+                             -32768, 32767)
+        if self.mag_rate_hz < mag.rates_hz[-1]:  # the chip runs slower for this rate
+            rows = self._mag_row + np.arange(len(raw))
+            ratio = self.mag_rate_hz / lsm6dsox.ODR_RATES_HZ[self._settings[0]]
+            taken = np.floor(rows * ratio) != np.floor((rows - 1) * ratio)
+            counts[~taken] = np.nan
         return counts
 
     def _take_samples(self, count: int) -> np.ndarray:

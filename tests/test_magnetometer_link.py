@@ -22,12 +22,13 @@ from app.core.devices import BoardStatus
 from app.core.earth_field import DEFAULT_PLACE, earth_field
 from app.services.board_health import describe_rise
 from drivers import magnetometers
-from drivers.emulated_nucleo import MAG_FIELD_YEAR, EmulatedNucleo, mag_fits
+from drivers.emulated_nucleo import MAG_FIELD_DATE, EmulatedNucleo, mag_fits
 from drivers.link import protocol as p
 from drivers.link.decoder import LinkDecoder
-from drivers.link.framing import encode_packet
+from drivers.link.framing import FrameSplitter, encode_packet, unframe
 from drivers.registry import create_device
 from drivers.serial_link import board_status_of
+from drivers.sim.device import SimulatedDevice
 
 ROOT = Path(__file__).resolve().parent.parent
 PRE_MAG_COMMIT = "8b3bdf3"
@@ -203,7 +204,9 @@ def read_rows(device, count: int, deadline_s: float = 5.0) -> list:
     ("lis3mdl", 80.0, 100 / 6842), ("lis2mdl", 100.0, 0.15)])
 def test_the_emulated_board_streams_its_magnetometer_to_the_app(chip, rate_hz, ut_per_lsb
                                                                 ) -> None:
-    with EmulatedNucleo("wobble", odr_hz=208, seed=5, mag=chip) as board:
+    # An ideal unit (no hard or soft iron, no noise): the field is the WMM's, quantised.
+    with EmulatedNucleo("wobble", odr_hz=208, seed=5, mag=chip, errors=False,
+                        noise=False) as board:
         device = create_device(board.port)
         info = device.open()
         try:
@@ -218,9 +221,9 @@ def test_the_emulated_board_streams_its_magnetometer_to_the_app(chip, rate_hz, u
     rows = ~np.isnan(field[:, 0])
     # One field sample per 208/rate rows, each on an accelerometer row.
     assert abs(rows.sum() - len(field) * rate_hz / 208.33) <= 3
-    wmm = earth_field(DEFAULT_PLACE, MAG_FIELD_YEAR).total_ut
+    wmm = earth_field(DEFAULT_PLACE, MAG_FIELD_DATE).total_ut
     magnitude = np.linalg.norm(field[rows] * blocks[0].scale.mag_ut_per_lsb, axis=1)
-    assert np.all(np.abs(magnitude - wmm) < 2 * ut_per_lsb)  # an ideal chip: quantisation only
+    assert np.all(np.abs(magnitude - wmm) < 2 * ut_per_lsb)  # quantisation only
     assert status is not None and status.mag_i2c_errors == 0
 
 
@@ -242,3 +245,30 @@ def test_the_magnetometer_pauses_where_the_link_cannot_carry_it() -> None:
     assert info.magnetometer is None and info.odr_nominal_hz == 833
     assert all(block.mag_raw is None for block in blocks)
     assert any("magnetometer (LIS3MDL) paused: 833 Hz" in text for text in logs)
+
+
+def test_the_emulated_board_sends_the_simulators_field_at_the_rate_it_announces() -> None:
+    # At 208 Hz the LIS2MDL runs at its own 100 Hz: the board sends the simulator's samples
+    # (its unit's hard and soft iron and noise included), every one, in order.
+    with EmulatedNucleo("wobble", odr_hz=208, seed=4, mag="lis2mdl") as board:
+        packets = [p.parse_packet(body[0], body[1:]) for body in map(
+            unframe, FrameSplitter().feed(capture_emulated_stream(board, 0.5)))]
+    sent = np.concatenate([pk.xyz for pk in packets if isinstance(pk, p.MagSamples)])
+    sim = SimulatedDevice("sim://wobble?odr=208&accel_fs=4&gyro_fs=250&seed=4&realtime=0"
+                          "&block=256&settling=1&mag=lis2mdl&date=2026-07-02")
+    sim.open()
+    field = sim.read(1.0).mag_raw
+    sim.close()
+    own = field[~np.isnan(field[:, 0])].astype(np.int16)
+    assert len(sent) >= 30
+    assert any(np.array_equal(own[k:k + len(sent)], sent) for k in range(len(own) - len(sent)))
+    # At 52 Hz the LIS3MDL is set to 40 Hz, and the board sends 40 a second.
+    with EmulatedNucleo("wobble", odr_hz=52, seed=4, mag="lis3mdl") as board:
+        packets = [p.parse_packet(body[0], body[1:]) for body in map(
+            unframe, FrameSplitter().feed(capture_emulated_stream(board, 1.0)))]
+    (described,) = [pk for pk in packets if isinstance(pk, p.Magnetometer)]
+    samples_52 = [pk for pk in packets if isinstance(pk, p.Samples)]
+    rows = sum(pk.count for pk in samples_52)
+    field_rows = sum(len(pk.t) for pk in packets if isinstance(pk, p.MagSamples))
+    assert described.odr_mhz == 40_000
+    assert abs(field_rows - rows * 40 / 52.08) <= 2
