@@ -45,7 +45,7 @@ class ChipSpec:
 
     @property
     def ut_per_lsb(self) -> float:
-        return self.pt_per_lsb * 1e-6
+        return self.pt_per_lsb / 1e6
 
     def rate_for(self, accel_odr_hz: float) -> float:
         """The chip's rate for an accelerometer rate: the fastest not above it, else the

@@ -645,7 +645,7 @@ class Magnetometer:
 
     @property
     def ut_per_lsb(self) -> float:
-        return self.pt_per_lsb * 1e-6
+        return self.pt_per_lsb / 1e6
 
     @property
     def answering(self) -> bool:
