@@ -2,7 +2,7 @@
 
 Shared by the link protocol (MAGNETOMETER, MAG_SAMPLES: ``docs/protocol.md``), the emulated
 board and the host side. Sources: ST's LIS3MDL datasheet (DocID024204) and register header
-``lis3mdl_reg.h`` (STMicroelectronics/lis3mdl-pid), ST's LIS2MDL datasheet (DocID027895)
+``lis3mdl_reg.h`` (STMicroelectronics/lis3mdl-pid), ST's LIS2MDL datasheet
 and ``lis2mdl_reg.h`` (STMicroelectronics/lis2mdl-pid). ``firmware/core/magnetometer.h``
 holds the same numbers for the firmware.
 """

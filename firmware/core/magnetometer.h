@@ -13,7 +13,7 @@
  *     CTRL_REG5 0x24: FAST_READ[7] = 0, BDU[6] = 1 (block data update)
  *     STATUS_REG 0x27: ZYXDA[3] new X, Y, Z; ZYXOR[7] overrun; OUT_X_L..OUT_Z_H 0x28..0x2D
  *     A multi-byte I2C read asserts the sub-address MSB (auto-increment), as ST's examples.
- *   LIS2MDL (datasheet DocID027895; STMicroelectronics/lis2mdl-pid lis2mdl_reg.h)
+ *   LIS2MDL (ST's datasheet; STMicroelectronics/lis2mdl-pid lis2mdl_reg.h)
  *     I2C 0x1E; WHO_AM_I 0x4F reads 0x40
  *     CFG_REG_A 0x60: COMP_TEMP_EN[7] = 1, REBOOT[6], SOFT_RST[5], LP[4] = 0 (high
  *       resolution), ODR[3:2] 00/01/10/11 = 10/20/50/100 Hz, MD[1:0] = 00 continuous
