@@ -112,6 +112,7 @@ def test_every_field_sample_reaches_the_host_in_order_on_sensor_0s_clock(firmwar
     packets = packets_of(wire)
     mags = [pk for pk in packets if isinstance(pk, p.MagSamples)]
     assert [pk.seq for pk in mags] == list(range(len(mags)))
+    assert core.counters()["mag_overruns"] == 0  # polled every 2 ms: none overwritten
     xyz = np.concatenate([pk.xyz for pk in mags])
     ticks = np.concatenate([pk.t for pk in mags]).astype(np.int64)
     truth = np.array([values for _, values in mag.truth])
@@ -205,4 +206,17 @@ def test_magnetometer_i2c_errors_are_counted_and_it_comes_back(firmware_lib) -> 
     core.send(p.GetStatus())
     final = [pk for pk in core.packets() if isinstance(pk, p.Status)][-1]
     assert final.mag_samples_read > status.mag_samples_read
+    core.close()
+
+
+def test_polls_too_late_for_the_field_count_the_samples_the_chip_overwrote(firmware_lib) -> None:
+    core, mag, _ = board(firmware_lib)
+    core.send(p.Start())
+    core.run(0.1)
+    core.run(0.5, step_s=0.03)  # a board busy for 30 ms at a time: 80 Hz outruns its polls
+    core.send(p.GetStatus())
+    status = [pk for pk in core.packets() if isinstance(pk, p.Status)][-1]
+    overruns = core.counters()["mag_overruns"]
+    assert overruns > 5 and status.mag_overruns == overruns
+    assert status.mag_samples_read + overruns <= len(mag.truth)
     core.close()

@@ -88,10 +88,10 @@ def test_mag_packets_round_trip_and_refuse_what_does_not_fit() -> None:
 
 def test_status_version_2_carries_the_magnetometers_i2c_errors_and_v1_reads_none() -> None:
     v1 = p.Status(1, 1, 3, 1000, 0, 0, 4, 0, 0, 0, 100, 100, 0)
-    v2 = p.Status(2, 1, 3, 2000, 0, 0, 9, 0, 0, 0, 300, 300, 0, extra=p.Status.mag_extra(5, 160))
+    v2 = p.Status(2, 1, 3, 2000, 0, 0, 9, 0, 0, 0, 300, 300, 0, extra=p.Status.mag_extra(5, 160, 2))
     assert v1.mag_i2c_errors is None and v1.mag_samples_read is None
     parsed = p.parse_packet(p.STATUS, v2.payload())
-    assert (parsed.mag_i2c_errors, parsed.mag_samples_read) == (5, 160)
+    assert (parsed.mag_i2c_errors, parsed.mag_samples_read, parsed.mag_overruns) == (5, 160, 2)
     before, after = board_status_of(v1), board_status_of(parsed)
     assert (before.mag_i2c_errors, after.mag_i2c_errors) == (0, 5)
     assert "mag_i2c_errors" in BoardStatus.COUNTERS

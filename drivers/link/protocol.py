@@ -113,8 +113,9 @@ MAG_FLAG_PAUSED = 0x02
 
 STATUS_VERSION = 1
 STATUS_VERSION_MAG = 2
-"""STATUS version 2 appends mag_i2c_errors and mag_samples_read (u32 each) at offset 44."""
-_STATUS_MAG = struct.Struct("<II")
+"""STATUS version 2 appends mag_i2c_errors, mag_samples_read and mag_overruns (u32 each) at
+offset 44."""
+_STATUS_MAG = struct.Struct("<III")
 RESET_CAUSES: dict[int, str] = {
     0: "unknown", 1: "power-on", 2: "reset pin", 3: "brown-out", 4: "software reset",
     5: "independent watchdog", 6: "window watchdog", 7: "low-power",
@@ -460,15 +461,21 @@ class Status:
         """Field samples read from the magnetometer (status version 2), None before it."""
         return self._mag_fields()[1] if self._mag_fields() else None
 
-    def _mag_fields(self) -> tuple[int, int] | None:
+    @property
+    def mag_overruns(self) -> int | None:
+        """Field samples the chip overwrote before the board read them (version 2)."""
+        return self._mag_fields()[2] if self._mag_fields() else None
+
+    def _mag_fields(self) -> tuple[int, int, int] | None:
         if self.version < STATUS_VERSION_MAG or len(self.extra) < _STATUS_MAG.size:
             return None
         return _STATUS_MAG.unpack_from(self.extra)
 
     @staticmethod
-    def mag_extra(mag_i2c_errors: int, mag_samples_read: int) -> bytes:
+    def mag_extra(mag_i2c_errors: int, mag_samples_read: int, mag_overruns: int = 0) -> bytes:
         """The bytes status version 2 appends (for ``extra``)."""
-        return _STATUS_MAG.pack(mag_i2c_errors & 0xFFFFFFFF, mag_samples_read & 0xFFFFFFFF)
+        return _STATUS_MAG.pack(mag_i2c_errors & 0xFFFFFFFF, mag_samples_read & 0xFFFFFFFF,
+                                mag_overruns & 0xFFFFFFFF)
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -203,6 +203,7 @@ void fw_status(fw_state *fw, link_status *status)
         status->version = LINK_STATUS_VERSION_MAG;
         status->mag_i2c_errors = fw->counters.mag_i2c_errors;
         status->mag_samples_read = fw->counters.mag_samples_read;
+        status->mag_overruns = fw->counters.mag_overruns;
     }
 }
 
@@ -1022,8 +1023,8 @@ static void poll_mag(fw_state *fw, uint32_t now)
     if ((uint32_t)(now - fw->mag_last_us) < period_us / 4u * 3u)
         return;
     int16_t xyz[3];
-    bool ready = false;
-    if (mag_read(&fw->mag, xyz, &ready)) {
+    bool ready = false, overrun = false;
+    if (mag_read(&fw->mag, xyz, &ready, &overrun)) {
         if (++fw->mag_failures > FW_I2C_RETRIES) {
             fw->mag_ok = false;
             fw->last_retry_mag_us = now;
@@ -1037,6 +1038,8 @@ static void poll_mag(fw_state *fw, uint32_t now)
     fw->mag_failures = 0;
     if (!ready)
         return;
+    if (overrun && fw->mag_primed) /* late: the chip overwrote a sample (a hole, not an error) */
+        fw->counters.mag_overruns++;
     uint32_t ticks = 0;
     if (lsm_read_timestamp(&fw->chip, &ticks))
         return; /* sensor 0's trouble: its FIFO poll finds it */

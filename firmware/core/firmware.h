@@ -55,6 +55,7 @@ typedef struct fw_counters {
     uint32_t mag_i2c_errors;     /* failed I2C transfers to the magnetometer (also above) */
     uint32_t mag_samples_read;   /* field samples read (STATUS version 2) */
     uint32_t mag_samples_sent;   /* field samples in MAG_SAMPLES queued for the UART */
+    uint32_t mag_overruns;       /* field samples the chip overwrote unread (ZYXOR) */
 } fw_counters;
 
 typedef struct fw_state {

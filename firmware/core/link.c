@@ -197,6 +197,7 @@ size_t link_encode_status(const link_status *status, uint8_t *wire)
         return link_frame(LINK_STATUS, payload, LINK_STATUS_PAYLOAD, wire);
     put_u32(payload + LINK_STATUS_PAYLOAD, status->mag_i2c_errors);
     put_u32(payload + LINK_STATUS_PAYLOAD + 4, status->mag_samples_read);
+    put_u32(payload + LINK_STATUS_PAYLOAD + 8, status->mag_overruns);
     return link_frame(LINK_STATUS, payload, LINK_STATUS_PAYLOAD_MAG, wire);
 }
 

@@ -94,11 +94,12 @@ typedef struct link_selftest {
 } link_selftest;
 
 /* STATUS (docs/protocol.md, 0x08): version 1 is 43 bytes of payload; later versions append.
- * Version 2 (a board with a magnetometer) appends mag_i2c_errors and mag_samples_read. */
+ * Version 2 (a board with a magnetometer) appends mag_i2c_errors, mag_samples_read and
+ * mag_overruns. */
 #define LINK_STATUS_VERSION 1u
 #define LINK_STATUS_PAYLOAD 43u
 #define LINK_STATUS_VERSION_MAG 2u
-#define LINK_STATUS_PAYLOAD_MAG 51u
+#define LINK_STATUS_PAYLOAD_MAG 55u
 
 enum {
     LINK_RESET_UNKNOWN = 0,
@@ -133,6 +134,7 @@ typedef struct link_status {
     uint8_t version;           /* 0 or 1: version 1; 2: with the two fields below */
     uint32_t mag_i2c_errors;
     uint32_t mag_samples_read;
+    uint32_t mag_overruns;
 } link_status;
 
 /* MAGNETOMETER (docs/protocol.md, 0x0C). */

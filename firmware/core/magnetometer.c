@@ -116,7 +116,7 @@ int mag_configure(magnetometer *mag, uint32_t accel_odr_mhz)
     return MAG_OK;
 }
 
-int mag_read(magnetometer *mag, int16_t xyz[3], bool *ready)
+int mag_read(magnetometer *mag, int16_t xyz[3], bool *ready, bool *overrun)
 {
     const fw_platform *p = mag->bus;
     uint8_t data[7];
@@ -125,6 +125,7 @@ int mag_read(magnetometer *mag, int16_t xyz[3], bool *ready)
     if (p->i2c_read(p->ctx, mag->address, reg, data, sizeof data))
         return MAG_ERR_BUS;
     *ready = (data[0] & MAG_STATUS_ZYXDA) != 0;
+    *overrun = (data[0] & MAG_STATUS_ZYXOR) != 0;
     for (int axis = 0; axis < 3; axis++)
         xyz[axis] = (int16_t)(data[1 + 2 * axis] | (data[2 + 2 * axis] << 8));
     return MAG_OK;

@@ -69,6 +69,7 @@ enum { MAG_MODE_ULTRA_HIGH_PERFORMANCE = 3, MAG_MODE_HIGH_RESOLUTION = 4 };
 #define LIS2MDL_CFG_REG_C_BDU 0x10u
 
 #define MAG_STATUS_ZYXDA 0x08u
+#define MAG_STATUS_ZYXOR 0x80u /* a sample was overwritten before it was read */
 #define MAG_RESET_US 5000u /* soft reset and reboot: a few ms (a margin on both datasheets) */
 #define MAG_SEQUENCE_LENGTH 5u
 
@@ -103,8 +104,9 @@ unsigned mag_sequence(uint8_t chip, uint32_t odr_mhz, mag_register_write *out);
 /* Soft reset, then the configuration sequence for the accelerometer's rate, read back. */
 int mag_configure(magnetometer *mag, uint32_t accel_odr_mhz);
 
-/* One burst of the status and output registers: `*ready` when ZYXDA says new X, Y, Z. */
-int mag_read(magnetometer *mag, int16_t xyz[3], bool *ready);
+/* One burst of the status and output registers: `*ready` when ZYXDA says new X, Y, Z,
+ * `*overrun` when ZYXOR says one was overwritten unread. */
+int mag_read(magnetometer *mag, int16_t xyz[3], bool *ready, bool *overrun);
 
 /* What MAGNETOMETER reports: full scale (+-uT), picotesla per LSB, mode. */
 uint16_t mag_range_ut(uint8_t chip);

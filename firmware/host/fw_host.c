@@ -143,7 +143,7 @@ int fwh_sensor_count(const host_board *board)
  * incomplete_slots, lost_slots, overruns, samples, packets, dropped_packets, rx frames,
  * rx bad_frames, settling (samples discarded as turn-on transient), tx_dropped_bytes,
  * i2c_errors, i2c_retries, samples_sent, status_sent, mag_i2c_errors, mag_samples_read,
- * mag_samples_sent.
+ * mag_samples_sent, mag_overruns.
  * Returns how many were written (at most `size`). */
 size_t fwh_counters(const host_board *board, uint32_t *out, size_t size)
 {
@@ -154,7 +154,7 @@ size_t fwh_counters(const host_board *board, uint32_t *out, size_t size)
         s->incomplete_slots, s->lost_slots, s->overruns, s->samples, s->packets,
         s->dropped_packets, board->fw.rx.frames, board->fw.rx.bad_frames, s->settling,
         c->tx_dropped_bytes, c->i2c_errors, c->i2c_retries, c->samples_sent, c->status_sent,
-        c->mag_i2c_errors, c->mag_samples_read, c->mag_samples_sent,
+        c->mag_i2c_errors, c->mag_samples_read, c->mag_samples_sent, c->mag_overruns,
     };
     size_t n = sizeof values / sizeof values[0];
     if (n > size)

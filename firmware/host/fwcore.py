@@ -42,6 +42,7 @@ COUNTER_NAMES = (
     "lost_slots", "overruns", "samples", "packets", "dropped_packets", "rx_frames",
     "rx_bad_frames", "settling", "tx_dropped_bytes", "i2c_errors", "i2c_retries",
     "samples_sent", "status_sent", "mag_i2c_errors", "mag_samples_read", "mag_samples_sent",
+    "mag_overruns",
 )
 LED_IDLE, LED_STREAMING, LED_ERROR = 0, 1, 2
 POLL_INTERVAL_S = 0.002
@@ -83,7 +84,7 @@ class _LinkStatus(ctypes.Structure):
     _fields_ = (("reset_cause", ctypes.c_uint8), ("flags", ctypes.c_uint8),
                 *((name, ctypes.c_uint32) for name in p.Status.COUNTERS),
                 ("version", ctypes.c_uint8), ("mag_i2c_errors", ctypes.c_uint32),
-                ("mag_samples_read", ctypes.c_uint32))
+                ("mag_samples_read", ctypes.c_uint32), ("mag_overruns", ctypes.c_uint32))
 
 
 class _LinkMagnetometer(ctypes.Structure):
@@ -290,13 +291,13 @@ def c_encode(lib: ctypes.CDLL, packet: p.Packet) -> bytes:
     elif isinstance(packet, p.Pong):
         n = lib.link_encode_pong(packet.token, wire)
     elif isinstance(packet, p.Status):
-        with_mag = packet.version == p.STATUS_VERSION_MAG and len(packet.extra) == 8
+        with_mag = packet.version == p.STATUS_VERSION_MAG and len(packet.extra) == 12
         if not (packet.version == 1 and not packet.extra) and not with_mag:
-            raise ValueError("the firmware sends STATUS version 1, or 2 with its 8 bytes")
+            raise ValueError("the firmware sends STATUS version 1, or 2 with its 12 bytes")
         status = _LinkStatus(packet.reset_cause, packet.flags,
                              *(getattr(packet, name) for name in p.Status.COUNTERS),
                              packet.version, packet.mag_i2c_errors or 0,
-                             packet.mag_samples_read or 0)
+                             packet.mag_samples_read or 0, packet.mag_overruns or 0)
         n = lib.link_encode_status(ctypes.byref(status), wire)
     elif isinstance(packet, p.Magnetometer):
         mag = _LinkMagnetometer(packet.chip, packet.i2c_address, packet.who_am_i,

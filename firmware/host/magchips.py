@@ -3,7 +3,8 @@
 Each is an :class:`~drivers.lsm6dsox_direct.bus.I2CBus` answering at its own address, to sit
 on a :class:`fwcore.SharedBus` beside an emulated LSM6DSOX and share its clock. It keeps the
 registers the firmware touches, converts continuously at the rate written (once MD = 00), sets
-ZYXDA when a new sample is ready and clears it when the output is read, and records every
+ZYXDA when a new sample is ready (ZYXOR when it overwrote an unread one) and clears them when
+the output is read, and records every
 sample it converted (time, counts) as the truth a test compares with. The field is a slow
 rotation of a 50 uT vector, quantised to the chip's sensitivity. ``fail`` makes every transfer
 fail (a loose wire).
@@ -88,7 +89,7 @@ class _EmulatedMagnetometer(I2CBus):
         status = self.status_register
         if start <= status + 6 < start + length:  # the whole sample was read: ZYXDA clears
             self._ready = False
-            self.regs[status] &= ~0x08 & 0xFF
+            self.regs[status] &= ~0x88 & 0xFF  # ZYXDA and ZYXOR clear once the data is read
         return out
 
     def close(self) -> None:
@@ -108,6 +109,8 @@ class _EmulatedMagnetometer(I2CBus):
             self._latest = tuple(int(v) for v in counts)
             self.truth.append((self._next_s, self._latest))
             self._next_s += 1.0 / rate
+            if self._ready:  # the previous sample was never read: ZYXOR
+                self.regs[self.status_register] |= 0x80
             self._ready = True
         base = self.status_register + 1
         for axis, value in enumerate(self._latest):
