@@ -28,6 +28,21 @@ are independent: the motion is the same scenario, drawn per unit, not one rigid 
 that fits one sensor but not two streams sensor 0 alone: sensor 1 is paused (its SENSOR says
 so, a LOG says why), as the firmware does. Faults (drops, overruns, cuts) touch sensor 0 only.
 
+A magnetometer (``mag="lis3mdl"`` or ``"lis2mdl"``, docs/protocol.md "A magnetometer beside
+the sensor"): the board describes it in MAGNETOMETER after CONFIG and streams its field samples
+in MAG_SAMPLES at the chip's rate for the accelerometer's (:meth:`ChipSpec.rate_for`), each
+timed in sensor 0's ticks on the accelerometer row it was taken with, and sent before the
+SAMPLES packet that holds that row. The field is the simulator's magnetometer
+(``sim://...&mag=lis3mdl|lis2mdl``, :mod:`drivers.sim.magnetometer`): the World Magnetic
+Model's field at the simulator's place on :data:`MAG_FIELD_DATE`, seen in the true orientation
+through the unit's hard and soft iron, its turn against the accelerometer and the datasheet
+noise (``errors=False`` and ``noise=False`` switch them off, as for the accelerometer). Below
+the chip's own rate the board takes every k-th of those samples, at the rate MAGNETOMETER
+announces. A rate that
+leaves no room for the field samples on the UART or the I2C bus pauses the magnetometer
+(MAGNETOMETER flags bit 1 and a LOG), as the firmware does. STATUS is then version 2 (the
+magnetometer's I2C errors and samples read).
+
 Timing model: the board's clock runs with the wall clock from power-on (``initial_ticks`` at
 power-on; it keeps running across an unplug unless :meth:`replug` is told ``power_cycle``).
 Samples are produced at the simulated chip's true rate and sent every ``packet_interval_s``
@@ -40,6 +55,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import datetime as dt
 import hashlib
 import logging
 import math
@@ -53,7 +69,8 @@ from dataclasses import dataclass
 import numpy as np
 from cobs import cobs
 
-from drivers import lsm6dsox
+from app.core.samples import RawBlock
+from drivers import lsm6dsox, magnetometers
 from drivers.link import protocol as p
 from drivers.link.framing import FrameError, FrameSplitter, crc16, encode_packet, unframe
 from drivers.link.ports import (
@@ -66,7 +83,7 @@ from drivers.sim.error_model import unique_id_for_seed
 
 log = logging.getLogger(__name__)
 
-FIRMWARE_VERSION = (1, 1, 0)
+FIRMWARE_VERSION = (1, 2, 0)
 USB_VID = 0x0483
 USB_PID = 0x374B
 TX_BUFFER_BYTES = 16 * 1024
@@ -132,6 +149,30 @@ def odr_fits_sensor_bus(odr_hz: float, bus_hz: int | None, sensors: int = 1) -> 
     return bus_hz is None or sensor_bus_bits_s(odr_hz, sensors) <= _BUS_USABLE * bus_hz
 
 
+# The firmware's rule for the magnetometer (firmware/core/firmware.c, fw_mag_fits): per field
+# sample up to three burst reads of STATUS..OUT_Z (10 bytes of 9 bits: address, register,
+# address, 7 data) and one read of the LSM6DSOX's TIMESTAMP0..3 (7 bytes); on the UART a
+# MAG_SAMPLES packet of one sample, 18 bytes with COBS and the 0x00.
+MAG_BUS_BITS_PER_SAMPLE = 3 * 10 * 9 + 7 * 9
+MAG_LINK_BYTES_PER_SAMPLE = 1 + p.MAG_SAMPLES_HEADER_BYTES + p.MAG_SAMPLE_BYTES + 2 + 2
+
+
+def mag_fits(odr_hz: float, mag_hz: float, baud: int | None, bus_hz: int | None,
+             sensors: int = 1) -> bool:
+    """True when the accelerometer's stream at ``odr_hz`` leaves room for the field samples
+    at ``mag_hz`` on the UART and the sensor's I2C bus (None: no limit)."""
+    link_ok = baud is None or (odr_hz * link_bytes_per_odr_sample(sensors)
+                               + mag_hz * MAG_LINK_BYTES_PER_SAMPLE
+                               <= link_capacity_bytes_s(baud))
+    bus_ok = bus_hz is None or (sensor_bus_bits_s(odr_hz, sensors)
+                                + mag_hz * MAG_BUS_BITS_PER_SAMPLE <= _BUS_USABLE * bus_hz)
+    return link_ok and bus_ok
+
+
+MAG_FIELD_DATE = dt.date(2026, 7, 2)
+"""The date of the WMM field the emulated magnetometer sees (fixed: recordings repeat)."""
+
+
 def usb_serial_for_seed(seed: int) -> str:
     """A 24-digit hex USB serial number, stable per seed (like an ST-LINK's)."""
     digest = hashlib.blake2b(f"emulated-stlink:{seed}".encode(), digest_size=9).hexdigest()
@@ -183,6 +224,9 @@ class NucleoStats:
     i2c_errors: int = 0
     i2c_retries: int = 0
     status_sent: int = 0
+    mag_samples_read: int = 0
+    """Field samples the magnetometer delivered (sent in MAG_SAMPLES)."""
+    mag_i2c_errors: int = 0
 
 
 class EmulatedNucleo:
@@ -210,6 +254,7 @@ class EmulatedNucleo:
     sends_status : False acts as firmware before the STATUS extension: no STATUS, and
         GET_STATUS is an unknown command.
     sensors : 1, or 2 for a second LSM6DSOX (see the module docstring).
+    mag : ``"lis3mdl"``, ``"lis2mdl"`` or None: the magnetometer beside the sensor.
     """
 
     def __init__(
@@ -233,9 +278,13 @@ class EmulatedNucleo:
         share_port: bool = False,
         sends_status: bool = True,
         sensors: int = 1,
+        mag: str | None = None,
     ) -> None:
         if sensors not in (1, 2):
             raise ValueError(f"sensors={sensors}: the NUCLEO board carries 1 or 2 LSM6DSOX")
+        if mag is not None and mag.lower() not in magnetometers.CHIPS_BY_NAME:
+            raise ValueError(f"mag={mag!r}: use lis3mdl, lis2mdl or none")
+        self.mag = None if mag is None else magnetometers.CHIPS_BY_NAME[mag.lower()]
         self.sensors = sensors
         odr_code = lsm6dsox.odr_code_for(odr_hz)
         # The one-sensor rule: a rate that fits sensor 0 alone pauses sensor 1.
@@ -399,6 +448,40 @@ class EmulatedNucleo:
         if self.sensor1_paused:
             self._queue(p.Log(1, self.pause_message()))
 
+    @property
+    def mag_rate_hz(self) -> float:
+        """The magnetometer's rate for the accelerometer's current rate."""
+        assert self.mag is not None
+        return self.mag.rate_for(lsm6dsox.ODR_RATES_HZ[self._settings[0]])
+
+    @property
+    def mag_paused(self) -> bool:
+        """The accelerometer's rate leaves no room for the field samples."""
+        return self.mag is not None and not mag_fits(
+            lsm6dsox.ODR_RATES_HZ[self._settings[0]], self.mag_rate_hz, self.baud,
+            self.sensor_bus_hz, self.sensors if not self.sensor1_paused else 1)
+
+    def magnetometer_packet(self) -> p.Magnetometer | None:
+        """MAGNETOMETER as the board sends it after CONFIG (None without a magnetometer)."""
+        mag = self.mag
+        if mag is None:
+            return None
+        flags = p.MAG_FLAG_ANSWERING | (p.MAG_FLAG_PAUSED if self.mag_paused else 0)
+        return p.Magnetometer(mag.code, mag.addresses[0], mag.who_am_i,
+                              round(self.mag_rate_hz * 1000), mag.range_ut, mag.pt_per_lsb,
+                              mag.mode, flags)
+
+    def _queue_magnetometer(self) -> None:
+        packet = self.magnetometer_packet()
+        if packet is None:
+            return
+        self._queue(packet)
+        if packet.paused:
+            odr = lsm6dsox.ODR_RATES_HZ[self._settings[0]]
+            self._queue(p.Log(1, f"magnetometer ({self.mag.name if self.mag else ''}) paused: "
+                                 f"{lsm6dsox.odr_label_hz(odr):g} Hz leaves no room for its "
+                                 f"{packet.odr_hz:g} Hz on the UART or I2C"))
+
     def status(self) -> p.Status:
         """The STATUS the board would send now (its counters since power-on)."""
         now, base = self.stats, self._status_base
@@ -411,6 +494,12 @@ class EmulatedNucleo:
             stats.tx_dropped_bytes & 0xFFFFFFFF, 0, stats.i2c_errors & 0xFFFFFFFF, 0,
             stats.i2c_retries & 0xFFFFFFFF, stats.fifo_overruns & 0xFFFFFFFF,
             stats.samples_read & 0xFFFFFFFF, stats.samples_sent & 0xFFFFFFFF, 0,
+        ) if self.mag is None else p.Status(
+            p.STATUS_VERSION_MAG, 1, flags, uptime_ms & 0xFFFFFFFF,
+            stats.tx_dropped_bytes & 0xFFFFFFFF, 0, stats.i2c_errors & 0xFFFFFFFF, 0,
+            stats.i2c_retries & 0xFFFFFFFF, stats.fifo_overruns & 0xFFFFFFFF,
+            stats.samples_read & 0xFFFFFFFF, stats.samples_sent & 0xFFFFFFFF, 0,
+            extra=p.Status.mag_extra(stats.mag_i2c_errors, stats.mag_samples_read),
         )
 
     def inject_fifo_overrun(self) -> None:
@@ -444,6 +533,10 @@ class EmulatedNucleo:
         self._last_end_ticks: float = self.initial_ticks
         self._sim = self._new_sim(*self._settings)
         self._pending: list[np.ndarray] = []  # generated, not yet sent: (n, 7) gx..az, temp
+        self._pending_mag: list[np.ndarray] = []  # their field counts, NaN: no sample there
+        self._mag_seq = 0
+        self._mag_row = 0  # accelerometer rows of the run so far (places the field samples)
+        self._taken_mag: np.ndarray | None = None
         self._run_sent = 0
         if self.sensors > 1:
             if getattr(self, "_second", None) is not None:
@@ -457,6 +550,8 @@ class EmulatedNucleo:
                f"&accel_fs={accel_fs_g}&gyro_fs={gyro_fs_dps}&seed={seed}&realtime=0"
                f"&block={SIM_BLOCK}&errors={int(self.errors)}&noise={int(self.noise)}"
                "&settling=1")
+        if self.mag is not None and seed == self.seed:  # beside sensor 0 only
+            url += f"&mag={self.mag.name.lower()}&date={MAG_FIELD_DATE.isoformat()}"
         sim = SimulatedDevice(url, **self.scenario_params)  # type: ignore[arg-type]
         sim.open()
         # The simulated chip starts with its turn-on transient; the firmware drops it, as
@@ -571,6 +666,7 @@ class EmulatedNucleo:
             self._queue(self.info)
             self._queue(self.config)
             self._queue_sensors()
+            self._queue_magnetometer()
         elif isinstance(packet, p.Configure):
             self._configure(packet)
         elif isinstance(packet, p.Start):
@@ -633,11 +729,13 @@ class EmulatedNucleo:
             self._sim.close()
             self._sim = self._new_sim(*self._settings)
             self._pending = []
+            self._pending_mag = []
             if self.sensors > 1:
                 self._second.configure(self._settings)
             self._queue(p.Ack(p.CONFIGURE, p.ACK_OK))
         self._queue(self.config)
         self._queue_sensors()
+        self._queue_magnetometer()
 
     def _start(self) -> None:
         now = time.monotonic()
@@ -647,12 +745,33 @@ class EmulatedNucleo:
         self._last_send = now
         self._run_origin_ticks = max(self._board_ticks(now), math.ceil(self._last_end_ticks))
         self._last_status = now
+        self._mag_row = 0
         if self.sensors > 1 and not self.sensor1_paused:
             self._second.start(now)
 
     # -- samples --------------------------------------------------------------------------------
+    def _field_counts(self, raw: RawBlock) -> np.ndarray:
+        """(n, 3) the magnetometer's counts on the simulator's rows, NaN where the chip took
+        no sample: the simulator's magnetometer (same chip, same counts), thinned to the rate
+        MAGNETOMETER announces when the accelerometer is slower than the chip."""
+        mag = self.mag
+        assert mag is not None
+        if raw.mag_raw is None:
+            raise RuntimeError("the simulator delivered no magnetometer")
+        counts = np.array(raw.mag_raw, dtype=float)
+        if abs(raw.scale.mag_ut_per_lsb / mag.ut_per_lsb - 1.0) > 1e-4:  # another sensitivity
+            counts = np.clip(np.rint(counts * raw.scale.mag_ut_per_lsb / mag.ut_per_lsb),
+                             -32768, 32767)
+        if self.mag_rate_hz < mag.rates_hz[-1]:  # the chip runs slower for this rate
+            rows = self._mag_row + np.arange(len(raw))
+            ratio = self.mag_rate_hz / lsm6dsox.ODR_RATES_HZ[self._settings[0]]
+            taken = np.floor(rows * ratio) != np.floor((rows - 1) * ratio)
+            counts[~taken] = np.nan
+        return counts
+
     def _take_samples(self, count: int) -> np.ndarray:
         rows: list[np.ndarray] = []
+        mags: list[np.ndarray] = []
         have = 0
         while have < count:
             if not self._pending:
@@ -668,15 +787,39 @@ class EmulatedNucleo:
                 if settling == len(block):
                     continue
                 self._pending = [block[settling:]]
+                if self.mag is not None:
+                    self._pending_mag = [self._field_counts(raw)[settling:]]
+                    self._mag_row += len(raw)
             head = self._pending[0]
             take = min(count - have, len(head))
             rows.append(head[:take])
+            if self.mag is not None:
+                mags.append(self._pending_mag[0][:take])
             have += take
             if take == len(head):
                 self._pending.pop(0)
+                if self.mag is not None:
+                    self._pending_mag.pop(0)
             else:
                 self._pending[0] = head[take:]
+                if self.mag is not None:
+                    self._pending_mag[0] = self._pending_mag[0][take:]
+        self._taken_mag = np.concatenate(mags) if mags else None
         return np.concatenate(rows)
+
+    def _send_mag(self, counts: np.ndarray, t0: int, ticks_per_sample: float) -> None:
+        """MAG_SAMPLES for the field samples on the rows of one SAMPLES packet (sent before
+        it, as the firmware's are: it reads the field as it comes, the FIFO every 2 ms)."""
+        if self.mag is None or self.mag_paused:
+            return
+        rows = np.flatnonzero(~np.isnan(counts[:, 0]))
+        for first in range(0, len(rows), p.MAX_MAG_SAMPLES_PER_PACKET):
+            chunk = rows[first:first + p.MAX_MAG_SAMPLES_PER_PACKET]
+            ticks = (t0 + np.rint(chunk * ticks_per_sample).astype(np.int64)) & 0xFFFFFFFF
+            self._queue(p.MagSamples(self._mag_seq & 0xFFFF, ticks.astype(np.uint32),
+                                     counts[chunk].astype(np.int16)))
+            self._mag_seq += 1
+            self.stats.mag_samples_read += len(chunk)
 
     def _send_samples(self, now: float) -> None:
         due = math.floor((now - self._run_start) * self._sim.true_odr_hz) + 1 - self._run_sent
@@ -691,6 +834,9 @@ class EmulatedNucleo:
             chunk = rows[first:first + p.MAX_SAMPLES_PER_PACKET]
             index = self._run_sent + first
             t0 = self._run_origin_ticks + round(index * ticks_per_sample)
+            if self._taken_mag is not None:
+                self._send_mag(self._taken_mag[first:first + p.MAX_SAMPLES_PER_PACKET], t0,
+                               ticks_per_sample)
             self._send_packet(p.Samples(self._seq & 0xFFFF, t0 & 0xFFFFFFFF, int(chunk[0, 6]),
                                         chunk[:, 0:6]), index)
             self._last_end_ticks = t0 + len(chunk) * ticks_per_sample

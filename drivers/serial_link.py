@@ -66,9 +66,9 @@ from urllib.parse import urlencode
 
 import serial
 
-from app.core.devices import BoardStatus
+from app.core.devices import BoardStatus, MagnetometerInfo
 from app.core.samples import RawBlock, merge_raw_blocks
-from drivers import lsm6dsox
+from drivers import lsm6dsox, magnetometers
 from drivers.base import Device, DeviceDescriptor, DeviceInfo, DeviceMessage, read_block_s
 from drivers.errors import (
     DeviceError,
@@ -495,6 +495,8 @@ class SerialLinkDevice(Device):
             self.sensor_packet = self._await_sensor()
         if self.options.wants_configure:
             config = self._configure(config)
+        if not self.options.sensor:
+            self._await_magnetometer()
         if self.options.other_options:
             ignored = ", ".join(key for key, _ in self.options.other_options)
             log.warning("%s speaks protocol v1: ignoring the text-line options %s", self.port,
@@ -570,6 +572,34 @@ class SerialLinkDevice(Device):
                 f"0x{sensor.i2c_address:02X}) is paused at {rate}: the board streams sensor 0 "
                 f"alone at this rate ({why}). Open the board at a rate all its sensors fit "
                 "(?odr=...), or sensor 0 alone.")
+
+    def _await_magnetometer(self) -> None:
+        """Let the board's MAGNETOMETER (a v1 extension, sent after CONFIG and the SENSOR
+        packets) reach the decoder: a PING, whose PONG comes after it. A board without a
+        magnetometer, or firmware before the extension, sends none."""
+        token = secrets.randbits(32)
+        self._send(p.Ping(token))
+        self._wait_for(lambda pkt: isinstance(pkt, p.Pong) and pkt.token == token,
+                       COMMAND_TIMEOUT_S)
+        with self._state:
+            mag = self._decoder.magnetometer
+        if mag is not None and mag.paused:
+            log.warning("%s: the board's %s is paused at this rate (see its LOG): no field "
+                        "samples", self.port, magnetometers.chip_name(mag.chip))
+
+    def _magnetometer_info(self) -> MagnetometerInfo | None:
+        """The board's magnetometer as the app describes it; None without one streaming."""
+        if self.options.sensor:
+            return None
+        with self._state:
+            mag = self._decoder.magnetometer
+        if mag is None or not mag.answering or mag.paused:
+            return None
+        return MagnetometerInfo(
+            chip=magnetometers.chip_name(mag.chip), odr_hz=mag.odr_hz,
+            range_ut=float(mag.range_ut), ut_per_lsb=mag.ut_per_lsb,
+            address=mag.i2c_address, mode=magnetometers.MODE_NAMES.get(mag.mode, ""),
+            path="bus")
 
     def _await_sensor(self) -> p.Sensor:
         """This sensor's SENSOR packet, or a clear refusal when the board lacks it (a PING
@@ -723,6 +753,7 @@ class SerialLinkDevice(Device):
             accel_fs_g=config.accel_fs_g,
             gyro_fs_dps=config.gyro_fs_dps,
             firmware=info.firmware_text,
+            magnetometer=self._magnetometer_info(),
             extra={
                 "port": self.port,
                 "baud": self.options.baud,
@@ -951,7 +982,9 @@ def board_status_of(packet: p.Status, host_gap_samples: int = 0) -> BoardStatus:
         reset_cause=packet.reset_cause_text, uptime_s=packet.uptime_ms / 1000.0,
         streaming=packet.streaming, sensor_ok=packet.sensor_ok,
         clock_fallback=packet.clock_fallback,
-        **{name: getattr(packet, name) for name in BoardStatus.COUNTERS},
+        **{name: getattr(packet, name) for name in BoardStatus.COUNTERS
+           if name != "mag_i2c_errors"},
+        mag_i2c_errors=packet.mag_i2c_errors or 0,
         host_gap_samples=host_gap_samples,
     )
 

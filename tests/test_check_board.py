@@ -33,7 +33,7 @@ def test_the_firmware_core_passes_and_says_which_rates_it_refuses(firmware_lib) 
         board.close()
     report = out.getvalue()
     assert passed, report
-    assert "board     NUCLEO-F746ZG, firmware 1.1.0, unique id 000000000000000000000000" in report
+    assert "board     NUCLEO-F746ZG, firmware 1.2.0, unique id 000000000000000000000000" in report
     assert "WHO_AM_I 0x6C" in report and "ping      20 round trips" in report
     lines = {line.split()[0]: line for line in report.splitlines() if line.strip()}
     assert lines["104"].endswith("ok") and lines["1667"].endswith("ok")

@@ -119,7 +119,7 @@ def test_hello_answers_info_and_config(board) -> None:
     core, _, chip = board
     core.send(p.Hello())
     info, config = core.packets()
-    assert info == p.Info(1, (1, 1, 0), 0x6C, UNIQUE_ID, "NUCLEO-F746ZG")
+    assert info == p.Info(1, (1, 2, 0), 0x6C, UNIQUE_ID, "NUCLEO-F746ZG")
     # "104 Hz" runs at 6666.67 / 64 = 104.167 Hz, times the chip's trim.
     assert config.odr_mhz == lsm6dsox.odr_mhz(4, chip.unit.freq_fine)
     assert config.odr_mhz == pytest.approx(104_166.67 * chip.trim, abs=1)

@@ -56,6 +56,10 @@ def packet_from_fields(vector: dict) -> p.Packet:
             np.array(fields["samples"], dtype=np.int16)))
     if kind == p.SENSOR:
         return p.Sensor(**fields)
+    if kind == p.MAGNETOMETER:
+        return p.Magnetometer(**fields)
+    if kind == p.MAG_SAMPLES:
+        return p.MagSamples(fields["seq"], fields["t"], fields["xyz"])
     raise AssertionError(f"no device packet type {kind}")
 
 

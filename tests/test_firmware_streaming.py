@@ -220,7 +220,7 @@ def test_the_app_connects_to_the_firmware_on_a_pty(firmware_lib, caplog) -> None
         caplog.set_level(logging.INFO)
         device.open()
         info = device.info
-        assert info.name == "NUCLEO-F746ZG" and info.firmware == "1.1.0"
+        assert info.name == "NUCLEO-F746ZG" and info.firmware == "1.2.0"
         assert info.unique_id == bytes(range(12)).hex().upper()
         assert info.odr_nominal_hz == 208.0
         blocks: list[RawBlock] = []

@@ -158,7 +158,7 @@ def test_open_reads_info_config_and_streams(boards, devices):
     info = device.info
     assert isinstance(device, PortDevice)
     assert info.unique_id == board.unique_id.hex().upper()
-    assert info.name.startswith("NUCLEO-F746ZG emulated") and info.firmware == "1.1.0"
+    assert info.name.startswith("NUCLEO-F746ZG emulated") and info.firmware == "1.2.0"
     assert info.odr_nominal_hz == 208.0 and info.odr_hz == pytest.approx(board.config.odr_hz)
     assert (info.accel_fs_g, info.gyro_fs_dps) == (4, 250)
     assert info.extra["usb_serial"] == board.usb_serial

@@ -471,7 +471,7 @@ def test_the_app_opens_both_sensors_of_the_firmware_core_on_a_pty(firmware_lib) 
     one = create_device(f"serial://{board.port}?sensor=1&odr=833")
     try:
         info0, info1 = zero.open(), one.open()
-        assert info0.firmware == "1.1.0" and info1.extra["i2c_address"] == 0x6B
+        assert info0.firmware == "1.2.0" and info1.extra["i2c_address"] == 0x6B
         assert info1.unique_id == info0.unique_id + "-S1"
         got: dict = {}
         threads = [read_in_thread(zero, 200, got, "zero"), read_in_thread(one, 200, got, "one")]

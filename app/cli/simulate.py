@@ -49,6 +49,9 @@ def add_arguments(simulate: argparse.ArgumentParser) -> None:
                           help="LSM6DSOX on the board: 2 adds a second one (its own unit, "
                                "seed + 1000) streamed as sensor 1, open it as "
                                "serial://PORT?sensor=1 (default %(default)s)")
+    simulate.add_argument("--mag", choices=("none", "lis3mdl", "lis2mdl"), default="none",
+                          help="a magnetometer beside the sensor, streamed in MAG_SAMPLES "
+                               "(protocol v1 extension; default %(default)s)")
     simulate.add_argument("--fifo-overrun", metavar="SEQ,...", default="",
                           help="lose the samples of these SAMPLES packets (sequence numbers) "
                                "to a sensor FIFO overrun, as the firmware reports one: a gap, "
@@ -89,6 +92,7 @@ def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
             seed=args.seed, baud=args.baud or None,
             sensor_bus_hz=args.i2c_khz * 1000 or None, share_port=True,
             faults=NucleoFaults(overrun_seqs=overruns), sensors=args.sensors,
+            mag=None if getattr(args, "mag", "none") == "none" else args.mag,
         )
     except ImportError as exc:
         print(f"inclinometer: pseudo-terminals need Linux or macOS ({exc})", file=sys.stderr)
@@ -104,6 +108,10 @@ def simulate_command(args: argparse.Namespace, out: TextIO | None = None,
           f"+-{config.accel_fs_g} g, +-{config.gyro_fs_dps} dps.",
           file=out)
     print(f"Connect with: inclinometer --device {board.port}    (Ctrl-C stops)", file=out)
+    mag = board.magnetometer_packet()
+    if mag is not None:
+        print(f"Magnetometer: {board.mag.name if board.mag else ''} at 0x{mag.i2c_address:02X}, "
+              f"{mag.odr_hz:g} Hz" + (" (paused at this rate)" if mag.paused else ""), file=out)
     if args.sensors > 1:
         print(f"Sensor 1 (0x6B, seed {args.seed + 1000}): inclinometer --device "
               f"'serial://{board.port}?sensor=1'", file=out)

@@ -125,17 +125,21 @@ class BoardStatus:
     host_gap_samples: int = 0
     """Samples the host had counted lost in sequence gaps that no corrupt frame explains
     (lost on the board) when this STATUS arrived."""
+    mag_i2c_errors: int = 0
+    """Failed I2C transfers to the magnetometer (STATUS version 2; 0 from older boards and
+    boards without one). Also counted in ``i2c_errors``."""
 
     COUNTERS: ClassVar[tuple[str, ...]] = (
         "uart_tx_dropped_bytes", "uart_rx_errors", "i2c_errors", "i2c_recoveries",
         "i2c_retries", "fifo_overruns", "samples_read", "samples_sent", "watchdog_resets",
+        "mag_i2c_errors",
     )
     TITLES: ClassVar[dict[str, str]] = {
         "uart_tx_dropped_bytes": "UART bytes dropped", "uart_rx_errors": "UART RX errors",
         "i2c_errors": "I2C errors", "i2c_recoveries": "I2C bus recoveries",
         "i2c_retries": "I2C retries", "fifo_overruns": "Sensor FIFO overruns",
         "samples_read": "Samples read", "samples_sent": "Samples sent",
-        "watchdog_resets": "Watchdog resets",
+        "watchdog_resets": "Watchdog resets", "mag_i2c_errors": "Magnetometer I2C errors",
     }
 
     def rise(self, earlier: BoardStatus, name: str) -> int:

@@ -56,6 +56,10 @@ def describe_rise(before: BoardStatus, after: BoardStatus) -> list[BoardMessage]
     errors = rise["i2c_errors"] - rise["i2c_retries"]
     if errors > 0:
         messages.append(BoardMessage(WARNING, f"board: {errors} failed I2C transfers"))
+    if rise["mag_i2c_errors"]:
+        messages.append(BoardMessage(
+            WARNING, f"board: {rise['mag_i2c_errors']} failed I2C transfers to the "
+                     "magnetometer (field samples lost)"))
     if rise["i2c_recoveries"]:
         messages.append(BoardMessage(
             WARNING, f"board: I2C bus stuck and recovered {_times(rise['i2c_recoveries'])}"))

@@ -98,6 +98,16 @@ class LinkCounters:
     """The samples those gaps held (the rest of ``lost_samples`` was lost on the board)."""
     other_sensor_packets: int = 0
     """Valid sample packets of the board's other sensors (skipped by this decoder)."""
+    mag_samples: int = 0
+    """Field samples (MAG_SAMPLES) placed on accelerometer rows."""
+    mag_seq_gaps: int = 0
+    """MAG_SAMPLES sequence gaps (field samples lost on the board or the link)."""
+    mag_late: int = 0
+    """Field samples that arrived after the rows of their time had been delivered (dropped:
+    placed on a later row they would carry the wrong time)."""
+    mag_early: int = 0
+    """Field samples from before the stream's first accelerometer row (the board reads the
+    field while the accelerometer's turn-on transient is discarded): dropped."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -121,13 +131,14 @@ class GapReport:
         return f"board: ~{self.lost_samples} samples lost (a sequence gap)"
 
 
-def scale_factors(config: p.Config) -> ScaleFactors:
-    """How the raw numbers of a device with this CONFIG become SI units."""
+def scale_factors(config: p.Config, magnetometer: p.Magnetometer | None = None) -> ScaleFactors:
+    """How the raw numbers of a device with this CONFIG (and MAGNETOMETER) become SI units."""
     return ScaleFactors(
         accel_m_s2_per_lsb=lsm6dsox.accel_m_s2_per_lsb(config.accel_fs_g),
         gyro_rad_s_per_lsb=lsm6dsox.gyro_rad_s_per_lsb(config.gyro_fs_dps),
         temp_degc_per_lsb=1.0 / lsm6dsox.TEMP_LSB_PER_DEGC,
         temp_offset_degc=lsm6dsox.TEMP_OFFSET_DEGC,
+        mag_ut_per_lsb=magnetometer.ut_per_lsb if magnetometer is not None else 1.0,
     )
 
 
@@ -184,6 +195,16 @@ class LinkDecoder:
         self._last_period_ticks = 0.0
         self._pending_gap = False
         self._armed: tuple[bool, bool] | None = None
+        # The magnetometer (MAGNETOMETER, MAG_SAMPLES; sensor 0's board only).
+        self._magnetometer: p.Magnetometer | None = None
+        self._mag_pending: list[p.MagSamples] = []
+        self._mag_last_seq: int | None = None
+        self._mag_floor_s = -math.inf
+        """Time of the last row delivered: a field sample before it is late."""
+        self._mag_samples = 0
+        self._mag_gaps = 0
+        self._mag_late = 0
+        self._mag_early = 0
         self._clear_batch()
         if config is not None:
             self._apply_config(config)
@@ -196,6 +217,11 @@ class LinkDecoder:
     @property
     def scale(self) -> ScaleFactors | None:
         return self._scale
+
+    @property
+    def magnetometer(self) -> p.Magnetometer | None:
+        """The board's MAGNETOMETER once it arrived (blocks then carry ``mag_raw``)."""
+        return self._magnetometer
 
     @property
     def clock_origin_s(self) -> float | None:
@@ -216,6 +242,8 @@ class LinkDecoder:
             unknown_packets=self._unknown, seq_gaps=self._seq_gaps, lost_samples=self._lost,
             dropped_samples=self._dropped, link_gaps=self._link_gaps,
             link_lost_samples=self._link_lost, other_sensor_packets=self._other_sensor,
+            mag_samples=self._mag_samples, mag_seq_gaps=self._mag_gaps,
+            mag_late=self._mag_late, mag_early=self._mag_early,
         )
 
     def take_gap_reports(self) -> list[GapReport]:
@@ -275,6 +303,11 @@ class LinkDecoder:
                 self._apply_config(packet.config)
             elif isinstance(packet, p.Ack):
                 self._on_start_ack(packet)
+            elif isinstance(packet, p.MagSamples):
+                self._on_mag(packet)
+                continue
+            elif isinstance(packet, p.Magnetometer) and self.sensor == 0:
+                self._apply_magnetometer(packet)
             packets.append(packet)
         self._flush()
         return packets
@@ -303,9 +336,11 @@ class LinkDecoder:
         self._armed = None
         if ack.ok:
             self._last_seq = None
+            self._mag_last_seq = None
             if new_origin:
                 self._origin_ticks = None
                 self._offset_s = 0.0
+                self._mag_floor_s = -math.inf
             self._pending_gap = self._pending_gap or mark_gap
 
     def reset_framing(self) -> None:
@@ -341,9 +376,70 @@ class LinkDecoder:
             self._last_seq = None
             self._pending_gap = True
         self._config = config
-        self._scale = scale_factors(config)
+        self._scale = scale_factors(config, self._magnetometer)
         self._ticks_per_sample = 1e12 / (config.odr_mhz * config.tick_ns)
         self._tick_s = config.tick_s
+
+    def _apply_magnetometer(self, magnetometer: p.Magnetometer) -> None:
+        if magnetometer == self._magnetometer:
+            return
+        self._flush()
+        self._magnetometer = magnetometer
+        if self._config is not None:
+            self._scale = scale_factors(self._config, magnetometer)
+
+    def _mag_streams(self) -> bool:
+        mag = self._magnetometer
+        return mag is not None and mag.answering and not mag.paused
+
+    def _on_mag(self, packet: p.MagSamples) -> None:
+        """Keep field samples until the accelerometer rows of their time are flushed."""
+        if self.sensor != 0 or not self._mag_streams():
+            return  # another sensor's decoder, or no MAGNETOMETER yet: nothing to scale by
+        if self._config is None or self._armed is not None:
+            return  # before START's ACK: left over from an earlier stream
+        if self._mag_last_seq is not None:
+            step = (packet.seq - self._mag_last_seq) & 0xFFFF
+            if step == 0:
+                return  # a duplicate
+            if step > 1:
+                self._mag_gaps += 1
+        self._mag_last_seq = packet.seq
+        self._mag_pending.append(packet)
+        if len(self._mag_pending) > 4096:  # no accelerometer rows for a long time
+            self._mag_late += len(self._mag_pending.pop(0).t)
+
+    def _place_mag(self, t_s: np.ndarray) -> np.ndarray:
+        """(n, 3) field counts on the rows ``t_s``: each sample on the first row at or after
+        its time, NaN elsewhere; samples after the last row wait for the next block."""
+        mag = np.full((t_s.shape[0], 3), np.nan)
+        if not self._mag_pending or self._origin_ticks is None:
+            return mag
+        ticks = np.concatenate([packet.t for packet in self._mag_pending]).astype(np.int64)
+        xyz = np.concatenate([packet.xyz for packet in self._mag_pending])
+        # Sensor 0's ticks, unwrapped against the latest SAMPLES' t0 (signed difference).
+        diff = ((ticks - self._last_t0 + _HALF32) & _MASK32) - _HALF32
+        times = self._offset_s + (self._t_ticks + diff - self._origin_ticks) * self._tick_s
+        # Times are whole ticks: a sample within half a tick of a row is taken at that row.
+        tolerance = 0.5 * self._tick_s + 1e-9
+        rows = np.searchsorted(t_s, times - tolerance, side="left")
+        if self._mag_floor_s == -math.inf:  # the stream's first rows: nothing before them
+            late = times < t_s[0] - tolerance
+            self._mag_early += int(np.count_nonzero(late))
+        else:
+            late = times <= self._mag_floor_s + tolerance  # its row was delivered already
+            self._mag_late += int(np.count_nonzero(late))
+        placed = ~late & (rows < t_s.shape[0])
+        mag[rows[placed]] = xyz[placed]  # in order: two on one row keep the later
+        self._mag_samples += int(np.count_nonzero(placed))
+        waiting = ~late & ~placed
+        self._mag_pending = []
+        if waiting.any():
+            keep = np.flatnonzero(waiting)
+            self._mag_pending.append(p.MagSamples(
+                0, (ticks[keep] & _MASK32).astype(np.uint32), xyz[keep]))
+        self._mag_floor_s = float(t_s[-1])
+        return mag
 
     def _clear_batch(self) -> None:
         self._starts: list[float] = []
@@ -440,6 +536,7 @@ class LinkDecoder:
                 scale=scale,
                 gap=gap,
                 lost_samples=self._batch_lost,
+                mag_raw=self._place_mag(t_s) if self._mag_streams() else None,
             )
         )
         self._samples += n

@@ -45,6 +45,10 @@ SAMPLES_INDEXED = 0x09
 """A v1 extension: SAMPLES of sensor 1, 2, ... (sensor 0 keeps using SAMPLES)."""
 SENSOR = 0x0A
 """A v1 extension: one sensor of a board with several (index, count, address, settings)."""
+MAG_SAMPLES = 0x0B
+"""A v1 extension: magnetometer samples, each with its own time in sensor 0's ticks."""
+MAGNETOMETER = 0x0C
+"""A v1 extension: the board's magnetometer (chip, address, rate, range, sensitivity)."""
 MAX_SENSORS = 8
 """Sensor indexes are 0..7 (the NUCLEO firmware has two: 0x6A and 0x6B)."""
 # Host -> device.
@@ -64,7 +68,8 @@ COMMAND_NAMES: dict[int, str] = {
 PACKET_NAMES: dict[int, str] = {
     INFO: "INFO", CONFIG: "CONFIG", SAMPLES: "SAMPLES", ACK: "ACK", SELFTEST: "SELFTEST",
     LOG: "LOG", PONG: "PONG", STATUS: "STATUS", SAMPLES_INDEXED: "SAMPLES_INDEXED",
-    SENSOR: "SENSOR", **COMMAND_NAMES,
+    SENSOR: "SENSOR", MAG_SAMPLES: "MAG_SAMPLES", MAGNETOMETER: "MAGNETOMETER",
+    **COMMAND_NAMES,
 }
 
 # ACK status codes.
@@ -95,7 +100,22 @@ SENSOR_FLAG_ANSWERING = 0x01
 SENSOR_FLAG_PAUSED = 0x02
 """SENSOR flags bit 1: the rate fits sensor 0 alone, so this sensor is not streamed."""
 
+MAG_SAMPLE_BYTES = 10
+"""One field sample on the wire: t u32 (sensor 0's ticks), mx, my, mz as i16."""
+MAG_SAMPLES_HEADER_BYTES = 3
+"""seq u16, count u8."""
+MAX_MAG_SAMPLES_PER_PACKET = 32
+_MAG_SAMPLES_HEADER = struct.Struct("<HB")
+_MAGNETOMETER = struct.Struct("<BBBIHIBB")
+MAG_FLAG_ANSWERING = 0x01
+MAG_FLAG_PAUSED = 0x02
+"""MAGNETOMETER flags bit 1: the accelerometer's rate leaves no room on the bus for it."""
+
 STATUS_VERSION = 1
+STATUS_VERSION_MAG = 2
+"""STATUS version 2 appends mag_i2c_errors, mag_samples_read and mag_overruns (u32 each) at
+offset 44."""
+_STATUS_MAG = struct.Struct("<III")
 RESET_CAUSES: dict[int, str] = {
     0: "unknown", 1: "power-on", 2: "reset pin", 3: "brown-out", 4: "software reset",
     5: "independent watchdog", 6: "window watchdog", 7: "low-power",
@@ -434,6 +454,35 @@ class Status:
     def clock_fallback(self) -> bool:
         return bool(self.flags & STATUS_FLAG_CLOCK_FALLBACK)
 
+    @property
+    def mag_i2c_errors(self) -> int | None:
+        """Failed I2C transfers to the magnetometer (status version 2), None before it."""
+        fields = self._mag_fields()
+        return None if fields is None else fields[0]
+
+    @property
+    def mag_samples_read(self) -> int | None:
+        """Field samples read from the magnetometer (status version 2), None before it."""
+        fields = self._mag_fields()
+        return None if fields is None else fields[1]
+
+    @property
+    def mag_overruns(self) -> int | None:
+        """Field samples the chip overwrote before the board read them (version 2)."""
+        fields = self._mag_fields()
+        return None if fields is None else fields[2]
+
+    def _mag_fields(self) -> tuple[int, int, int] | None:
+        if self.version < STATUS_VERSION_MAG or len(self.extra) < _STATUS_MAG.size:
+            return None
+        return _STATUS_MAG.unpack_from(self.extra)
+
+    @staticmethod
+    def mag_extra(mag_i2c_errors: int, mag_samples_read: int, mag_overruns: int = 0) -> bytes:
+        """The bytes status version 2 appends (for ``extra``)."""
+        return _STATUS_MAG.pack(mag_i2c_errors & 0xFFFFFFFF, mag_samples_read & 0xFFFFFFFF,
+                                mag_overruns & 0xFFFFFFFF)
+
 
 @dataclass(frozen=True, slots=True, eq=False)
 class SamplesIndexed:
@@ -518,6 +567,107 @@ class Sensor:
     def paused(self) -> bool:
         """The board streams sensor 0 alone at this rate: this sensor sends no samples."""
         return bool(self.flags & SENSOR_FLAG_PAUSED)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class MagSamples:
+    """0x0B MAG_SAMPLES (a v1 extension): field samples of the board's magnetometer.
+
+    ``t`` (u32, wraps) is each sample's time in ticks of sensor 0's clock (the clock of
+    SAMPLES' ``t0``, CONFIG's ``tick_ns``): the magnetometer is read on the board's own
+    schedule, so its samples carry their own times. ``xyz`` holds raw counts (i16).
+    ``seq`` counts MAG_SAMPLES packets (+1 per packet produced, wraps at 65536).
+    """
+
+    TYPE: ClassVar[int] = MAG_SAMPLES
+    seq: int
+    t: np.ndarray
+    """(n,) uint32 ticks."""
+    xyz: np.ndarray
+    """(n, 3) int16 counts."""
+
+    def __post_init__(self) -> None:  # lists (test vectors) become arrays
+        object.__setattr__(self, "t", np.asarray(self.t, dtype=np.int64).astype(np.uint32))
+        object.__setattr__(self, "xyz", np.asarray(self.xyz, dtype=np.int16).reshape(-1, 3))
+
+    def payload(self) -> bytes:
+        n = int(self.t.shape[0])
+        if not 1 <= n <= MAX_MAG_SAMPLES_PER_PACKET or self.xyz.shape != (n, 3):
+            raise PacketError(f"MAG_SAMPLES holds 1..{MAX_MAG_SAMPLES_PER_PACKET} samples "
+                              f"of 3 axes, not {self.xyz.shape}")
+        rows = np.zeros(n, dtype=[("t", "<u4"), ("m", "<i2", 3)])
+        rows["t"] = np.asarray(self.t, dtype=np.int64) & 0xFFFFFFFF
+        rows["m"] = self.xyz
+        return _MAG_SAMPLES_HEADER.pack(self.seq & 0xFFFF, n) + rows.tobytes()
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> MagSamples:
+        if len(payload) < _MAG_SAMPLES_HEADER.size:
+            raise PacketError(f"MAG_SAMPLES payload is {len(payload)} bytes")
+        seq, count = _MAG_SAMPLES_HEADER.unpack_from(payload)
+        if not 1 <= count <= MAX_MAG_SAMPLES_PER_PACKET:
+            raise PacketError(f"MAG_SAMPLES count {count}, expected "
+                              f"1..{MAX_MAG_SAMPLES_PER_PACKET}")
+        _exact_length("MAG_SAMPLES", payload, _MAG_SAMPLES_HEADER.size + MAG_SAMPLE_BYTES * count)
+        rows = np.frombuffer(payload, dtype=[("t", "<u4"), ("m", "<i2", 3)],
+                             offset=_MAG_SAMPLES_HEADER.size)
+        return cls(seq, rows["t"].astype(np.uint32), rows["m"].astype(np.int16))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, MagSamples):
+            return NotImplemented
+        return (self.seq == other.seq and np.array_equal(self.t, other.t)
+                and np.array_equal(self.xyz, other.xyz))
+
+
+@dataclass(frozen=True, slots=True)
+class Magnetometer:
+    """0x0C MAGNETOMETER (a v1 extension): the board's magnetometer and its settings.
+
+    Sent after CONFIG (and the SENSOR packets) in answer to HELLO and CONFIGURE, only by a
+    board that found a magnetometer at power-on.
+    """
+
+    TYPE: ClassVar[int] = MAGNETOMETER
+    chip: int
+    """1 LIS3MDL, 2 LIS2MDL (:mod:`drivers.magnetometers`)."""
+    i2c_address: int
+    who_am_i: int
+    odr_mhz: int
+    range_ut: int
+    pt_per_lsb: int
+    """Sensitivity: picotesla per LSB."""
+    mode: int
+    flags: int = MAG_FLAG_ANSWERING
+
+    def payload(self) -> bytes:
+        return _MAGNETOMETER.pack(self.chip, self.i2c_address, self.who_am_i, self.odr_mhz,
+                                  self.range_ut, self.pt_per_lsb, self.mode, self.flags)
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> Magnetometer:
+        _exact_length("MAGNETOMETER", payload, _MAGNETOMETER.size)
+        mag = cls(*_MAGNETOMETER.unpack(payload))
+        if mag.chip == 0 or mag.odr_mhz == 0 or mag.range_ut == 0 or mag.pt_per_lsb == 0:
+            raise PacketError("MAGNETOMETER with chip, odr_mhz, range_ut or pt_per_lsb 0")
+        return mag
+
+    @property
+    def odr_hz(self) -> float:
+        return self.odr_mhz / 1000.0
+
+    @property
+    def ut_per_lsb(self) -> float:
+        return self.pt_per_lsb / 1e6
+
+    @property
+    def answering(self) -> bool:
+        return bool(self.flags & MAG_FLAG_ANSWERING)
+
+    @property
+    def paused(self) -> bool:
+        """The accelerometer's rate leaves no room on the bus: no MAG_SAMPLES are sent."""
+        return bool(self.flags & MAG_FLAG_PAUSED)
 
 
 # -- host to device -------------------------------------------------------------------------
@@ -607,10 +757,11 @@ class GetStatus(_NoPayload):
 PACKET_CLASSES: dict[int, type[Packet]] = {
     cls.TYPE: cls
     for cls in (Info, Config, Samples, Ack, SelfTestResult, Log, Pong, Status, SamplesIndexed,
-                Sensor, Hello, Configure, Start, Stop, SelfTest, Ping, GetStatus)
+                Sensor, MagSamples, Magnetometer, Hello, Configure, Start, Stop, SelfTest, Ping,
+                GetStatus)
 }
 DEVICE_PACKET_TYPES = frozenset({INFO, CONFIG, SAMPLES, ACK, SELFTEST, LOG, PONG, STATUS,
-                                 SAMPLES_INDEXED, SENSOR})
+                                 SAMPLES_INDEXED, SENSOR, MAG_SAMPLES, MAGNETOMETER})
 HOST_PACKET_TYPES = frozenset(COMMAND_NAMES)
 
 

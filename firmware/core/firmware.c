@@ -99,6 +99,52 @@ static void send_sensors(fw_state *fw)
     }
 }
 
+/* MAGNETOMETER after CONFIG and the SENSOR packets (docs/protocol.md, 0x0C); a board
+ * without a magnetometer sends none, so its bytes stay those it sent before. A paused one
+ * is followed by a LOG saying why. */
+static void send_magnetometer(fw_state *fw)
+{
+    if (!fw->mag_found)
+        return;
+    link_magnetometer packet = {
+        fw->mag.chip, fw->mag.address, fw->mag.who_am_i,
+        mag_rate_mhz(fw->mag.chip, lsm_odr_nominal_mhz(fw->chip.settings.odr_code)),
+        mag_range_ut(fw->mag.chip), mag_pt_per_lsb(fw->mag.chip), mag_mode(fw->mag.chip),
+        (uint8_t)((fw->mag_ok ? LINK_MAG_ANSWERING : 0u) |
+                  (fw->mag_paused ? LINK_MAG_PAUSED : 0u)),
+    };
+    send_reply(fw, link_encode_magnetometer(&packet, fw->wire));
+    if (fw->mag_paused) {
+        char message[MESSAGE_SIZE];
+        text t;
+        text_init(&t, message, sizeof message);
+        text_str(&t, "magnetometer (");
+        text_str(&t, mag_chip_name(fw->mag.chip));
+        text_str(&t, ") paused: ");
+        text_mhz(&t, lsm_odr_label_mhz(fw->chip.settings.odr_code));
+        text_str(&t, " Hz leaves no room for its ");
+        text_mhz(&t, packet.odr_mhz);
+        text_str(&t, " Hz on the UART or I2C");
+        send_log(fw, LINK_LOG_INFO, message);
+    }
+}
+
+/* One field sample, sent at once (MAG_SAMPLES never waits: without room it is dropped, its
+ * sequence number skipped). */
+static void send_mag_sample(fw_state *fw, uint32_t ticks, const int16_t xyz[3])
+{
+    const fw_platform *p = fw->platform;
+    int16_t rows[1][3] = {{xyz[0], xyz[1], xyz[2]}};
+    size_t n = link_encode_mag_samples(fw->mag_seq++, &ticks, (const int16_t(*)[3])rows, 1,
+                                       fw->wire);
+    if (p->tx_free(p->ctx) >= n) {
+        p->tx_write(p->ctx, fw->wire, n);
+        fw->counters.mag_samples_sent++;
+    } else {
+        fw->counters.tx_dropped_bytes += (uint32_t)n;
+    }
+}
+
 /* SAMPLES never wait: without room the packet is dropped and its sequence number tells.
  * Sensor 0's go out as SAMPLES, sensor 1's as SAMPLES_INDEXED. */
 static void send_packet(fw_state *fw, uint8_t sensor, const fifo_packet *packet)
@@ -153,6 +199,12 @@ void fw_status(fw_state *fw, link_status *status)
     status->samples_read = fw->stream.counters.samples + fw->stream1.counters.samples;
     status->samples_sent = fw->counters.samples_sent;
     status->watchdog_resets = board.watchdog_resets;
+    if (fw->mag_found) { /* version 2: the magnetometer's counters */
+        status->version = LINK_STATUS_VERSION_MAG;
+        status->mag_i2c_errors = fw->counters.mag_i2c_errors;
+        status->mag_samples_read = fw->counters.mag_samples_read;
+        status->mag_overruns = fw->counters.mag_overruns;
+    }
 }
 
 static void update_uptime(fw_state *fw)
@@ -200,6 +252,26 @@ static int counted_i2c_read(void *ctx, uint8_t address, uint8_t reg, uint8_t *da
     int err = fw->platform->i2c_read(fw->platform->ctx, address, reg, data, length);
     if (err)
         fw->counters.i2c_errors++;
+    return err;
+}
+
+/* The magnetometer's transfers: counted as every sensor's, and as its own. */
+static int mag_i2c_write(void *ctx, uint8_t address, uint8_t reg, const uint8_t *data,
+                         size_t length)
+{
+    fw_state *fw = ctx;
+    int err = counted_i2c_write(ctx, address, reg, data, length);
+    if (err)
+        fw->counters.mag_i2c_errors++;
+    return err;
+}
+
+static int mag_i2c_read(void *ctx, uint8_t address, uint8_t reg, uint8_t *data, size_t length)
+{
+    fw_state *fw = ctx;
+    int err = counted_i2c_read(ctx, address, reg, data, length);
+    if (err)
+        fw->counters.mag_i2c_errors++;
     return err;
 }
 
@@ -296,6 +368,32 @@ static void find_second_sensor(fw_state *fw)
     }
     fw->sensor_count = 2;
     bring_up_sensor1(fw);
+}
+
+/* The magnetometer at the rate for sensor 0's; false when it does not answer. */
+static bool bring_up_mag(fw_state *fw)
+{
+    if (!fw->mag_found)
+        return false;
+    int err = mag_configure(&fw->mag, lsm_odr_nominal_mhz(fw->chip.settings.odr_code));
+    if (err == MAG_ERR_BUS && mag_probe(&fw->mag) == MAG_OK)
+        err = mag_configure(&fw->mag, lsm_odr_nominal_mhz(fw->chip.settings.odr_code));
+    fw->mag_ok = err == MAG_OK;
+    fw->mag_failures = 0;
+    fw->mag_primed = false;
+    fw->last_retry_mag_us = now_us(fw);
+    return fw->mag_ok;
+}
+
+/* At power-on: an LIS3MDL at 0x1C or 0x1E, or an LIS2MDL at 0x1E. */
+static void find_magnetometer(fw_state *fw)
+{
+    /* Probed on the board's own bus: most boards have none, and its absence is no error
+     * (the probes would add three failed transfers to every board's STATUS). */
+    mag_init(&fw->mag, fw->platform);
+    fw->mag_found = mag_probe(&fw->mag) == MAG_OK;
+    fw->mag.bus = &fw->mag_bus;
+    bring_up_mag(fw);
 }
 
 static bool bring_up_sensor(fw_state *fw, text *t)
@@ -413,6 +511,40 @@ static void sensor1_lost(fw_state *fw)
 
 /* ---- rates */
 
+/* Milli-bytes per second on the UART for `sensors` streaming at `odr_mhz` (full packets). */
+static uint64_t uart_need_milli(uint32_t odr_mhz, uint8_t sensors)
+{
+    return (uint64_t)odr_mhz *
+        (WIRE_BYTES_PER_FULL_PACKET + (sensors - 1u) * WIRE_BYTES_PER_FULL_INDEXED_PACKET) /
+        LINK_MAX_SAMPLES;
+}
+
+/* Bits per second on I2C to drain `sensors` FIFOs at `odr_mhz`, polls included. */
+static uint64_t i2c_need_bits(uint32_t odr_mhz, uint8_t sensors)
+{
+    uint64_t words_milli = (uint64_t)odr_mhz * (2u * LSM_TIMESTAMP_DECIMATION + 1u) /
+                           LSM_TIMESTAMP_DECIMATION + TEMPERATURE_BATCH_MHZ;
+    return sensors * (words_milli * I2C_BITS_PER_WORD / 1000u +
+                      (uint64_t)I2C_BITS_PER_POLL * (1000000u / FW_POLL_INTERVAL_US));
+}
+
+bool fw_mag_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, uint8_t sensors,
+                 uint32_t mag_odr_mhz)
+{
+    uint32_t odr_mhz = lsm_odr_nominal_mhz(odr_code);
+    if (!odr_mhz)
+        return false;
+    if (sensors < 1)
+        sensors = 1;
+    uint64_t bytes_milli = uart_need_milli(odr_mhz, sensors) +
+                           (uint64_t)mag_odr_mhz * FW_MAG_WIRE_BYTES;
+    if (baud && bytes_milli * 10u > (uint64_t)baud * 1000u)
+        return false;
+    uint64_t bits = i2c_need_bits(odr_mhz, sensors) +
+                    (uint64_t)mag_odr_mhz * FW_MAG_I2C_BITS / 1000u;
+    return !i2c_hz || bits <= (uint64_t)i2c_hz * I2C_USABLE_PERCENT / 100u;
+}
+
 bool fw_rate_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, char *why, size_t size)
 {
     return fw_rate_fits_sensors(odr_code, baud, i2c_hz, 1, why, size);
@@ -431,9 +563,7 @@ bool fw_rate_fits_sensors(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, uint
         return false;
     }
     /* UART, 8N1: baud / 10 bytes/s; full packets take 399 bytes per 32 samples. */
-    uint64_t need_bytes_milli = (uint64_t)odr_mhz *
-        (WIRE_BYTES_PER_FULL_PACKET + (sensors - 1u) * WIRE_BYTES_PER_FULL_INDEXED_PACKET) /
-        LINK_MAX_SAMPLES;
+    uint64_t need_bytes_milli = uart_need_milli(odr_mhz, sensors);
     if (baud && need_bytes_milli * 10u > (uint64_t)baud * 1000u) {
         uint8_t highest = (uint8_t)(odr_code - 1u);
         while (highest > LSM_ODR_CODE_MIN &&
@@ -460,10 +590,7 @@ bool fw_rate_fits_sensors(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, uint
     /* I2C: per sample a gyroscope and an accelerometer word, a timestamp word every 8th
      * slot, temperature words at 12.5 Hz, and the polls' own traffic. */
     if (i2c_hz) {
-        uint64_t words_milli = (uint64_t)odr_mhz * (2u * LSM_TIMESTAMP_DECIMATION + 1u) /
-                               LSM_TIMESTAMP_DECIMATION + TEMPERATURE_BATCH_MHZ;
-        uint64_t need_bits = sensors * (words_milli * I2C_BITS_PER_WORD / 1000u +
-                             (uint64_t)I2C_BITS_PER_POLL * (1000000u / FW_POLL_INTERVAL_US));
+        uint64_t need_bits = i2c_need_bits(odr_mhz, sensors);
         uint64_t usable_bits = (uint64_t)i2c_hz * I2C_USABLE_PERCENT / 100u;
         if (need_bits > usable_bits) {
             uint8_t highest = (uint8_t)(odr_code - 1u);
@@ -500,6 +627,12 @@ static void update_pause(fw_state *fw)
     fw->sensor1_paused = fw->sensor_count > 1 &&
         !fw_rate_fits_sensors(fw->chip.settings.odr_code, fw->identity.baud,
                               fw->identity.i2c_hz, fw->sensor_count, NULL, 0);
+    /* The magnetometer yields to the sensors: paused where they leave it no room. */
+    uint8_t streaming = fw->sensor1_paused ? 1u : fw->sensor_count;
+    fw->mag_paused = fw->mag_found &&
+        !fw_mag_fits(fw->chip.settings.odr_code, fw->identity.baud, fw->identity.i2c_hz,
+                     streaming, mag_rate_mhz(fw->mag.chip,
+                                             lsm_odr_nominal_mhz(fw->chip.settings.odr_code)));
 }
 
 /* "sensor 1 (0x6B) paused: 1667 Hz does not fit two sensors on I2C 400 kHz (highest 833 Hz)" */
@@ -556,6 +689,7 @@ static void on_hello(fw_state *fw)
     send_info(fw);
     send_config(fw);
     send_sensors(fw);
+    send_magnetometer(fw);
     if (!fw->sensor_ok)
         send_log(fw, LINK_LOG_ERROR, message);
 }
@@ -607,11 +741,13 @@ static void on_configure(fw_state *fw, const uint8_t *payload)
             fw->chip.settings = previous;
             status = LINK_ACK_SENSOR_ERROR;
         }
+        bring_up_mag(fw); /* its rate follows sensor 0's */
         update_pause(fw);
     }
     send_ack(fw, LINK_CONFIGURE, status, message);
     send_config(fw);
     send_sensors(fw);
+    send_magnetometer(fw);
 }
 
 static void on_start(fw_state *fw)
@@ -651,6 +787,19 @@ static void on_start(fw_state *fw)
         else if (!fw->sensor1_ok)
             text_str(&t, " does not answer)");
     }
+    if (fw->mag_found) {
+        text_str(&t, "; magnetometer ");
+        text_str(&t, mag_chip_name(fw->mag.chip));
+        text_str(&t, " at ");
+        text_hex8(&t, fw->mag.address);
+        text_str(&t, fw->mag_paused ? " paused" : fw->mag_ok ? ", " : " not answering");
+        if (fw->mag_ok && !fw->mag_paused) {
+            text_mhz(&t, fw->mag.odr_mhz);
+            text_str(&t, " Hz");
+        }
+    }
+    fw->mag_primed = false;
+    fw->mag_last_us = now_us(fw);
     send_log(fw, LINK_LOG_INFO, message);
     send_status(fw, true); /* the counters at the start, for the host to compare with */
 }
@@ -755,6 +904,8 @@ void fw_init(fw_state *fw, const fw_platform *platform, const fw_identity *ident
     fw->identity = *identity;
     fw->sensor_bus = (fw_platform){fw, counted_i2c_write, counted_i2c_read, bus_micros,
                                    bus_delay_us, bus_tx_free, bus_tx_write, NULL};
+    fw->mag_bus = (fw_platform){fw, mag_i2c_write, mag_i2c_read, bus_micros, bus_delay_us,
+                                bus_tx_free, bus_tx_write, NULL};
     fw->uptime_last_us = now_us(fw);
     link_rx_init(&fw->rx);
     lsm_init(&fw->chip, &fw->sensor_bus);
@@ -767,6 +918,8 @@ void fw_init(fw_state *fw, const fw_platform *platform, const fw_identity *ident
     platform->delay_us(platform->ctx, FW_SENSOR_BOOT_US); /* powered up with the board */
     bring_up_sensor(fw, NULL);
     find_second_sensor(fw);
+    find_magnetometer(fw);
+    update_pause(fw);
     fw->last_retry_us = now_us(fw);
 }
 
@@ -849,6 +1002,56 @@ static void retry_sensor1(fw_state *fw, uint32_t now)
         start_stream1(fw);
 }
 
+/* The magnetometer, read directly on the board's schedule: from 3/4 of its period after the
+ * last field sample, one burst of its status and output registers per poll until ZYXDA says
+ * a new sample is there; that sample is stamped with sensor 0's timestamp counter, read right
+ * after it, and sent at once. The first sample after START is dropped (it may be old). Four
+ * failed reads in a row lose the magnetometer (a LOG; looked for every 0.5 s); sensor 0 goes
+ * on. */
+static void poll_mag(fw_state *fw, uint32_t now)
+{
+    if (!fw->mag_found || fw->mag_paused)
+        return;
+    if (!fw->mag_ok) {
+        if ((uint32_t)(now - fw->last_retry_mag_us) < FW_RETRY_INTERVAL_US)
+            return;
+        if (bring_up_mag(fw))
+            send_log(fw, LINK_LOG_INFO, "the magnetometer answers again");
+        return;
+    }
+    uint32_t period_us = (uint32_t)(1000000000ull / fw->mag.odr_mhz);
+    if ((uint32_t)(now - fw->mag_last_us) < period_us / 4u * 3u)
+        return;
+    int16_t xyz[3];
+    bool ready = false, overrun = false;
+    if (mag_read(&fw->mag, xyz, &ready, &overrun)) {
+        if (++fw->mag_failures > FW_I2C_RETRIES) {
+            fw->mag_ok = false;
+            fw->last_retry_mag_us = now;
+            send_log(fw, LINK_LOG_ERROR, "the magnetometer stopped answering on I2C1; sensor 0 "
+                                         "goes on, looking for it every 0.5 s");
+        } else {
+            fw->counters.i2c_retries++;
+        }
+        return;
+    }
+    fw->mag_failures = 0;
+    if (!ready)
+        return;
+    if (overrun && fw->mag_primed) /* late: the chip overwrote a sample (a hole, not an error) */
+        fw->counters.mag_overruns++;
+    uint32_t ticks = 0;
+    if (lsm_read_timestamp(&fw->chip, &ticks))
+        return; /* sensor 0's trouble: its FIFO poll finds it */
+    fw->mag_last_us = now;
+    fw->counters.mag_samples_read++;
+    if (!fw->mag_primed) {
+        fw->mag_primed = true;
+        return;
+    }
+    send_mag_sample(fw, ticks, xyz);
+}
+
 static void report_tx_drops(fw_state *fw)
 {
     uint32_t dropped = fw->counters.tx_dropped_packets - fw->reported_tx_drops;
@@ -890,6 +1093,7 @@ void fw_poll(fw_state *fw)
         }
         if (sensor1_streams(fw) && !drain_fifo(fw, 1))
             sensor1_lost(fw);
+        poll_mag(fw, now_us(fw));
     }
     fifo_stream_flush(&fw->stream, now_us(fw), false, send_samples, fw);
     if (sensor1_streams(fw))

@@ -13,10 +13,11 @@
 #include "fifo_stream.h"
 #include "link.h"
 #include "lsm6dsox.h"
+#include "magnetometer.h"
 #include "platform.h"
 
 #define FW_VERSION_MAJOR 1
-#define FW_VERSION_MINOR 1
+#define FW_VERSION_MINOR 2
 #define FW_VERSION_PATCH 0
 
 #define FW_POLL_INTERVAL_US 2000u      /* FIFO polls while streaming */
@@ -51,6 +52,10 @@ typedef struct fw_counters {
     uint32_t i2c_retries;        /* failed FIFO transfers tried again while streaming */
     uint32_t samples_sent;       /* samples in SAMPLES packets queued for the UART */
     uint32_t status_sent;        /* STATUS packets queued */
+    uint32_t mag_i2c_errors;     /* failed I2C transfers to the magnetometer (also above) */
+    uint32_t mag_samples_read;   /* field samples read (STATUS version 2) */
+    uint32_t mag_samples_sent;   /* field samples in MAG_SAMPLES queued for the UART */
+    uint32_t mag_overruns;       /* field samples the chip overwrote unread (ZYXOR) */
 } fw_counters;
 
 typedef struct fw_state {
@@ -77,6 +82,18 @@ typedef struct fw_state {
     uint64_t uptime_us;       /* since fw_init, accumulated across the 32-bit clock's wrap */
     uint32_t uptime_last_us;
     uint32_t last_status_us;
+    /* The magnetometer beside sensor 0, read directly on the board's schedule
+     * (docs/protocol.md, "A magnetometer beside the sensor"). */
+    magnetometer mag;
+    fw_platform mag_bus;      /* the sensor bus, its failures also counted as the magnetometer's */
+    bool mag_found;           /* answered at power-on: MAGNETOMETER follows every CONFIG */
+    bool mag_ok;              /* configured and answering */
+    bool mag_paused;          /* the accelerometer's rate leaves no room for it */
+    bool mag_primed;          /* the first field sample after START was read (and dropped) */
+    uint8_t mag_failures;     /* failed reads in a row */
+    uint16_t mag_seq;
+    uint32_t mag_last_us;     /* when the last field sample was read */
+    uint32_t last_retry_mag_us;
     uint8_t wire[LINK_MAX_WIRE];
     uint8_t burst[FW_FIFO_BURST_WORDS * LSM_FIFO_WORD_BYTES];
 } fw_state;
@@ -104,5 +121,15 @@ bool fw_rate_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, char *why, s
 /* The same for `sensors` sensors streaming at once (their traffic adds up). */
 bool fw_rate_fits_sensors(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, uint8_t sensors,
                           char *why, size_t size);
+/* Whether `sensors` streaming at `odr_code` leave room for a magnetometer at `mag_odr_mhz`
+ * on the UART and I2C (per field sample FW_MAG_WIRE_BYTES and FW_MAG_I2C_BITS); when not,
+ * the magnetometer is paused, the accelerometer keeps its rate. */
+bool fw_mag_fits(uint8_t odr_code, uint32_t baud, uint32_t i2c_hz, uint8_t sensors,
+                 uint32_t mag_odr_mhz);
+/* A MAG_SAMPLES packet of one sample on the wire: type, seq, count, t, x, y, z, CRC, COBS
+ * and the 0x00. On I2C up to three bursts of STATUS..OUT_Z (address, register, address, 7
+ * data bytes) and the LSM6DSOX's TIMESTAMP0..3 (7 bytes), 9 bits a byte. */
+#define FW_MAG_WIRE_BYTES 18u
+#define FW_MAG_I2C_BITS (3u * 10u * 9u + 7u * 9u)
 
 #endif

@@ -105,6 +105,37 @@ size_t link_encode_sensor(const link_sensor *sensor, uint8_t *wire)
     return link_frame(LINK_SENSOR, payload, sizeof payload, wire);
 }
 
+size_t link_encode_magnetometer(const link_magnetometer *mag, uint8_t *wire)
+{
+    uint8_t payload[LINK_MAGNETOMETER_PAYLOAD];
+    payload[0] = mag->chip;
+    payload[1] = mag->address;
+    payload[2] = mag->who_am_i;
+    put_u32(payload + 3, mag->odr_mhz);
+    put_u16(payload + 7, mag->range_ut);
+    put_u32(payload + 9, mag->pt_per_lsb);
+    payload[13] = mag->mode;
+    payload[14] = mag->flags;
+    return link_frame(LINK_MAGNETOMETER, payload, sizeof payload, wire);
+}
+
+size_t link_encode_mag_samples(uint16_t seq, const uint32_t *t, const int16_t (*xyz)[3],
+                               uint8_t count, uint8_t *wire)
+{
+    uint8_t payload[3u + 10u * LINK_MAG_MAX_SAMPLES];
+    if (count < 1 || count > LINK_MAG_MAX_SAMPLES)
+        return 0;
+    put_u16(payload, seq);
+    payload[2] = count;
+    for (unsigned i = 0; i < count; i++) {
+        uint8_t *row = payload + 3 + 10 * i;
+        put_u32(row, t[i]);
+        for (int axis = 0; axis < 3; axis++)
+            put_u16(row + 4 + 2 * axis, (uint16_t)xyz[i][axis]);
+    }
+    return link_frame(LINK_MAG_SAMPLES, payload, 3u + 10u * count, wire);
+}
+
 size_t link_encode_ack(uint8_t command, uint8_t status, const char *message, uint8_t *wire)
 {
     uint8_t payload[LINK_MAX_PAYLOAD];
@@ -147,7 +178,7 @@ size_t link_encode_pong(uint32_t token, uint8_t *wire)
 
 size_t link_encode_status(const link_status *status, uint8_t *wire)
 {
-    uint8_t payload[LINK_STATUS_PAYLOAD];
+    uint8_t payload[LINK_STATUS_PAYLOAD_MAG];
     const uint32_t counters[] = {
         status->uptime_ms, status->uart_tx_dropped_bytes, status->uart_rx_errors,
         status->i2c_errors, status->i2c_recoveries, status->i2c_retries,
@@ -156,12 +187,18 @@ size_t link_encode_status(const link_status *status, uint8_t *wire)
     };
     _Static_assert(3u + 4u * (sizeof counters / sizeof counters[0]) == LINK_STATUS_PAYLOAD,
                    "STATUS version 1 layout");
-    payload[0] = LINK_STATUS_VERSION;
+    bool with_mag = status->version == LINK_STATUS_VERSION_MAG;
+    payload[0] = with_mag ? LINK_STATUS_VERSION_MAG : LINK_STATUS_VERSION;
     payload[1] = status->reset_cause;
     payload[2] = status->flags;
     for (size_t i = 0; i < sizeof counters / sizeof counters[0]; i++)
         put_u32(payload + 3 + 4 * i, counters[i]);
-    return link_frame(LINK_STATUS, payload, sizeof payload, wire);
+    if (!with_mag)
+        return link_frame(LINK_STATUS, payload, LINK_STATUS_PAYLOAD, wire);
+    put_u32(payload + LINK_STATUS_PAYLOAD, status->mag_i2c_errors);
+    put_u32(payload + LINK_STATUS_PAYLOAD + 4, status->mag_samples_read);
+    put_u32(payload + LINK_STATUS_PAYLOAD + 8, status->mag_overruns);
+    return link_frame(LINK_STATUS, payload, LINK_STATUS_PAYLOAD_MAG, wire);
 }
 
 void link_rx_init(link_rx *rx)

@@ -31,12 +31,20 @@ enum {
     LINK_STATUS = 0x08, /* v1 extension: the board's health counters */
     LINK_SAMPLES_INDEXED = 0x09, /* v1 extension: SAMPLES of sensor 1, 2, ... */
     LINK_SENSOR = 0x0A,          /* v1 extension: one sensor of several */
+    LINK_MAG_SAMPLES = 0x0B,     /* v1 extension: the magnetometer's field samples */
+    LINK_MAGNETOMETER = 0x0C,    /* v1 extension: the magnetometer and its settings */
 };
 
 #define LINK_SENSOR_PAYLOAD 16u
 #define LINK_SENSOR_ANSWERING 0x01u
 /* Paused: the rate fits sensor 0 alone, so this sensor is configured but not streamed. */
 #define LINK_SENSOR_PAUSED 0x02u
+
+#define LINK_MAGNETOMETER_PAYLOAD 15u
+#define LINK_MAG_MAX_SAMPLES 32u
+#define LINK_MAG_ANSWERING 0x01u
+/* Paused: the accelerometer's rate leaves no room for the field samples on UART or I2C. */
+#define LINK_MAG_PAUSED 0x02u
 
 /* Host to device. */
 enum {
@@ -85,9 +93,13 @@ typedef struct link_selftest {
     int16_t gyro_delta_dps[3];
 } link_selftest;
 
-/* STATUS (docs/protocol.md, 0x08): version 1 is 43 bytes of payload; later versions append. */
+/* STATUS (docs/protocol.md, 0x08): version 1 is 43 bytes of payload; later versions append.
+ * Version 2 (a board with a magnetometer) appends mag_i2c_errors, mag_samples_read and
+ * mag_overruns. */
 #define LINK_STATUS_VERSION 1u
 #define LINK_STATUS_PAYLOAD 43u
+#define LINK_STATUS_VERSION_MAG 2u
+#define LINK_STATUS_PAYLOAD_MAG 55u
 
 enum {
     LINK_RESET_UNKNOWN = 0,
@@ -119,7 +131,23 @@ typedef struct link_status {
     uint32_t samples_read;
     uint32_t samples_sent;
     uint32_t watchdog_resets;
+    uint8_t version;           /* 0 or 1: version 1; 2: with the two fields below */
+    uint32_t mag_i2c_errors;
+    uint32_t mag_samples_read;
+    uint32_t mag_overruns;
 } link_status;
+
+/* MAGNETOMETER (docs/protocol.md, 0x0C). */
+typedef struct link_magnetometer {
+    uint8_t chip;        /* 1 LIS3MDL, 2 LIS2MDL */
+    uint8_t address;
+    uint8_t who_am_i;
+    uint32_t odr_mhz;
+    uint16_t range_ut;
+    uint32_t pt_per_lsb;
+    uint8_t mode;
+    uint8_t flags;       /* LINK_MAG_ANSWERING, LINK_MAG_PAUSED */
+} link_magnetometer;
 
 /* SENSOR (docs/protocol.md, 0x0A): one sensor of a board with several. */
 typedef struct link_sensor {
@@ -144,6 +172,10 @@ size_t link_encode_samples_indexed(uint8_t sensor_index, uint16_t seq, uint32_t 
                                    int16_t temperature_raw, const int16_t (*samples)[6],
                                    uint8_t count, uint8_t *wire);
 size_t link_encode_sensor(const link_sensor *sensor, uint8_t *wire);
+size_t link_encode_magnetometer(const link_magnetometer *mag, uint8_t *wire);
+/* MAG_SAMPLES: `count` (1..32) samples, each a time `t` (sensor 0's ticks) and x, y, z. */
+size_t link_encode_mag_samples(uint16_t seq, const uint32_t *t, const int16_t (*xyz)[3],
+                               uint8_t count, uint8_t *wire);
 /* `message` may be NULL or empty. */
 size_t link_encode_ack(uint8_t command, uint8_t status, const char *message, uint8_t *wire);
 size_t link_encode_selftest(const link_selftest *result, uint8_t *wire);

@@ -262,6 +262,16 @@ int lsm_read_temperature(lsm6dsox *chip, int16_t *raw)
     return err;
 }
 
+int lsm_read_timestamp(lsm6dsox *chip, uint32_t *ticks)
+{
+    uint8_t data[4];
+    int err = read_regs(chip, LSM_TIMESTAMP0, data, sizeof data);
+    if (!err)
+        *ticks = (uint32_t)data[0] | ((uint32_t)data[1] << 8) | ((uint32_t)data[2] << 16) |
+                 ((uint32_t)data[3] << 24);
+    return err;
+}
+
 /* 1 + 0.0015 * FREQ_FINE, in parts per million. */
 static int64_t trim_ppm(const lsm6dsox *chip)
 {

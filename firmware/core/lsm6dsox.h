@@ -151,6 +151,9 @@ int lsm_fifo_read(lsm6dsox *chip, uint8_t *out, uint16_t words);
 
 /* OUT_TEMP_L/H: degC = raw / 256 + 25. */
 int lsm_read_temperature(lsm6dsox *chip, int16_t *raw);
+/* The chip's timestamp counter now (TIMESTAMP0..3, ticks of lsm_tick_ns): the time a
+ * magnetometer's field sample is stamped with (docs/protocol.md, MAG_SAMPLES). */
+int lsm_read_timestamp(lsm6dsox *chip, uint32_t *ticks);
 
 /* Output data rate and timestamp tick of the trimmed clock (docs/protocol.md section 5). */
 uint32_t lsm_odr_mhz(const lsm6dsox *chip);

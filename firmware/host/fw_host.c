@@ -142,7 +142,8 @@ int fwh_sensor_count(const host_board *board)
 /* Counters, in this order: commands, bus_errors, tx_dropped_packets, words, unknown_tags,
  * incomplete_slots, lost_slots, overruns, samples, packets, dropped_packets, rx frames,
  * rx bad_frames, settling (samples discarded as turn-on transient), tx_dropped_bytes,
- * i2c_errors, i2c_retries, samples_sent, status_sent.
+ * i2c_errors, i2c_retries, samples_sent, status_sent, mag_i2c_errors, mag_samples_read,
+ * mag_samples_sent, mag_overruns.
  * Returns how many were written (at most `size`). */
 size_t fwh_counters(const host_board *board, uint32_t *out, size_t size)
 {
@@ -153,12 +154,24 @@ size_t fwh_counters(const host_board *board, uint32_t *out, size_t size)
         s->incomplete_slots, s->lost_slots, s->overruns, s->samples, s->packets,
         s->dropped_packets, board->fw.rx.frames, board->fw.rx.bad_frames, s->settling,
         c->tx_dropped_bytes, c->i2c_errors, c->i2c_retries, c->samples_sent, c->status_sent,
+        c->mag_i2c_errors, c->mag_samples_read, c->mag_samples_sent, c->mag_overruns,
     };
     size_t n = sizeof values / sizeof values[0];
     if (n > size)
         n = size;
     memcpy(out, values, n * sizeof values[0]);
     return n;
+}
+
+/* The magnetometer as the core sees it: chip (0 none), address, rate (mHz), flags
+ * (1 found, 2 answering, 4 paused). */
+void fwh_magnetometer(const host_board *board, uint32_t out[4])
+{
+    const fw_state *fw = &board->fw;
+    out[0] = fw->mag_found ? fw->mag.chip : 0u;
+    out[1] = fw->mag.address;
+    out[2] = fw->mag.odr_mhz;
+    out[3] = (fw->mag_found ? 1u : 0u) | (fw->mag_ok ? 2u : 0u) | (fw->mag_paused ? 4u : 0u);
 }
 
 /* ---- the frame receiver on its own (the tests feed it Python-encoded frames) */

@@ -41,7 +41,8 @@ COUNTER_NAMES = (
     "commands", "bus_errors", "tx_dropped_packets", "words", "unknown_tags", "incomplete_slots",
     "lost_slots", "overruns", "samples", "packets", "dropped_packets", "rx_frames",
     "rx_bad_frames", "settling", "tx_dropped_bytes", "i2c_errors", "i2c_retries",
-    "samples_sent", "status_sent",
+    "samples_sent", "status_sent", "mag_i2c_errors", "mag_samples_read", "mag_samples_sent",
+    "mag_overruns",
 )
 LED_IDLE, LED_STREAMING, LED_ERROR = 0, 1, 2
 POLL_INTERVAL_S = 0.002
@@ -81,7 +82,16 @@ class _LinkSelfTest(ctypes.Structure):
 
 class _LinkStatus(ctypes.Structure):
     _fields_ = (("reset_cause", ctypes.c_uint8), ("flags", ctypes.c_uint8),
-                *((name, ctypes.c_uint32) for name in p.Status.COUNTERS))
+                *((name, ctypes.c_uint32) for name in p.Status.COUNTERS),
+                ("version", ctypes.c_uint8), ("mag_i2c_errors", ctypes.c_uint32),
+                ("mag_samples_read", ctypes.c_uint32), ("mag_overruns", ctypes.c_uint32))
+
+
+class _LinkMagnetometer(ctypes.Structure):
+    _fields_ = [("chip", ctypes.c_uint8), ("address", ctypes.c_uint8),
+                ("who_am_i", ctypes.c_uint8), ("odr_mhz", ctypes.c_uint32),
+                ("range_ut", ctypes.c_uint16), ("pt_per_lsb", ctypes.c_uint32),
+                ("mode", ctypes.c_uint8), ("flags", ctypes.c_uint8)]
 
 
 class BuildError(RuntimeError):
@@ -165,6 +175,15 @@ def _declare(lib: ctypes.CDLL) -> None:
     lib.link_encode_pong.argtypes = [ctypes.c_uint32, wire]
     lib.link_encode_status.restype = size
     lib.link_encode_status.argtypes = [ctypes.POINTER(_LinkStatus), wire]
+    lib.link_encode_magnetometer.restype = size
+    lib.link_encode_magnetometer.argtypes = [ctypes.POINTER(_LinkMagnetometer), wire]
+    lib.link_encode_mag_samples.restype = size
+    lib.link_encode_mag_samples.argtypes = [ctypes.c_uint16, ctypes.POINTER(ctypes.c_uint32),
+                                            ctypes.POINTER(ctypes.c_int16), ctypes.c_uint8, wire]
+    lib.fwh_magnetometer.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint32)]
+    lib.fw_mag_fits.restype = ctypes.c_bool
+    lib.fw_mag_fits.argtypes = [ctypes.c_uint8, ctypes.c_uint32, ctypes.c_uint32,
+                                ctypes.c_uint8, ctypes.c_uint32]
     lib.fw_rate_fits.restype = ctypes.c_bool
     lib.fw_rate_fits.argtypes = [ctypes.c_uint8, ctypes.c_uint32, ctypes.c_uint32,
                                  ctypes.c_char_p, size]
@@ -272,11 +291,25 @@ def c_encode(lib: ctypes.CDLL, packet: p.Packet) -> bytes:
     elif isinstance(packet, p.Pong):
         n = lib.link_encode_pong(packet.token, wire)
     elif isinstance(packet, p.Status):
-        if packet.version != 1 or packet.extra:
-            raise ValueError("the firmware sends STATUS version 1 only")
+        with_mag = packet.version == p.STATUS_VERSION_MAG and len(packet.extra) == 12
+        if not (packet.version == 1 and not packet.extra) and not with_mag:
+            raise ValueError("the firmware sends STATUS version 1, or 2 with its 12 bytes")
         status = _LinkStatus(packet.reset_cause, packet.flags,
-                             *(getattr(packet, name) for name in p.Status.COUNTERS))
+                             *(getattr(packet, name) for name in p.Status.COUNTERS),
+                             packet.version, packet.mag_i2c_errors or 0,
+                             packet.mag_samples_read or 0, packet.mag_overruns or 0)
         n = lib.link_encode_status(ctypes.byref(status), wire)
+    elif isinstance(packet, p.Magnetometer):
+        mag = _LinkMagnetometer(packet.chip, packet.i2c_address, packet.who_am_i,
+                                packet.odr_mhz, packet.range_ut, packet.pt_per_lsb,
+                                packet.mode, packet.flags)
+        n = lib.link_encode_magnetometer(ctypes.byref(mag), wire)
+    elif isinstance(packet, p.MagSamples):
+        ticks = np.ascontiguousarray(packet.t, dtype=np.uint32)
+        xyz = np.ascontiguousarray(packet.xyz, dtype=np.int16)
+        n = lib.link_encode_mag_samples(packet.seq, ticks.ctypes.data_as(
+            ctypes.POINTER(ctypes.c_uint32)), xyz.ctypes.data_as(ctypes.POINTER(ctypes.c_int16)),
+            len(ticks), wire)
     else:
         raise TypeError(f"the firmware does not send {type(packet).__name__}")
     return bytes(wire[:n])
@@ -442,6 +475,13 @@ class FirmwareCore:
     def sensor_count(self) -> int:
         """Sensors the firmware found at power-on (1, or 2 at 0x6A and 0x6B)."""
         return int(self.lib.fwh_sensor_count(self._handle))
+
+    def magnetometer(self) -> dict[str, int | bool]:
+        """The magnetometer as the core sees it (chip 0: none found)."""
+        out = (ctypes.c_uint32 * 4)()
+        self.lib.fwh_magnetometer(self._handle, out)
+        return {"chip": out[0], "address": out[1], "odr_mhz": out[2],
+                "found": bool(out[3] & 1), "ok": bool(out[3] & 2), "paused": bool(out[3] & 4)}
 
     def counters(self) -> dict[str, int]:
         values = (ctypes.c_uint32 * len(COUNTER_NAMES))()

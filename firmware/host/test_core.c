@@ -860,6 +860,41 @@ static void test_rates_two_sensors(void)
     CHECK(fw_rate_fits_sensors(8, 921600, 400000, 1, why, sizeof why));
 }
 
+/* The magnetometer's datasheet tables, its encoders and the bus budget it yields to. */
+static void test_magnetometer(void)
+{
+    mag_register_write seq[MAG_SEQUENCE_LENGTH];
+    /* LIS3MDL at 80 Hz: OM = 11, DO = 111; +-4 gauss; OMZ = 11; BDU; continuous last. */
+    CHECK(mag_rate_mhz(MAG_CHIP_LIS3MDL, 104167u) == 80000u);
+    CHECK(mag_rate_mhz(MAG_CHIP_LIS3MDL, 52083u) == 40000u);
+    CHECK(mag_rate_mhz(MAG_CHIP_LIS3MDL, 13021u) == 10000u);
+    CHECK(mag_rate_mhz(MAG_CHIP_LIS2MDL, 52083u) == 50000u);
+    CHECK(mag_rate_mhz(MAG_CHIP_LIS2MDL, 6666667u) == 100000u);
+    CHECK(mag_sequence(MAG_CHIP_LIS3MDL, 80000u, seq) == 5u);
+    CHECK(seq[0].reg == 0x20 && seq[0].value == 0x7C);
+    CHECK(seq[2].reg == 0x23 && seq[2].value == 0x0C);
+    CHECK(seq[3].reg == 0x24 && seq[3].value == 0x40);
+    CHECK(seq[4].reg == 0x22 && seq[4].value == 0x00);
+    CHECK(mag_sequence(MAG_CHIP_LIS2MDL, 20000u, seq) == 3u);
+    CHECK(seq[0].reg == 0x61 && seq[0].value == 0x03);
+    CHECK(seq[1].reg == 0x62 && seq[1].value == 0x10);
+    CHECK(seq[2].reg == 0x60 && seq[2].value == 0x84);
+    /* MAG_SAMPLES: 4 + 10 bytes per sample before the CRC. */
+    uint8_t wire[LINK_MAX_WIRE];
+    uint32_t t[2] = {0x00012345u, 0x00012545u};
+    int16_t xyz[2][3] = {{1000, -2000, 3000}, {-1, 0, 32767}};
+    size_t n = link_encode_mag_samples(0x0102, t, (const int16_t(*)[3])xyz, 2, wire);
+    uint8_t packet[64];
+    int m = cobs_decode(wire, n - 1, packet, sizeof packet);
+    CHECK(m == 1 + 3 + 20 + 2 && packet[0] == LINK_MAG_SAMPLES && packet[3] == 2);
+    CHECK(link_encode_mag_samples(0, t, (const int16_t(*)[3])xyz, 0, wire) == 0);
+    /* One sensor leaves room at every rate it streams; two at 833 Hz do not. */
+    CHECK(fw_mag_fits(8, 921600u, 400000u, 1, 80000u));
+    CHECK(fw_mag_fits(6, 921600u, 400000u, 2, 80000u));
+    CHECK(!fw_mag_fits(7, 921600u, 400000u, 2, 80000u));
+    CHECK(!fw_mag_fits(7, 115200u, 400000u, 1, 80000u));
+}
+
 int main(void)
 {
     test_crc();
@@ -879,6 +914,7 @@ int main(void)
     test_two_sensors();
     test_rates_two_sensors();
     test_uart_divisor();
+    test_magnetometer();
     printf("%d checks, %d failed\n", checks, failures);
     return failures ? 1 : 0;
 }
