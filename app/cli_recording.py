@@ -254,7 +254,7 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
         return EXIT_USAGE
     if not args.quiet:
         print(f"recording {target.name} at {info.odr_hz:g} Hz: "
-              f"{_data_rate(target, info.odr_hz, getattr(device, 'scheme', '') == 'sim')}",
+              f"{_data_rate(target, info.odr_hz, device.reference_source is not None)}",
               file=sys.stderr, flush=True)
     stop = threading.Event()
 
@@ -274,6 +274,8 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             alarms=AlarmMonitor(alarm_config) if alarm_config.limits else None,
             on_alarms=lambda events: print_crossings(events, out),
             reconnect_timeout_s=reconnect_timeout, on_outage=print_outage,
+            on_faults=lambda events: print_faults(events, out),
+            on_message=print_warning,
         )
     except (DeviceError, RecordingWriteError) as exc:
         _error(str(exc))
@@ -331,6 +333,20 @@ def print_crossings(events: list, out: TextIO) -> None:
     """One line per alarm crossing, as it happens (stdout: they are results, not progress)."""
     for event in events:
         print(event.message(), file=out, flush=True)
+
+
+def print_warning(level: int, text: str) -> None:
+    """A device's warnings and the look-alike check's verdict (stderr, even with --quiet)."""
+    if level >= 2:
+        _error(text)
+
+
+def print_faults(events: list, out: TextIO) -> None:
+    """One line per fault event, as it is declared (stdout, as the alarms' crossings)."""
+    from app.services.health import fault_line
+
+    for event in events:
+        print(fault_line(event), file=out, flush=True)
 
 
 def _data_rate(target: Path, odr_hz: float, reference: bool) -> str:

@@ -69,6 +69,9 @@ from drivers.sim.options import SimOptions, parse_sim_url
 from drivers.sim.scenarios import SCENARIOS, Interactive, Scenario
 from drivers.sim.transient import apply_turn_on_transient
 
+SIMULATOR_REFERENCE = "the simulator's true orientation"
+"""What a simulator's reference orientation is (a recording's ``reference`` metadata)."""
+
 __all__ = ["SCENARIOS", "SimulatedDevice"]
 
 FIFO_SPAN_S = 1.0
@@ -100,6 +103,8 @@ class SimulatedDevice(Device):
     """
 
     scheme: ClassVar[str] = "sim"
+    steerable: ClassVar[bool] = True
+    knows_truth: ClassVar[bool] = True
 
     def __init__(
         self, url: str, *, clock: Callable[[], float] = time.monotonic, **overrides: object
@@ -158,6 +163,22 @@ class SimulatedDevice(Device):
     def is_interactive(self) -> bool:
         """True when :meth:`set_target_attitude` can move the sensor."""
         return isinstance(self.scenario, Interactive)
+
+    @property
+    def is_steerable(self) -> bool:
+        """The interactive scenario follows :meth:`set_target_attitude` (drivers.base)."""
+        return self.is_interactive
+
+    @property
+    def reference_source(self) -> str:
+        return SIMULATOR_REFERENCE
+
+    @classmethod
+    def unpaced_url(cls, url: str) -> str:
+        """``url`` with ``realtime=0`` unless it says how to pace."""
+        if "realtime" in url:
+            return url
+        return url + ("&" if "?" in url else "?") + "realtime=0"
 
     def set_target_attitude(self, roll_deg: float, pitch_deg: float, yaw_deg: float = 0.0) -> float:
         """Tilt the virtual sensor (``sim://interactive`` only). Thread-safe.
