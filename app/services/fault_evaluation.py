@@ -34,7 +34,9 @@ from app.core.faults.evaluation import (
 )
 from app.core.faults.events import CHANNELS
 from app.core.recording.reader import read_recording
-from app.core.samples import SampleBlock, convert_raw_block
+from app.core.samples import SampleBlock
+from app.services.acquisition import Acquisition, Until
+from app.services.connection import Connection
 from app.services.diagnosis import recording_spec
 
 SIMULATOR_GROUP = "simulator"
@@ -181,24 +183,20 @@ def _simulator_stream(url: str, settings: FaultEvaluationSettings) -> CleanStrea
     from drivers.sim.device import SimulatedDevice
 
     device = SimulatedDevice(url, realtime=False, block=65536)
-    info = device.open()
+    session = Acquisition(Connection(), detect_faults=False, check_lookalike=False)
+    info = session.attach(device)
     blocks: list[SampleBlock] = []
     scale = device.scale
+    wanted = max(1, round(max(settings.clean_seconds, settings.seconds) * device.odr_hz))
     try:
-        wanted = max(1, round(max(settings.clean_seconds, settings.seconds) * device.odr_hz))
-        got = 0
-        while got < wanted:
-            try:
-                raw = device.read(1.0)
-            except DeviceIOError:  # fail_after: the stream ends there
-                break
-            if raw is None or len(raw) == 0:
-                break
-            scale = raw.scale or scale
-            blocks.append(convert_raw_block(raw))
-            got += len(raw)
+        for block in session.stream(Until(samples=wanted), 1.0):
+            scale = block.raw.scale or scale
+            blocks.append(block.uncalibrated)
     finally:
-        device.close()
+        session.close()
+    error = session.ended.error
+    if error is not None and not isinstance(error, DeviceIOError):  # fail_after: the end
+        raise error
     clean = _join(blocks)
     clean = sample_rows(clean, 0, min(len(clean), wanted))
     sweep_n = min(len(clean), max(1, round(settings.seconds * device.odr_hz)))
