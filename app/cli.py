@@ -253,7 +253,7 @@ def resolve_sources(items: list[str], seconds: float, compensate: bool) -> list[
     """
     from app.services import simulation
     from drivers.errors import DeviceError, DeviceUrlError
-    from drivers.registry import scheme_of
+    from drivers.registry import driver_for, scheme_of
     from drivers.replay import recording_path
 
     errors = "static errors uncompensated" if not compensate else "static errors compensated"
@@ -274,13 +274,17 @@ def resolve_sources(items: list[str], seconds: float, compensate: bool) -> list[
             continue
         if "://" in item:
             try:
-                scheme = scheme_of(item)
+                scheme_of(item)
             except DeviceUrlError as exc:
                 raise _Usage(str(exc)) from None
-            if scheme == "replay":
+            try:
+                driver = driver_for(item)
+            except DeviceError:  # no such driver: it knows nothing
+                driver = None
+            if driver is not None and driver.replayable:
                 add_recording(recording_path(item), item)
                 continue
-            if scheme != "sim":
+            if driver is None or not driver.knows_truth:
                 raise _Usage(f"{item}: only sources that know their true orientation can be "
                              "evaluated (sim:// URLs and recordings with reference columns)")
             try:
@@ -466,12 +470,12 @@ def evaluate_sources(args: argparse.Namespace, out: TextIO | None = None) -> int
 
 def scheme_of_recording(source: str) -> bool:
     """True when ``source`` names a recording (``replay://PATH`` or a path ending in .csv)."""
-    from drivers.errors import DeviceUrlError
-    from drivers.registry import scheme_of
+    from drivers.errors import DeviceError
+    from drivers.registry import driver_for
 
     try:
-        return scheme_of(source) == "replay"
-    except DeviceUrlError:
+        return driver_for(source).replayable
+    except DeviceError:
         return False
 
 

@@ -14,8 +14,8 @@ from urllib.parse import urlencode
 
 from app.core.devices import DeviceDescriptor
 from drivers import lsm6dsox
-from drivers.errors import DeviceUrlError
-from drivers.registry import DEFAULT_DEVICE_URL, scheme_of
+from drivers.errors import DeviceError, DeviceUrlError
+from drivers.registry import DEFAULT_DEVICE_URL, driver_for
 from drivers.registry import available_devices as _available_devices
 from drivers.replay import replay_url as _replay_url
 from drivers.sim.options import SimOptions, parse_sim_url
@@ -34,8 +34,17 @@ def available_devices() -> list[DeviceDescriptor]:
 def is_replay_url(url: str) -> bool:
     """True when ``url`` names a recording to replay (``replay://`` or a bare ``.csv`` path)."""
     try:
-        return scheme_of(url) == "replay"
-    except DeviceUrlError:
+        return driver_for(url).replayable
+    except DeviceError:
+        return False
+
+
+def has_simulator_controls(url: str) -> bool:
+    """True when ``url``'s driver takes live controls (the simulator panel: drivers.base
+    ``steerable``); whether this device can be tilted now is ``Device.is_steerable``."""
+    try:
+        return driver_for(url).steerable
+    except DeviceError:
         return False
 
 

@@ -134,7 +134,8 @@ def resolve_fault_sources(items: Sequence[str]) -> list[FaultSource]:
         For a URL that is not a simulator (a live device cannot be made clean at will), a bad
         simulator URL, a missing file or a glob that matches nothing.
     """
-    from drivers.errors import DeviceUrlError
+    from drivers.errors import DeviceError, DeviceUrlError
+    from drivers.registry import driver_for
     from drivers.sim.options import parse_sim_url
 
     sources: list[FaultSource] = []
@@ -165,7 +166,11 @@ def resolve_fault_sources(items: Sequence[str]) -> list[FaultSource]:
             add_file(Path(item))
             continue
         for url in items_here:
-            if not url.lower().startswith("sim://"):
+            try:
+                simulated = driver_for(url).knows_truth
+            except DeviceError:
+                simulated = False
+            if not simulated:
                 raise ValueError(f"{url}: only simulator URLs (sim://...) and recordings can be "
                                  "swept; a live device cannot be made clean at will")
             try:
