@@ -182,7 +182,7 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     from app.core.calibration_procedures.profiles import ProfileError, read_profile_file
     from app.core.filters import FILTERS
     from app.core.recording.errors import RecordingWriteError
-    from app.services.recorder import parse_duration, record_device
+    from app.services.recorder import parse_duration, record_device, warm_up_filters
     from drivers.errors import DeviceError
     from drivers.registry import create_device
 
@@ -246,6 +246,7 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     except OutputRefused as exc:
         _error(str(exc))
         return EXIT_FAILED
+    warm_up_filters(args.record_filter, comparisons)  # before the device streams
     try:
         device = create_device(args.record_device)
         info = device.open()

@@ -218,3 +218,21 @@ def test_the_drivers_declare_what_they_have(tmp_path):
     finally:
         replay.close()
     assert np.isfinite(interactive.set_target_attitude(5.0, 0.0))
+
+
+def test_record_loads_the_filters_before_it_opens_the_device(tmp_path, monkeypatch):
+    """A realtime device opened first overflowed while the filters compiled (the first
+    block came seconds late on a busy machine: samples lost, a link gap event)."""
+    from app.services import recorder
+    from drivers import registry
+
+    order: list[str] = []
+    real_warm_up, real_create = recorder.warm_up_filters, registry.create_device
+    monkeypatch.setattr(recorder, "warm_up_filters",
+                        lambda *a: order.append("warm up") or real_warm_up(*a))
+    monkeypatch.setattr(registry, "create_device",
+                        lambda url: order.append("create") or real_create(url))
+    out = tmp_path / "r.csv"
+    assert main(["record", "--device", "sim://static?realtime=0", "--duration", "0.5",
+                 "--quiet", str(out)]) == 0
+    assert order[:2] == ["warm up", "create"]

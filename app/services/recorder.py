@@ -87,6 +87,17 @@ class RecordOutcome:
     """The fault detector's events (stored in the file's ``fault_events``)."""
 
 
+def warm_up_filters(filter_name: str | None, comparisons: Sequence[str] = ()) -> None:
+    """Load the filters' compiled kernels; call it before the device is opened. The first
+    block would otherwise wait for them (0.3 s from numba's cache, seconds on a cold one or a
+    busy machine) while the sensor's FIFO overflows (benchmarks/soak-results: three of four
+    losses were this). Loaded once per process: a second call costs nothing."""
+    for name in {filter_name or DEFAULT_FILTER, *(comparisons or ())}:
+        with contextlib.suppress(ValueError):  # unknown or offline: refused further on
+            require_online(name)
+            create_filter(name).warm_up()
+
+
 def record_device(
     device: Any,
     path: str | os.PathLike[str],
@@ -124,14 +135,7 @@ def record_device(
     ``reconnect_timeout_s`` (None: never) is how long an unplugged board is awaited;
     ``on_outage`` hears of it when it is lost and again when it is back.
     """
-    # Load the filters' compiled kernels before the device streams: the first block would
-    # otherwise wait for them (0.3 s from numba's cache, seconds on a cold one) while the
-    # sensor's FIFO overflows (benchmarks/soak-results: three of four losses were this).
-    for name in {pipeline.filter.name if pipeline else filter_name or DEFAULT_FILTER,
-                 *(comparisons or ())}:
-        with contextlib.suppress(ValueError):  # unknown or offline: refused further on
-            require_online(name)
-            create_filter(name).warm_up()
+    warm_up_filters(pipeline.filter.name if pipeline else filter_name, comparisons)
     info = device.open()
     lock = OutputLock(path)
     try:
