@@ -86,12 +86,21 @@ class _Callbacks(Subscriber):
     def __init__(self, on_message: Callable[[int, str], None] | None,
                  on_faults: Callable[[list[FaultEvent]], None] | None,
                  on_alarms: Callable[[list[AlarmEvent]], None] | None) -> None:
-        if on_message is not None:
-            self.on_message = on_message  # type: ignore[method-assign]
-        if on_faults is not None:
-            self.on_faults = on_faults  # type: ignore[method-assign]
-        if on_alarms is not None:
-            self.on_alarms = on_alarms  # type: ignore[method-assign]
+        self._on_message = on_message
+        self._on_faults = on_faults
+        self._on_alarms = on_alarms
+
+    def on_message(self, level: int, text: str) -> None:
+        if self._on_message is not None:
+            self._on_message(level, text)
+
+    def on_faults(self, events: list[FaultEvent]) -> None:
+        if self._on_faults is not None:
+            self._on_faults(events)
+
+    def on_alarms(self, events: list[AlarmEvent]) -> None:
+        if self._on_alarms is not None:
+            self._on_alarms(events)
 
 
 @dataclass(slots=True)

@@ -185,7 +185,7 @@ def recorded_alarm_marks(device: Device | None) -> tuple[float, ...]:
     if device is None or not is_replay(device):
         return ()
     metadata = {} if device.recording is None else device.recording.metadata
-    start = device.start_t_s  # type: ignore[union-attr]
+    start = device.start_t_s  # type: ignore[attr-defined]
     return tuple(e.t - start for e in recorded_alarm_events(metadata) if e.raised)
 
 
