@@ -29,13 +29,11 @@ from app.services.recording_control import RecordingControl
 from app.services.replay_control import (
     OverviewTracker,
     ReplayNotice,
-    recorded_alarm_marks,
     recorded_alarms_note,
     replay_command,
-    replay_position,
     restore_recorded_filter,
 )
-from app.services.stream_status import StatusMeter, StreamStatus
+from app.services.stream_status import StatusMeter, stream_status
 from drivers.errors import DeviceError, DeviceIOError
 
 log = logging.getLogger(__name__)
@@ -243,26 +241,9 @@ class DeviceWorker(QObject):
             self._close_device(message)
 
     def _emit_status(self) -> None:
-        device = self.connection.device
-        if device is None:
-            return
-        counters = self.pipeline.counters
-        rate, load = self.meter.measure(counters.samples, counters.filter_cpu_s)
-        update = self.overviews.changed(device)
-        health = self.health.health()
-        latest = self.health.latest_fault() if health and "fault" in health.values() else None
-        self.status.emit(StreamStatus(
-            url=device.url, measured_rate_hz=rate, samples=counters.samples,
-            lost_samples=counters.lost_samples, gaps=counters.gaps, pipeline_load=load,
-            replay=replay_position(device),
-            overview=None if update is None else update[0],
-            gaps_s=None if update is None else update[1],
-            health=health,
-            fault="" if latest is None else f"{latest.channel} {latest.kind}: {latest.message}",
-            board=self.acquisition.board.take_changed(),
-            alarms=tuple((limit.quantity, limit.spec()) for limit in self.alarms.active()),
-            alarm_marks_s=None if update is None else recorded_alarm_marks(device),
-        ))
+        status = stream_status(self.acquisition, self.meter, self.overviews)
+        if status is not None:
+            self.status.emit(status)
 
     @Slot()
     def reset_health(self) -> None:
