@@ -239,6 +239,7 @@ class Acquisition:
         """A new device: the board, the alarms and the look-alike check start afresh, and the
         fault detector starts at the first block (knowing its scale factors)."""
         self._info = info
+        self.health.stop()
         self.board.reset()
         self.alarms.reset()
         if self.pipeline is not None:
