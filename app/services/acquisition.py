@@ -16,12 +16,15 @@ and at the end, the alarms in force and their crossings, and the fault detector'
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
 
 from app.core.alarms import AlarmEvent, AlarmMonitor
 from app.core.alarms.recording import alarm_events_metadata
@@ -168,15 +171,15 @@ class Reconnection:
 
 
 def head(raw: RawBlock, count: int) -> RawBlock:
-    """The first ``count`` samples of a block."""
-    ref = raw.reference_quat
-    gap = raw.gap
-    return RawBlock(
-        t_s=raw.t_s[:count], accel_raw=raw.accel_raw[:count], gyro_raw=raw.gyro_raw[:count],
-        temp_raw=raw.temp_raw[:count], scale=raw.scale,
-        gap=None if gap is None else gap[:count], lost_samples=raw.lost_samples,
-        reference_quat=None if ref is None else ref[:count],
-    )
+    """The first ``count`` samples of a block: every per-sample array is cut, whatever columns
+    the block carries (a magnetometer's too)."""
+    n = len(raw)
+    cut = {}
+    for item in dataclasses.fields(raw):
+        value = getattr(raw, item.name)
+        if isinstance(value, np.ndarray) and value.shape[:1] == (n,):
+            cut[item.name] = value[:count]
+    return dataclasses.replace(raw, **cut)
 
 
 class Acquisition:
