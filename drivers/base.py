@@ -12,12 +12,16 @@ from __future__ import annotations
 
 import threading
 from abc import ABC, abstractmethod
-from typing import ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from app.core.devices import BoardStatus, DeviceDescriptor, DeviceInfo, DeviceMessage
 from app.core.samples import RawBlock
 from drivers.errors import DeviceClosedError, DeviceError, DeviceIOError
 from drivers.url_options import Option
+
+if TYPE_CHECKING:
+    from app.core.calibration import SensorCalibration
+    from app.core.recording.reader import Recording
 
 __all__ = ["Device", "DeviceDescriptor", "DeviceInfo", "DeviceMessage", "read_block_s"]
 
@@ -87,15 +91,6 @@ class Device(ABC):
         finally:
             self._info = None
 
-    @property
-    def supports_self_test(self) -> bool:
-        """Whether :meth:`self_test` runs the sensor's own self-test (default: no such method).
-
-        Drivers that have one return an object with ``accel_pass``, ``gyro_pass``,
-        ``accel_delta_mg`` and ``gyro_delta_dps``.
-        """
-        return False
-
     def take_messages(self) -> list[DeviceMessage]:
         """Messages the device reported since the last call, oldest first (default: none).
 
@@ -103,11 +98,105 @@ class Device(ABC):
         """
         return []
 
+    # -- optional capabilities ----------------------------------------------------------------
+    # Declared here with the answer of a device that lacks them (as python-can's BusABC
+    # declares its optional methods), so that callers ask every device the same question
+    # instead of probing with getattr or testing URL schemes; a driver that has one overrides.
+
+    # replayable: a recording played back as a device (drivers/replay.py)
+    replayable: ClassVar[bool] = False
+    """The device plays a recording back (seek, speed, bookmarks: :mod:`drivers.replay`)."""
+    recording: Recording | None = None
+    """The recording a replay plays (None for live devices, and before a replay opened)."""
+
+    @property
+    def at_end(self) -> bool:
+        """True when the source delivered everything it has and will deliver nothing more
+        (a replay at its end that does not loop). A live device never ends."""
+        return False
+
+    @property
+    def last_block_generation(self) -> int | None:
+        """A count that changes when the source jumps (a replay's seek or loop), read right
+        after :meth:`read`: time runs backwards there. None for sources that never jump."""
+        return None
+
+    @property
+    def recorded_calibration(self) -> SensorCalibration | None:
+        """The calibration a replayed recording was made with (None: none, or live)."""
+        return None
+
+    # steerable: a simulator the program can tilt
+    steerable: ClassVar[bool] = False
+    """Devices of this kind take live controls (a simulator's panel in the window)."""
+
+    @property
+    def is_steerable(self) -> bool:
+        """True when :meth:`set_target_attitude` can move this device now."""
+        return False
+
+    def set_target_attitude(self, roll_deg: float, pitch_deg: float,
+                            yaw_deg: float = 0.0) -> float:
+        """Tilt the device to an attitude; returns the glide time (s). Thread-safe."""
+        raise DeviceError(f"{self.url}: cannot be tilted from the program")
+
+    # knows its truth: the true orientation (and a simulated unit's true errors)
+    knows_truth: ClassVar[bool] = False
+    """Devices of this kind deliver their true orientation with every block (a simulator);
+    a replay's recording may hold one too: ask :attr:`reference_source`."""
+    unit_errors: Any = None
+    """A simulated unit's true errors (``drivers.sim.error_model.UnitErrors``), what a
+    calibration should find; None for real hardware."""
+
+    def truth_metadata(self) -> dict[str, Any]:
+        """What a recording's ``simulator`` metadata holds for this device (a simulated unit's
+        true errors, its true rate, injected faults, the earth's field...); empty for devices
+        that know no truth of their own."""
+        return {}
+
+    @property
+    def reference_source(self) -> str | None:
+        """What the blocks' ``reference_quat`` is, for a recording's metadata; None when the
+        device delivers no reference orientation."""
+        return None
+
+    @classmethod
+    def unpaced_url(cls, url: str) -> str:
+        """The URL of the same source read as fast as it computes, where the driver can
+        (a simulator without real-time pacing); others return ``url`` unchanged."""
+        return url
+
+    # has a board clock (and health counters)
+    @property
+    def device_clock_origin_s(self) -> float | None:
+        """The board clock's reading where ``t_s`` is 0 (a reconnected board carries its time
+        on by it); None for devices without a clock of their own."""
+        return None
+
     @property
     def board_status(self) -> BoardStatus | None:
         """The board's latest health counters (link protocol v1 STATUS); None for devices
         without them. Thread-safe."""
         return None
+
+    def request_status(self) -> BoardStatus | None:
+        """The board's counters now (asked for where the device can; by default the latest
+        it sent). Raises DeviceError when asking fails."""
+        return self.board_status
+
+    # runs a self-test
+    @property
+    def supports_self_test(self) -> bool:
+        """Whether :meth:`self_test` runs the sensor's own self-test (default: no).
+
+        Drivers that have one return an object with ``accel_pass``, ``gyro_pass``,
+        ``accel_delta_mg`` and ``gyro_delta_dps``.
+        """
+        return False
+
+    def self_test(self) -> Any:
+        """Run the sensor's self-test (streaming pauses). Raises DeviceError without one."""
+        raise DeviceError(f"{self.url}: the device has no self-test")
 
     @property
     def info(self) -> DeviceInfo | None:

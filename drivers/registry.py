@@ -79,6 +79,12 @@ def driver_class(scheme: str) -> type[Device]:
     return getattr(module, class_name)
 
 
+def driver_for(url: str) -> type[Device]:
+    """The driver class for ``url``: ask it what its devices declare (``replayable``,
+    ``knows_truth``, ``steerable``, ``unpaced_url``) without opening one."""
+    return driver_class(scheme_of(url))
+
+
 def create_device(url: str) -> Device:
     """A closed device object for ``url`` (raises :class:`DeviceUrlError` for a bad URL)."""
     return driver_class(scheme_of(url))(url)

@@ -59,7 +59,7 @@ import numpy as np
 
 from app.core.calibration import SensorCalibration
 from app.core.recording.errors import RecordingError, RecordingTooLargeError
-from app.core.recording.format import KEY_BOOKMARKS
+from app.core.recording.format import KEY_BOOKMARKS, KEY_REFERENCE
 from app.core.recording.index import Overview
 from app.core.recording.reader import (
     UNIT_SCALE,
@@ -209,6 +209,7 @@ class ReplayDevice(Device):
 
     scheme: ClassVar[str] = SCHEME
     url_options: ClassVar[tuple[Option, ...]] = OPTIONS
+    replayable: ClassVar[bool] = True
 
     def __init__(
         self, url: str, *, clock: Callable[[], float] = time.monotonic,
@@ -425,6 +426,15 @@ class ReplayDevice(Device):
         """The generation of the block :meth:`read` returned last."""
         with self._cond:
             return self._last_block_generation
+
+    @property
+    def reference_source(self) -> str | None:
+        """The recording's reference orientation, as its metadata names it (None without)."""
+        recording = self.recording
+        if recording is None or not recording.has_reference:
+            return None
+        source = recording.metadata.get(KEY_REFERENCE)
+        return source.get("source") if isinstance(source, dict) else "recorded reference"
 
     @property
     def recorded_calibration(self) -> SensorCalibration | None:

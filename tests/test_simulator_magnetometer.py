@@ -375,14 +375,13 @@ def test_the_magtour_turns_the_field_through_every_direction() -> None:
 
 def test_blocks_cut_by_the_recorder_and_diagnose_keep_the_field() -> None:
     """A duration-limited recording (and diagnose) cut their last block: the field stays."""
-    from app.services.diagnosis import _head
-    from app.services.recorder import _cut
+    from app.services.acquisition import head
 
     device = SimulatedDevice("sim://magtour?realtime=0&block=300")
     device.open()
     raw = device.read(0.0)
     assert raw is not None and raw.mag_raw is not None
-    for cut in (_cut(raw, 123), _head(raw, 123)):
+    for cut in (head(raw, 123),):
         assert cut.mag_raw is not None and len(cut) == 123
         assert np.array_equal(cut.mag_raw, raw.mag_raw[:123], equal_nan=True)
 

@@ -23,15 +23,14 @@ import argparse
 import math
 import statistics
 import sys
-import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
 from app.cli.errors import finite, printable
-from app.core.lookalike import GIVE_UP_SECONDS, LookAlikeCheck
-from app.core.samples import convert_raw_block
+from app.core.lookalike import GIVE_UP_SECONDS
+from app.services.board_check import at_rest_verdict, timed_blocks
 from drivers import lsm6dsox
 from drivers.errors import DeviceError, SettingRefusedError
 from drivers.serial_link import SerialLinkDevice
@@ -158,17 +157,9 @@ def check_rate(port: str, odr_hz: float, seconds: float) -> RateResult:
         except SettingRefusedError as exc:
             return RateResult(odr_hz, refused=exc.reason)
         duration = max(seconds, MIN_SAMPLES / info.odr_hz)
-        times: list[np.ndarray] = []
         # (device time of a block's last sample, computer time it arrived), one pair a block.
-        arrivals: list[tuple[float, float]] = []
-        deadline = time.monotonic() + duration + 5.0
-        while sum(len(t) for t in times) < duration * info.odr_hz:
-            if time.monotonic() > deadline:
-                break
-            block = device.read(0.2)
-            if block is not None and len(block):
-                arrivals.append((float(block.t_s[-1]), time.monotonic()))
-                times.append(block.t_s)
+        seen = timed_blocks(device, duration * info.odr_hz, wall_s=duration + 5.0)
+        times, arrivals = seen.times, seen.arrivals
         # Reads return whole blocks (up to 100 ms of samples): the count stops at what was asked.
         t = np.concatenate(times)[: math.ceil(duration * info.odr_hz)] if times else np.zeros(0)
         counters = device.counters
@@ -199,18 +190,12 @@ def check_rate(port: str, odr_hz: float, seconds: float) -> RateResult:
 def at_rest_line(device: Device) -> str:
     """|a| while the board lies still: near 0.5 g or 2 g is a look-alike part (WHO_AM_I 0x6C
     answers for the LSM6DSO32 too, whose ranges are double)."""
-    check = LookAlikeCheck()
-    warning = None
-    deadline = time.monotonic() + min(GIVE_UP_SECONDS, AT_REST_SECONDS)
-    while not check.done and time.monotonic() < deadline:
-        block = device.read(0.2)
-        if block is not None and len(block):
-            warning = check.update(convert_raw_block(block))
-    if warning:
-        return f"WARN  sensor: {warning}"
-    if check.accel_g is None:
+    verdict = at_rest_verdict(device, min(GIVE_UP_SECONDS, AT_REST_SECONDS))
+    if verdict.warning:
+        return f"WARN  sensor: {verdict.warning}"
+    if verdict.accel_g is None:
         return "at rest   no verdict on |a|: the board moved (it must lie still)"
-    return f"at rest   |a| = {check.accel_g:.3f} g (an LSM6DSOX reads 1 g)"
+    return f"at rest   |a| = {verdict.accel_g:.3f} g (an LSM6DSOX reads 1 g)"
 
 
 def request_board_status(port: str) -> BoardStatus | None:

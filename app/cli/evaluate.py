@@ -40,7 +40,7 @@ from app.core.safe_output import (
 from app.core.version import __version__
 from app.services import simulation
 from drivers.errors import DeviceError, DeviceUrlError
-from drivers.registry import scheme_of
+from drivers.registry import driver_for, scheme_of
 from drivers.replay import recording_path
 
 EVALUATE_DEFAULT_SECONDS = 60.0
@@ -199,12 +199,16 @@ def _recordings_named(item: str) -> list[tuple[Path | None, str]]:
     """(file, label) of each recording ``item`` names, or ``[(None, item)]`` for a sim:// URL."""
     if "://" in item:
         try:
-            scheme = scheme_of(item)
+            scheme_of(item)
         except DeviceUrlError as exc:
             raise CommandError(str(exc)) from None
-        if scheme == "replay":
+        try:
+            driver = driver_for(item)
+        except DeviceError:  # no such driver: it knows nothing
+            driver = None
+        if driver is not None and driver.replayable:
             return [(recording_path(item), item)]
-        if scheme != "sim":
+        if driver is None or not driver.knows_truth:
             raise CommandError(f"{item}: {NOT_EVALUABLE}")
         return [(None, item)]
     if any(c in item for c in GLOB_CHARACTERS) and not Path(item).exists():

@@ -23,7 +23,8 @@ from app.core.filters import FILTERS
 from app.core.recording.errors import RecordingWriteError
 from app.core.recording.sizing import data_rate
 from app.core.safe_output import OutputRefused, check_output
-from app.services.recorder import parse_duration, record_device
+from app.services.health import fault_line
+from app.services.recorder import parse_duration, record_device, warm_up_filters
 from drivers.errors import DeviceError
 from drivers.registry import create_device
 from drivers.replay import recording_path
@@ -146,6 +147,7 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     except OutputRefused as exc:
         _error(str(exc))
         return EXIT_FAILED
+    warm_up_filters(args.record_filter, comparisons)  # before the device streams
     try:
         device = create_device(args.record_device)
         info = device.open()
@@ -154,7 +156,7 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
         return EXIT_USAGE
     if not args.quiet:
         print(f"recording {target.name} at {info.odr_hz:g} Hz: "
-              f"{_data_rate(target, info.odr_hz, getattr(device, 'scheme', '') == 'sim')}",
+              f"{_data_rate(target, info.odr_hz, device.reference_source is not None)}",
               file=sys.stderr, flush=True)
     stop = threading.Event()
 
@@ -174,6 +176,8 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             alarms=AlarmMonitor(alarm_config) if alarm_config.limits else None,
             on_alarms=lambda events: print_crossings(events, out),
             reconnect_timeout_s=reconnect_timeout, on_outage=print_outage,
+            on_faults=lambda events: print_faults(events, out),
+            on_message=print_warning,
         )
     except (DeviceError, RecordingWriteError) as exc:
         _error(str(exc))
@@ -229,6 +233,18 @@ def print_crossings(events: list, out: TextIO) -> None:
     """One line per alarm crossing, as it happens (stdout: they are results, not progress)."""
     for event in events:
         print(event.message(), file=out, flush=True)
+
+
+def print_warning(level: int, text: str) -> None:
+    """A device's warnings and the look-alike check's verdict (stderr, even with --quiet)."""
+    if level >= 2:
+        _error(text)
+
+
+def print_faults(events: list, out: TextIO) -> None:
+    """One line per fault event, as it is declared (stdout, as the alarms' crossings)."""
+    for event in events:
+        print(fault_line(event), file=out, flush=True)
 
 
 def _data_rate(target: Path, odr_hz: float, reference: bool) -> str:

@@ -4,12 +4,11 @@ status, the filter, the board's own messages, the self-test and the fault detect
 from __future__ import annotations
 
 from typing import Any
-from urllib.parse import urlsplit
 
 from app.core.devices import DeviceInfo
 from app.core.filters import FILTERS
 from app.core.self_test import SelfTestReport
-from app.services.devices import is_replay_url
+from app.services.devices import has_simulator_controls, is_replay_url
 from app.services.replay_control import replay_caption
 from app.services.stream_status import StreamStatus
 
@@ -42,7 +41,7 @@ class DeviceEvents:
         window.status_device.setText(
             f"{replay_caption(info) or info.name}  ·  {info.odr_hz:.1f} Hz")
         window.replay_bar.setVisible(is_replay_url(info.url))
-        if urlsplit(info.url).scheme == "sim":
+        if has_simulator_controls(info.url):
             window.simulator_panel.show_url(info.url)
             params = info.extra.get("scenario_params", {})
             if "roll" in params and "pitch" in params:

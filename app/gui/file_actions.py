@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from app.gui import file_dialogs
-from app.services.devices import replay_url
+from app.services.devices import knows_truth_url, replay_url
 from app.services.recording_control import recording_cost
 
 MainWindow = Any
@@ -79,7 +79,7 @@ class FileActions:
         folder = recordings_dir()
         folder.mkdir(parents=True, exist_ok=True)
         name = time.strftime("inclinometer-%Y%m%d-%H%M%S.csv")
-        cost = recording_cost(folder, info.odr_hz, reference=info.url.startswith("sim:"))
+        cost = recording_cost(folder, info.odr_hz, reference=knows_truth_url(info.url))
         path, chosen = file_dialogs.save_file_name(
             window, f"Record to ({cost})", name,
             f"{RECORDING_FILTER};;{COMPRESSED_RECORDING_FILTER}", folder,

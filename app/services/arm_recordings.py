@@ -23,7 +23,8 @@ from app.core.recording.format import (
 )
 from app.core.recording.writer import BASE_COLUMNS, format_table
 from app.core.safe_output import write_output
-from app.core.samples import convert_raw_block
+from app.services.acquisition import Acquisition, Until
+from app.services.connection import Connection
 from drivers.sim.device import SimulatedDevice
 from drivers.sim.options import parse_sim_url
 from drivers.sim.scenarios import Arm
@@ -86,21 +87,17 @@ def _true_axes(scenario: Arm, sensor: int) -> dict[str, list[float]]:
 
 def _record_sensor(device: SimulatedDevice, sensor: int, seconds: float,
                    path: Path, overwrite: bool = False) -> ArmRecording:
-    info = device.open()
+    session = Acquisition(Connection(), detect_faults=False, check_lookalike=False)
+    info = session.attach(device)
     scenario = device.scenario
     assert isinstance(scenario, Arm)
     wanted = math.ceil(seconds * device.odr_hz)
-    blocks = []
-    have = 0
     try:
-        while have < wanted:
-            raw = device.read(1.0)
-            if raw is None:
-                continue
-            blocks.append(convert_raw_block(raw))
-            have += len(raw)
+        blocks = [block.uncalibrated for block in session.stream(Until(samples=wanted), 1.0)]
     finally:
-        device.close()
+        session.close()
+    if session.ended.error is not None:
+        raise session.ended.error
     t = np.concatenate([b.t_s for b in blocks])[:wanted]
     accel = np.concatenate([b.accel_m_s2 for b in blocks])[:wanted]
     gyro = np.concatenate([b.gyro_rad_s for b in blocks])[:wanted]

@@ -15,8 +15,9 @@ from typing import Any
 from app.core.calibration_procedures.profiles import SensorSettings
 from app.core.evaluation import concatenate_blocks
 from app.core.recording.format import to_json_value
-from app.core.samples import SampleBlock, convert_raw_block
-from drivers.errors import DeviceError
+from app.core.samples import SampleBlock
+from app.services.acquisition import Acquisition, Block, Subscriber, Until
+from app.services.connection import Connection
 from drivers.registry import create_device
 
 READ_TIMEOUT_S = 0.5
@@ -55,58 +56,51 @@ def capture_device(
     if not math.isfinite(seconds) or seconds <= 0:
         raise ValueError("--seconds must be a positive number")
     device = create_device(url)
-    info = device.open()
     blocks: list[SampleBlock] = []
-    note = ""
+    session = Acquisition(Connection(), detect_faults=False, check_lookalike=False,
+                          subscribers=[_Capture(blocks, seconds, progress)])
+    info = session.attach(device)
     try:
-        first: float | None = None
-        t_last = math.nan
-        while True:
-            try:
-                raw = device.read(READ_TIMEOUT_S)
-            except DeviceError as exc:
-                held = 0.0 if first is None else t_last - first
-                note = f"the device failed after {held:.1f} s: {exc}"
-                break
-            if raw is None or len(raw) == 0:
-                if getattr(device, "at_end", False):
-                    note = "the source ended"
-                    break
-                continue
-            block = convert_raw_block(raw)
-            if first is None:
-                first = float(block.t_s[0])
-            inside = int((block.t_s < first + seconds).sum())
-            if inside < len(block):
-                blocks.append(_head(block, inside))
-                break
-            blocks.append(block)
-            t_last = float(block.t_s[-1])
-            if progress is not None:
-                progress(min(1.0, (t_last - first) / seconds))
-    except KeyboardInterrupt:
-        note = "interrupted (Ctrl-C): the samples read so far are used"
+        end = session.run(Until(duration_s=seconds), READ_TIMEOUT_S)
     finally:
-        device.close()
+        session.close()
+    note = ""
+    if end.reason == "device":
+        held = 0.0 if end.first_t_s is None or end.last_t_s is None else (
+            end.last_t_s - end.first_t_s)
+        note = f"the device failed after {held:.1f} s: {end.message}"
+    elif end.reason == "end":
+        note = "the source ended"
+    elif end.reason == "interrupted":
+        note = "interrupted (Ctrl-C): the samples read so far are used"
     device_json = to_json_value({name: getattr(info, name, None) for name in (
         "url", "name", "unique_id", "sensor", "odr_hz", "odr_nominal_hz", "accel_fs_g",
         "gyro_fs_dps", "firmware")})
-    unit = getattr(device, "unit_errors", None)
+    unit = device.unit_errors
     return CapturedStream(
         block=concatenate_blocks(blocks),
         settings=SensorSettings(info.odr_hz, info.accel_fs_g, info.gyro_fs_dps,
-                                getattr(info, "sensor", "LSM6DSOX") or "LSM6DSOX"),
+                                info.sensor or "LSM6DSOX"),
         device=device_json,
-        unit_errors=unit.as_dict() if unit is not None and hasattr(unit, "as_dict") else None,
+        unit_errors=None if unit is None else unit.as_dict(),
         note=note,
     )
 
 
-def _head(block: SampleBlock, count: int) -> SampleBlock:
-    ref = block.reference_quat
-    return SampleBlock(
-        t_s=block.t_s[:count], accel_m_s2=block.accel_m_s2[:count],
-        gyro_rad_s=block.gyro_rad_s[:count], temp_degc=block.temp_degc[:count],
-        gap=block.gap[:count], reference_quat=None if ref is None else ref[:count],
-    )
+class _Capture(Subscriber):
+    """Keeps the uncalibrated samples and reports how far the capture is."""
 
+    def __init__(self, blocks: list[SampleBlock], seconds: float,
+                 progress: Callable[[float], None] | None) -> None:
+        self.blocks = blocks
+        self.seconds = seconds
+        self.progress = progress
+        self.first: float | None = None
+
+    def on_block(self, block: Block) -> None:
+        samples = block.uncalibrated
+        self.blocks.append(samples)
+        if self.first is None:
+            self.first = float(samples.t_s[0])
+        if self.progress is not None:
+            self.progress(min(1.0, (float(samples.t_s[-1]) - self.first) / self.seconds))

@@ -21,6 +21,7 @@ from app.core.calibration_procedures import (
 )
 from app.core.devices import DeviceInfo
 from app.core.pipeline import Pipeline
+from drivers.base import Device
 
 
 def sensor_settings(info: DeviceInfo) -> SensorSettings:
@@ -45,7 +46,7 @@ class CalibrationState:
     def tare_reference(self) -> TareReference | None:
         return self.pipeline.level_reference
 
-    def load_for(self, info: DeviceInfo, device: object) -> list[str]:
+    def load_for(self, info: DeviceInfo, device: Device | None) -> list[str]:
         """Apply the profile for a newly connected device and clear the tare.
 
         A replay (a device with ``recorded_calibration``) reproduces its recording: the
@@ -54,7 +55,7 @@ class CalibrationState:
         """
         problems: list[str] = []
         self.notes = []
-        recorded = getattr(device, "recorded_calibration", None)
+        recorded = None if device is None else device.recorded_calibration
         self.unique_id = None if recorded is not None else info.unique_id
         if recorded is not None:
             profile = None if recorded.is_identity else make_profile(

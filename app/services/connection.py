@@ -168,7 +168,7 @@ class Connection:
         """
         plan = self.awaited
         if self._align_time and plan is not None:
-            origin = getattr(self.device, "device_clock_origin_s", None)
+            origin = None if self.device is None else self.device.device_clock_origin_s
             # The board's clock read clock_origin_s + last_t_s at the last sample; a clock that
             # ran on is past it now. (Comparing with the origin alone took a reset board,
             # started as late after power-on as before, for one whose clock ran on: no outage.)
@@ -199,8 +199,8 @@ class Connection:
         device = self.device
         if device is None or not device.supports_self_test:
             raise SelfTestUnavailableError(NO_SELF_TEST)
-        return SelfTestReport.from_result(device.self_test())  # type: ignore[attr-defined]
+        return SelfTestReport.from_result(device.self_test())
 
     def _clock_origin(self, device: Device) -> float | None:
-        origin = getattr(device, "device_clock_origin_s", None)
+        origin = device.device_clock_origin_s
         return None if origin is None else float(origin) - self._time_offset_s

@@ -15,7 +15,7 @@ from urllib.parse import urlencode
 from app.core.devices import DeviceDescriptor
 from drivers import lsm6dsox
 from drivers.errors import DeviceError, DeviceUrlError
-from drivers.registry import DEFAULT_DEVICE_URL, driver_options, scheme_of
+from drivers.registry import DEFAULT_DEVICE_URL, driver_for, driver_options
 from drivers.registry import available_devices as _available_devices
 from drivers.replay import replay_url as _replay_url
 from drivers.sim.options import SimOptions, parse_sim_url
@@ -24,6 +24,7 @@ from drivers.url_options import format_options, option_rows
 __all__ = [
     "DEFAULT_DEVICE_URL", "SENSOR_CHOICES", "SensorChoices", "SimulatorSettings",
     "available_devices", "device_options", "device_options_table", "is_replay_url",
+    "knows_truth_url",
     "option_hints", "replay_url",
 ]
 
@@ -56,8 +57,26 @@ def option_hints(url: str) -> list[dict[str, object]]:
 def is_replay_url(url: str) -> bool:
     """True when ``url`` names a recording to replay (``replay://`` or a bare ``.csv`` path)."""
     try:
-        return scheme_of(url) == "replay"
-    except DeviceUrlError:
+        return driver_for(url).replayable
+    except DeviceError:
+        return False
+
+
+def knows_truth_url(url: str) -> bool:
+    """True when ``url``'s driver delivers a reference orientation (drivers.base
+    ``knows_truth``: a recording then carries the reference columns)."""
+    try:
+        return driver_for(url).knows_truth
+    except DeviceError:
+        return False
+
+
+def has_simulator_controls(url: str) -> bool:
+    """True when ``url``'s driver takes live controls (the simulator panel: drivers.base
+    ``steerable``); whether this device can be tilted now is ``Device.is_steerable``."""
+    try:
+        return driver_for(url).steerable
+    except DeviceError:
         return False
 
 

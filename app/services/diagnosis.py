@@ -3,8 +3,9 @@
 :func:`diagnose_events` yields :class:`~app.core.faults.FaultEvent` s as they are declared
 (for ``--json`` they are printed at once). Recordings are read whole and fed in the blocks
 they were recorded in (``block_start``) or in 0.1 s blocks; devices are opened through the
-driver registry and read until ``seconds`` of device time, with simulators unpaced
-(``realtime=0``) unless the URL says otherwise.
+driver registry and read through the acquisition session until ``seconds`` of device time,
+as fast as the driver can deliver (:meth:`drivers.base.Device.unpaced_url`: a simulator without
+``realtime`` pacing unless the URL says otherwise).
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ from app.core.recording.errors import RecordingError
 from app.core.recording.reader import Recording, read_recording
 from app.core.sample_checks import implausible_message, implausible_rows
 from app.core.samples import RawBlock, convert_raw_block
+from app.services.acquisition import Acquisition, Until, head
+from app.services.connection import Connection
 
 DEFAULT_DEVICE_SECONDS = 10.0
 READ_TIMEOUT_S = 0.5
@@ -59,18 +62,10 @@ def recording_blocks(recording: Recording, seconds: float | None = None) -> Iter
         if n <= 0:
             return
         if len(block) > n:
-            yield _head(block, n)
+            yield head(block, n)
             return
         n -= len(block)
         yield block
-
-
-def _head(block: RawBlock, n: int) -> RawBlock:
-    ref = None if block.reference_quat is None else block.reference_quat[:n]
-    gap = None if block.gap is None else block.gap[:n]
-    mag = None if block.mag_raw is None else block.mag_raw[:n]
-    return RawBlock(block.t_s[:n], block.accel_raw[:n], block.gyro_raw[:n], block.temp_raw[:n],
-                    block.scale, gap, block.lost_samples, ref, mag)
 
 
 def diagnose_events(
@@ -128,35 +123,22 @@ def _account(result: Diagnosis, t: np.ndarray) -> None:
 
 
 def _device_events(url: str, seconds: float, result: Diagnosis) -> Iterator[FaultEvent]:
-    from drivers.registry import create_device, scheme_of
+    from drivers.registry import create_device, driver_class, scheme_of
 
-    if scheme_of(url) == "sim" and "realtime" not in url:
-        url += ("&" if "?" in url else "?") + "realtime=0"
-    device = create_device(url)
-    info = device.open()
+    device = create_device(driver_class(scheme_of(url)).unpaced_url(url))
+    pending: list[FaultEvent] = []
+    session = Acquisition(Connection(), on_events=pending.extend, check_lookalike=False)
+    session.attach(device)
     try:
-        detector: FaultDetector | None = None
-        t0: float | None = None
-        while True:
-            raw = device.read(READ_TIMEOUT_S)
-            if raw is None or len(raw) == 0:
-                if not device.is_open:
-                    return
-                continue
-            if detector is None:
-                detector = FaultDetector(SensorSpec.from_device_info(info, raw.scale))
-                result.detector = detector
-            t0 = float(raw.t_s[0]) if t0 is None else t0
-            if raw.t_s[0] - t0 >= seconds:
-                return
-            keep = int(np.searchsorted(raw.t_s, t0 + seconds, side="left"))
-            block_raw = _head(raw, keep) if keep < len(raw) else raw
-            block = convert_raw_block(block_raw)
-            events = detector.update(block, block_raw)
-            _account(result, block.t_s)
+        for block in session.stream(Until(duration_s=seconds), READ_TIMEOUT_S):
+            result.detector = session.health.detector
+            _account(result, block.raw.t_s)
+            events, pending[:] = list(pending), []
             result.events.extend(events)
             yield from events
-            if keep < len(raw):
-                return
     finally:
-        device.close()
+        session.close()
+    if session.ended.error is not None:
+        raise session.ended.error
+    if session.ended.reason == "interrupted":
+        raise KeyboardInterrupt

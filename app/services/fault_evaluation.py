@@ -34,7 +34,9 @@ from app.core.faults.evaluation import (
 )
 from app.core.faults.events import CHANNELS
 from app.core.recording.reader import read_recording
-from app.core.samples import SampleBlock, convert_raw_block
+from app.core.samples import SampleBlock
+from app.services.acquisition import Acquisition, Until
+from app.services.connection import Connection
 from app.services.diagnosis import recording_spec
 
 SIMULATOR_GROUP = "simulator"
@@ -132,7 +134,8 @@ def resolve_fault_sources(items: Sequence[str]) -> list[FaultSource]:
         For a URL that is not a simulator (a live device cannot be made clean at will), a bad
         simulator URL, a missing file or a glob that matches nothing.
     """
-    from drivers.errors import DeviceUrlError
+    from drivers.errors import DeviceError, DeviceUrlError
+    from drivers.registry import driver_for
     from drivers.sim.options import parse_sim_url
 
     sources: list[FaultSource] = []
@@ -163,7 +166,11 @@ def resolve_fault_sources(items: Sequence[str]) -> list[FaultSource]:
             add_file(Path(item))
             continue
         for url in items_here:
-            if not url.lower().startswith("sim://"):
+            try:
+                simulated = driver_for(url).knows_truth
+            except DeviceError:
+                simulated = False
+            if not simulated:
                 raise ValueError(f"{url}: only simulator URLs (sim://...) and recordings can be "
                                  "swept; a live device cannot be made clean at will")
             try:
@@ -181,24 +188,20 @@ def _simulator_stream(url: str, settings: FaultEvaluationSettings) -> CleanStrea
     from drivers.sim.device import SimulatedDevice
 
     device = SimulatedDevice(url, realtime=False, block=65536)
-    info = device.open()
+    session = Acquisition(Connection(), detect_faults=False, check_lookalike=False)
+    info = session.attach(device)
     blocks: list[SampleBlock] = []
     scale = device.scale
+    wanted = max(1, round(max(settings.clean_seconds, settings.seconds) * device.odr_hz))
     try:
-        wanted = max(1, round(max(settings.clean_seconds, settings.seconds) * device.odr_hz))
-        got = 0
-        while got < wanted:
-            try:
-                raw = device.read(1.0)
-            except DeviceIOError:  # fail_after: the stream ends there
-                break
-            if raw is None or len(raw) == 0:
-                break
-            scale = raw.scale or scale
-            blocks.append(convert_raw_block(raw))
-            got += len(raw)
+        for block in session.stream(Until(samples=wanted), 1.0):
+            scale = block.raw.scale or scale
+            blocks.append(block.uncalibrated)
     finally:
-        device.close()
+        session.close()
+    error = session.ended.error
+    if error is not None and not isinstance(error, DeviceIOError):  # fail_after: the end
+        raise error
     clean = _join(blocks)
     clean = sample_rows(clean, 0, min(len(clean), wanted))
     sweep_n = min(len(clean), max(1, round(settings.seconds * device.odr_hz)))

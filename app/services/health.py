@@ -18,7 +18,7 @@ import numpy as np
 from app.core.devices import DeviceInfo
 from app.core.faults import FaultDetector, FaultEvent, SensorSpec
 from app.core.faults.recording import KEY_FAULT_EVENTS, recorded_fault_events
-from app.core.samples import RawBlock, SampleBlock, convert_raw_block
+from app.core.samples import RawBlock, SampleBlock, ScaleFactors, convert_raw_block
 
 OK_STATE = "ok"
 
@@ -30,9 +30,10 @@ class HealthMonitor:
         self.detector: FaultDetector | None = None
         self._recording: list[FaultEvent] | None = None
 
-    def start(self, info: DeviceInfo) -> None:
-        """A new device: a fresh detector that knows its sensor settings."""
-        self.detector = FaultDetector(SensorSpec.from_device_info(info))
+    def start(self, info: DeviceInfo, scale: ScaleFactors | None = None) -> None:
+        """A new device: a fresh detector that knows its sensor settings (and its raw
+        scale factors, when known)."""
+        self.detector = FaultDetector(SensorSpec.from_device_info(info, scale))
 
     def stop(self) -> None:
         self.detector = None
@@ -69,13 +70,18 @@ class HealthMonitor:
     def begin_recording(self) -> None:
         self._recording = []
 
+    def take_recording(self) -> list[FaultEvent]:
+        """The events since :meth:`begin_recording` (and stop collecting)."""
+        events, self._recording = self._recording or [], None
+        return events
+
     def end_recording(self, path: Path | None, on_error: Callable[[str], None],
                       also: Mapping[str, Any] | None = None) -> int:
         """Store the recording's events into ``path``, with the metadata entries ``also``
         (e.g. the alarms' crossings) in the same rewrite, in a thread: the whole file is
         rewritten, which takes a while for a long one. Returns how many fault events there are.
         """
-        events, self._recording = self._recording or [], None
+        events = self.take_recording()
         changes = dict(also or {})
         if events:
             changes[KEY_FAULT_EVENTS] = [e.as_dict() for e in sorted(events, key=lambda e: e.t)]
@@ -92,6 +98,12 @@ class HealthMonitor:
 
         threading.Thread(target=save, name="save-fault-events", daemon=True).start()
         return len(events)
+
+
+def fault_line(event: FaultEvent) -> str:
+    """One line for the user: ``sensor gz stuck (fault) at 2.01 s: ...``."""
+    return (f"sensor {event.channel} {event.kind} ({event.severity}) at {event.t:.2f} s: "
+            f"{event.message}")
 
 
 def recorded_events_note(metadata: dict) -> str:

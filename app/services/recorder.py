@@ -1,7 +1,9 @@
 """Headless recording: read a device, run the pipeline, write every block (``record`` command).
 
-The loop is what the GUI's worker does, without Qt: ``raw = device.read()``, hand ``raw`` to the
-:class:`~app.core.recording.writer.RecordingWriter`, ``pipeline.process(raw)``. It ends after
+The loop is the window's: the :class:`~app.services.acquisition.Acquisition` session reads the
+device, records every raw block, runs the pipeline, the look-alike check, the alarms and the
+fault detector; fault events and alarm crossings go to ``on_faults`` / ``on_alarms`` as they
+happen and into the file's metadata when it is closed, as the window stores them. It ends after
 ``duration_s`` of device time, when ``stop`` is set, on Ctrl-C (KeyboardInterrupt), when the
 device fails or ends (a replay), or when the writer fails (a full disk); the file is closed
 cleanly in every case and keeps every row written. A board that reports its health (STATUS)
@@ -27,26 +29,21 @@ from pathlib import Path
 from typing import Any
 
 from app.core.alarms import AlarmEvent, AlarmMonitor
-from app.core.alarms.recording import alarm_events_metadata
 from app.core.calibration import SensorCalibration
+from app.core.faults import FaultEvent
 from app.core.filters import DEFAULT_FILTER, create_filter
 from app.core.pipeline import Pipeline, require_online
-from app.core.recording.closing import store_closing_metadata
 from app.core.recording.errors import RecordingWriteError
-from app.core.recording.format import KEY_REFERENCE, recording_metadata, simulator_metadata
-from app.core.recording.writer import RecordingWriter, WriterStatus
+from app.core.recording.writer import WriterStatus
 from app.core.safe_output import OutputLock, OutputRefused, interrupts_held
-from app.core.samples import RawBlock
-from app.services.board_health import KEY_STATUS_END, KEY_STATUS_START
+from app.services.acquisition import Acquisition, Reconnection, RunEnd, Until
 from app.services.connection import Connection
-from drivers.errors import DeviceError, DeviceIOError
 
 READ_TIMEOUT_S = 0.1
 RECONNECT_POLL_S = 0.1
 """How often an unplugged board is looked for (a port listing; cheap)."""
 DEFAULT_RECONNECT_TIMEOUT_S = 300.0
 """How long headless ``record`` waits for an unplugged board by default."""
-SIMULATOR_REFERENCE = "the simulator's true orientation"
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,44 +83,19 @@ class RecordOutcome:
     outages: list[DeviceOutage] = field(default_factory=list)
     """The board's outages, each as reported when it came back (the last one, if it never
     did, with ``back_after_s`` None)."""
+    fault_events: list[FaultEvent] = field(default_factory=list)
+    """The fault detector's events (stored in the file's ``fault_events``)."""
 
 
-def _cut(raw: RawBlock, count: int) -> RawBlock:
-    """The first ``count`` samples of a block."""
-    ref = raw.reference_quat
-    gap = raw.gap
-    return RawBlock(
-        t_s=raw.t_s[:count], accel_raw=raw.accel_raw[:count], gyro_raw=raw.gyro_raw[:count],
-        temp_raw=raw.temp_raw[:count], scale=raw.scale,
-        gap=None if gap is None else gap[:count], lost_samples=raw.lost_samples,
-        reference_quat=None if ref is None else ref[:count],
-        mag_raw=None if raw.mag_raw is None else raw.mag_raw[:count],
-    )
-
-
-def board_status_now(device: Any) -> dict[str, Any] | None:
-    """The board's counters now (asked for when the driver can), as metadata; None for
-    devices without them."""
-    request = getattr(device, "request_status", None)
-    status = None
-    if request is not None:
-        try:
-            status = request()
-        except DeviceError:
-            status = None
-    status = status or getattr(device, "board_status", None)
-    return None if status is None else status.as_dict()
-
-
-def reference_source_of(device: Any) -> str | None:
-    """What a device's reference orientation is, for the metadata (None: it has none)."""
-    if getattr(device, "scheme", "") == "sim":
-        return SIMULATOR_REFERENCE
-    recording = getattr(device, "recording", None)
-    if recording is not None and recording.has_reference:
-        source = recording.metadata.get(KEY_REFERENCE)
-        return source.get("source") if isinstance(source, dict) else "recorded reference"
-    return None
+def warm_up_filters(filter_name: str | None, comparisons: Sequence[str] = ()) -> None:
+    """Load the filters' compiled kernels; call it before the device is opened. The first
+    block would otherwise wait for them (0.3 s from numba's cache, seconds on a cold one or a
+    busy machine) while the sensor's FIFO overflows (benchmarks/soak-results: three of four
+    losses were this). Loaded once per process: a second call costs nothing."""
+    for name in {filter_name or DEFAULT_FILTER, *(comparisons or ())}:
+        with contextlib.suppress(ValueError):  # unknown or offline: refused further on
+            require_online(name)
+            create_filter(name).warm_up()
 
 
 def record_device(
@@ -145,6 +117,8 @@ def record_device(
     on_alarms: Callable[[list[AlarmEvent]], None] | None = None,
     reconnect_timeout_s: float | None = None,
     on_outage: Callable[[DeviceOutage], None] | None = None,
+    on_faults: Callable[[list[FaultEvent]], None] | None = None,
+    on_message: Callable[[int, str], None] | None = None,
 ) -> RecordOutcome:
     """Record ``device`` (a :class:`drivers.base.Device`) into ``path``.
 
@@ -154,19 +128,14 @@ def record_device(
     file cannot be created, and the device's ``DeviceError`` when it cannot be opened.
 
     ``alarms`` watch the filtered angles of every block; ``on_alarms`` gets each block's
-    crossings as they happen, and the file stores them all when it is closed.
+    crossings as they happen, ``on_faults`` the fault detector's events, ``on_message`` the
+    device's messages and the look-alike warning; the file stores the crossings and the
+    events when it is closed.
 
     ``reconnect_timeout_s`` (None: never) is how long an unplugged board is awaited;
     ``on_outage`` hears of it when it is lost and again when it is back.
     """
-    # Load the filters' compiled kernels before the device streams: the first block would
-    # otherwise wait for them (0.3 s from numba's cache, seconds on a cold one) while the
-    # sensor's FIFO overflows (benchmarks/soak-results: three of four losses were this).
-    for name in {pipeline.filter.name if pipeline else filter_name or DEFAULT_FILTER,
-                 *(comparisons or ())}:
-        with contextlib.suppress(ValueError):  # unknown or offline: refused further on
-            require_online(name)
-            create_filter(name).warm_up()
+    warm_up_filters(pipeline.filter.name if pipeline else filter_name, comparisons)
     info = device.open()
     lock = OutputLock(path)
     try:
@@ -176,47 +145,32 @@ def record_device(
             raise RecordingWriteError(str(exc), Path(path)) from None
         if pipeline is None:
             pipeline = Pipeline(info.odr_hz, filter_name or DEFAULT_FILTER)
-        else:
-            pipeline.configure(info.odr_hz)
-            if filter_name is not None and pipeline.filter.name != filter_name:
-                pipeline.set_filter(filter_name)
+        elif filter_name is not None and pipeline.filter.name != filter_name:
+            pipeline.set_filter(filter_name)
         for key, value in (filter_parameters or {}).items():
             pipeline.set_filter_parameter(key, value)
         if comparisons:
             pipeline.set_comparisons(list(comparisons))
         if calibration is not None:
             pipeline.set_calibration(calibration)
-        extra = {**simulator_metadata(device), **(extra_metadata or {})}
-        board_start = board_status_now(device)
-        if board_start is not None:
-            extra[KEY_STATUS_START] = board_start
-        if alarms is not None and alarms.watching:
-            extra["alarms"] = [limit.spec() for limit in alarms.config.enabled]
-            alarms.reset()
-            alarms.begin_recording()
-        metadata = recording_metadata(
-            device=info, calibration=pipeline.calibration, orientation_filter=pipeline.filter,
-            comparison_filters=pipeline.comparisons.values(), note=note,
-            reference_source=reference_source_of(device), extra=extra,
-        )
-        writer = RecordingWriter(path, metadata, overwrite=overwrite, on_flush=on_flush,
-                                 lock=lock)
-        writer.start()
+        session = Acquisition(Connection(), pipeline, on_message=on_message,
+                              on_events=on_faults, alarms=alarms or AlarmMonitor(),
+                              on_alarms=on_alarms)
+        session.attach(device)
+        session.start_recording(path, note, extra=extra_metadata, overwrite=overwrite,
+                                lock=lock, on_flush=on_flush)
     except BaseException:
         lock.release()
         device.close()
         raise
-    connection = Connection()
-    connection.attach(device)
+    session.reconnection = _Reconnect(reconnect_timeout_s, on_outage, info.odr_hz)
     try:
-        return _record_and_close(connection, writer, pipeline, duration_s, stop, alarms,
-                                 on_alarms, _Reconnect(reconnect_timeout_s, on_outage,
-                                                       info.odr_hz))
+        return _record_and_close(session, duration_s, stop)
     finally:
         lock.release()
 
 
-class _Reconnect:
+class _Reconnect(Reconnection):
     """Headless reconnection: the board's outage in progress and the deadline to give up."""
 
     def __init__(self, timeout_s: float | None,
@@ -279,102 +233,35 @@ class _Reconnect:
                 "recorded")
 
 
-def _record_and_close(
-    connection: Connection, writer: RecordingWriter, pipeline: Pipeline,
-    duration_s: float | None, stop: threading.Event | None, alarms: AlarmMonitor | None,
-    on_alarms: Callable[[list[AlarmEvent]], None] | None, reconnect: _Reconnect,
-) -> RecordOutcome:
+def _record_and_close(session: Acquisition, duration_s: float | None,
+                      stop: threading.Event | None) -> RecordOutcome:
     """The recording loop, then the closing: held against Ctrl-C so that the rows, the
-    board's closing counters and the alarm crossings all end up in the file."""
-    reason, message = "stopped", ""
-    first_t: float | None = None
-    last_t: float | None = None
+    board's closing counters, the alarm crossings and the fault events all end up in the
+    file."""
+    reconnect = session.reconnection
+    assert isinstance(reconnect, _Reconnect)
     held: list[int] = []
+    end = RunEnd()
     try:
-        while stop is None or not stop.is_set():
-            device = connection.device
-            if device is None:  # the board was unplugged: look for it
-                if not reconnect.wait(connection, stop):
-                    reason = "lost"
-                    break
-                continue
-            try:
-                raw = device.read(READ_TIMEOUT_S)
-            except DeviceIOError as exc:
-                if reconnect.lost(connection, str(exc), first_t, last_t):
-                    continue
-                reason, message = "device", str(exc)
-                break
-            except DeviceError as exc:
-                reason, message = "device", str(exc)
-                break
-            if raw is None or len(raw) == 0:
-                if getattr(device, "at_end", False):
-                    reason = "end"
-                    break
-                continue
-            connection.continue_time_axis(raw)
-            reconnect.back(float(raw.t_s[0]))
-            if first_t is None:
-                first_t = float(raw.t_s[0])
-            done = False
-            if duration_s is not None:
-                inside = int((raw.t_s < first_t + duration_s).sum())
-                done = inside < len(raw)
-                raw = _cut(raw, inside) if done else raw
-            if len(raw):
-                if not writer.write(raw):
-                    reason, message = "write", writer.status.error or "the recording stopped"
-                    break
-                last_t = float(raw.t_s[-1])
-                pipeline.process(raw)
-                if alarms is not None:
-                    crossings = alarms.update_from_buffer(pipeline.orientation, len(raw))
-                    if crossings and on_alarms is not None:
-                        on_alarms(crossings)
-            if done:
-                reason = "duration"
-                break
-        if writer.status.state == "failed":
-            reason, message = "write", writer.status.error or ""
-    except KeyboardInterrupt:
-        reason = "interrupted"
+        end = session.run(Until(duration_s=duration_s, stop=stop), READ_TIMEOUT_S)
     finally:
         with interrupts_held() as held:
-            device = connection.device
             try:
-                board_end = board_status_now(device) if device and device.is_open else None
+                closed = session.stop_recording()
             finally:
-                status = writer.close()
-                connection.close()
-            crossings = alarms.end_recording() if alarms is not None else []
-            closing: dict[str, Any] = {}
-            if board_end is not None and status.rows_written and status.state != "failed":
-                closing[KEY_STATUS_END] = board_end
-            if crossings and status.rows_written:
-                closing.update(alarm_events_metadata(crossings, alarms.config))  # type: ignore[union-attr]
-            closing_error = _store_closing_metadata(status, closing, crossings)
+                session.close()
+    assert closed is not None
+    status = closed.status
+    reason, message = end.reason, end.message
     if reason == "lost":
         message = reconnect.gave_up(status.rows_written, status.duration_s)
     if status.state == "failed":
         reason, message = "write", status.error or message
     if held and reason in ("stopped", "duration", "end"):
         reason = "interrupted"
-    return RecordOutcome(status, reason, message, pipeline, crossings, closing_error,
-                         bool(held), reconnect.outages)
-
-
-def _store_closing_metadata(status: WriterStatus, closing: dict[str, Any],
-                            crossings: list[AlarmEvent]) -> str:
-    """The closing metadata into the recording (else beside it); "" when stored in it."""
-    what = []
-    if crossings:
-        what.append(f"{len(crossings)} alarm crossings")
-    if KEY_STATUS_END in closing:
-        what.append("the board's closing counters")
-    return store_closing_metadata(
-        status.path, closing, "the " + (" and ".join(what) or "closing metadata"),
-        kept=f"the {status.rows_written} rows ({status.duration_s:.1f} s) were kept")
+    return RecordOutcome(status, reason, message, session.pipeline, closed.alarm_events,
+                         closed.closing_error, bool(held), reconnect.outages,
+                         closed.fault_events)
 
 
 def parse_duration(text: str) -> float:

@@ -9,12 +9,15 @@ from __future__ import annotations
 import shutil
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
+from app.core.calibration import SensorCalibration
 from app.core.pipeline import Pipeline
 from app.core.recording import RecordingWriter, WriterStatus, recording_metadata
+from app.core.recording.format import simulator_metadata
 from app.core.recording.sizing import data_rate
+from app.core.safe_output import OutputLock
 from app.core.samples import RawBlock
-from app.services.recorder import reference_source_of
 from drivers.base import Device
 
 
@@ -35,10 +38,14 @@ class RecordingControl:
     def active(self) -> bool:
         return self._writer is not None
 
-    def start(self, device: Device | None, pipeline: Pipeline, path: str,
-              note: str, extra: dict | None = None) -> WriterStatus:
+    def start(self, device: Device | None, pipeline: Pipeline | None, path: str,
+              note: str, extra: dict | None = None, *, overwrite: bool = False,
+              lock: OutputLock | None = None,
+              on_flush: Callable[[WriterStatus], None] | None = None,
+              calibration: SensorCalibration | None = None) -> WriterStatus:
         """Stop any recording, then record ``device``'s stream to ``path`` (``extra``: more
-        metadata entries, such as the board's counters at the start or the alarms in force).
+        metadata entries, such as the board's counters at the start or the alarms in force;
+        a simulator's truth is added). ``calibration`` is noted when there is no pipeline.
 
         Raises ValueError when no device is connected and
         :class:`~app.core.recording.errors.RecordingError` when the file cannot be started.
@@ -46,22 +53,32 @@ class RecordingControl:
         if device is None or device.info is None:
             raise ValueError("Connect a device before recording.")
         self.stop()
+        filters: dict[str, Any] = {} if pipeline is None else {
+            "calibration": pipeline.calibration, "orientation_filter": pipeline.filter,
+            "comparison_filters": list(pipeline.comparisons.values())}
+        if pipeline is None and calibration is not None:
+            filters["calibration"] = calibration
         metadata = recording_metadata(
-            device=device.info, calibration=pipeline.calibration,
-            orientation_filter=pipeline.filter,
-            comparison_filters=list(pipeline.comparisons.values()), note=note,
-            reference_source=reference_source_of(device), extra=extra,
+            device=device.info, note=note, reference_source=device.reference_source,
+            extra={**simulator_metadata(device), **(extra or {})}, **filters,
         )
-        writer = RecordingWriter(path, metadata, on_error=self._on_error,
-                                 on_flush=self._on_status)
+        writer = RecordingWriter(path, metadata, overwrite=overwrite, on_error=self._on_error,
+                                 on_flush=on_flush or self._on_status, lock=lock)
         writer.start()
         self._writer = writer
         return writer.status
 
-    def write(self, raw: RawBlock) -> None:
-        """Queue a block for the file (nothing when not recording)."""
-        if self._writer is not None:
-            self._writer.write(raw)
+    def write(self, raw: RawBlock) -> bool:
+        """Queue a block for the file (nothing when not recording); False when the recording
+        failed (a full disk: the writer said why through ``on_error``)."""
+        if self._writer is None:
+            return True
+        return self._writer.write(raw) or self._writer.status.state != "failed"
+
+    @property
+    def error(self) -> str:
+        """Why the recording under way failed ("" while it is fine)."""
+        return "" if self._writer is None else self._writer.status.error or ""
 
     def stop(self) -> WriterStatus | None:
         """Finish the recording (everything queued is written and synced); None if none."""

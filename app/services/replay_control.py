@@ -48,7 +48,8 @@ class ReplayState(NamedTuple):
 
 
 def is_replay(device: Device | None) -> bool:
-    return getattr(device, "scheme", "") == "replay"
+    """True for a recording played back as a device (its declared capability)."""
+    return device is not None and device.replayable
 
 
 def replay_position(device: Device | None) -> ReplayState | None:
@@ -141,12 +142,12 @@ class RestoredFilter:
 
 def restore_recorded_filter(device: Device | None, pipeline: Pipeline) -> RestoredFilter:
     """A replay runs the filter (and parameters) it was recorded with, to reproduce it."""
-    recording = getattr(device, "recording", None)
-    name = getattr(recording, "filter_name", None)
-    if not name:
+    recording = None if device is None else device.recording
+    name = None if recording is None else recording.filter_name
+    if not name or recording is None:
         return RestoredFilter(None)
     try:
-        values, dropped = known_parameters(name, recording.filter_parameters)  # type: ignore[union-attr]
+        values, dropped = known_parameters(name, recording.filter_parameters)
         new_filter = pipeline.set_filter(name, **values)
     except (KeyError, ValueError) as exc:
         return RestoredFilter(None, error=f"The recording's filter cannot be restored ({exc}); "
@@ -181,10 +182,10 @@ class OverviewTracker:
 
 def recorded_alarm_marks(device: Device | None) -> tuple[float, ...]:
     """Where the replayed recording's alarms were raised, s from its start (for the overview)."""
-    if not is_replay(device):
+    if device is None or not is_replay(device):
         return ()
-    metadata = getattr(device.recording, "metadata", None) or {}  # type: ignore[union-attr]
-    start = device.start_t_s  # type: ignore[union-attr]
+    metadata = {} if device.recording is None else device.recording.metadata
+    start = device.start_t_s  # type: ignore[attr-defined]
     return tuple(e.t - start for e in recorded_alarm_events(metadata) if e.raised)
 
 

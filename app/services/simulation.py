@@ -15,12 +15,13 @@ from app.core.evaluation import (
     StreamSource,
     calibration_from_unit_errors,
     concatenate_blocks,
-    split_block,
     with_gap,
 )
 from app.core.motion_stats import MotionStats, block_stats
-from app.core.samples import SampleBlock, convert_raw_block
-from drivers.errors import DeviceIOError
+from app.core.samples import SampleBlock
+from app.services.acquisition import Acquisition, Until
+from app.services.connection import Connection
+from drivers.errors import DeviceError, DeviceIOError
 from drivers.sim.device import SimulatedDevice
 from drivers.sim.options import parse_sim_url
 
@@ -40,23 +41,23 @@ def simulator_blocks(
     calibration = (
         calibration_from_unit_errors(device.unit_errors) if compensate else SensorCalibration()
     )
-    device.open()
+    session = Acquisition(Connection(), calibration=calibration, detect_faults=False,
+                          check_lookalike=False)
+    session.attach(device)
     try:
-        remaining = max(1, round(seconds * device.odr_hz))
-        while remaining > 0:
-            try:
-                raw = device.read(1.0)
-            except DeviceIOError:  # fail_after: the stream ends there, as a recording would
-                break
-            if raw is None or len(raw) == 0:
-                break
-            samples = calibration.apply(convert_raw_block(raw))
-            if len(samples) > remaining:
-                samples = next(split_block(samples, remaining))
-            remaining -= len(samples)
-            yield samples
+        for samples in session.stream(Until(samples=max(1, round(seconds * device.odr_hz))),
+                                      1.0):
+            yield samples.samples
     finally:
-        device.close()
+        session.close()
+    _raise_unless_cut(session.ended.error)
+
+
+def _raise_unless_cut(error: DeviceError | None) -> None:
+    """A simulator's ``fail_after`` (DeviceIOError) ends its stream, as a recording would
+    end; any other failure is raised."""
+    if error is not None and not isinstance(error, DeviceIOError):
+        raise error
 
 
 def simulator_source(

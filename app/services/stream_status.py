@@ -6,10 +6,19 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from app.core.devices import BoardStatus
 from app.core.recording.index import Overview
-from app.services.replay_control import ReplayState
+from app.services.replay_control import (
+    OverviewTracker,
+    ReplayState,
+    recorded_alarm_marks,
+    replay_position,
+)
+
+if TYPE_CHECKING:
+    from app.services.acquisition import Acquisition
 
 RATE_WINDOW_S = 2.0
 
@@ -81,3 +90,30 @@ class StatusMeter:
         load = (filter_cpu_s - last_cpu) / max(now - last_time, 1e-9)
         self._last_cpu = (now, filter_cpu_s)
         return rate, load
+
+
+def stream_status(session: Acquisition, meter: StatusMeter,
+                  overviews: OverviewTracker) -> StreamStatus | None:
+    """The status of the session's device now (None without one): rate and load since the
+    last call, a replay's position and, when changed, its overview, the detector's health,
+    the board's new counters and the alarms raised."""
+    device = session.connection.device
+    if device is None or session.pipeline is None:
+        return None
+    counters = session.pipeline.counters
+    rate, load = meter.measure(counters.samples, counters.filter_cpu_s)
+    update = overviews.changed(device)
+    health = session.health.health()
+    latest = session.health.latest_fault() if health and "fault" in health.values() else None
+    return StreamStatus(
+        url=device.url, measured_rate_hz=rate, samples=counters.samples,
+        lost_samples=counters.lost_samples, gaps=counters.gaps, pipeline_load=load,
+        replay=replay_position(device),
+        overview=None if update is None else update[0],
+        gaps_s=None if update is None else update[1],
+        health=health,
+        fault="" if latest is None else f"{latest.channel} {latest.kind}: {latest.message}",
+        board=session.board.take_changed(),
+        alarms=tuple((limit.quantity, limit.spec()) for limit in session.alarms.active()),
+        alarm_marks_s=None if update is None else recorded_alarm_marks(device),
+    )

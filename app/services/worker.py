@@ -1,8 +1,8 @@
 """The device worker: one long-lived QObject on its own QThread that wires the session's parts.
 
 It owns no logic of its own: the :class:`~app.services.connection.Connection` opens, loses and
-finds devices again, the :class:`~app.services.acquisition.Acquisition` moves blocks into the
-pipeline, :class:`~app.services.recording_control.RecordingControl` records,
+finds devices again, the :class:`~app.services.acquisition.Acquisition` session moves blocks
+through every stage and records them (with the closing metadata every consumer stores),
 :mod:`~app.services.replay_control` drives replays and
 :class:`~app.services.calibration_state.CalibrationState` holds the profile and the tare. The
 worker turns GUI requests (queued slots) into calls on them and their outcomes into signals,
@@ -17,7 +17,7 @@ from typing import Any
 
 from PySide6.QtCore import QObject, QTimer, Signal, Slot
 
-from app.core.alarms import AlarmConfig, AlarmMonitor, alarm_events_metadata
+from app.core.alarms import AlarmConfig, AlarmMonitor
 from app.core.calibration_procedures import CalibrationProfile, ProfileStore, TareReference
 from app.core.pipeline import Pipeline
 from app.core.recording import RecordingError
@@ -29,14 +29,11 @@ from app.services.recording_control import RecordingControl
 from app.services.replay_control import (
     OverviewTracker,
     ReplayNotice,
-    is_replay,
-    recorded_alarm_marks,
     recorded_alarms_note,
     replay_command,
-    replay_position,
     restore_recorded_filter,
 )
-from app.services.stream_status import StatusMeter, StreamStatus
+from app.services.stream_status import StatusMeter, stream_status
 from drivers.errors import DeviceError, DeviceIOError
 
 log = logging.getLogger(__name__)
@@ -78,7 +75,8 @@ class DeviceWorker(QObject):
         self.acquisition = Acquisition(self.connection, pipeline, self.recording,
                                        on_message=self.deviceMessage.emit, health=self.health,
                                        on_events=self.faultEvents.emit, alarms=self.alarms,
-                                       on_alarms=self.alarmEvents.emit)
+                                       on_alarms=self.alarmEvents.emit,
+                                       ask_board_status=False)
         self.meter = StatusMeter()
         self.overviews = OverviewTracker()
         self._poll_timer: QTimer | None = None
@@ -138,7 +136,7 @@ class DeviceWorker(QObject):
             self.error.emit(restored.error)
         if restored.orientation_filter is not None:
             self._emit_filter()
-        self.pipeline.configure(info.odr_hz)
+        self.acquisition.begin(info)
         for problem in self.calibration.load_for(info, device):
             self.error.emit(problem)
         for note in self.calibration.notes:
@@ -148,10 +146,8 @@ class DeviceWorker(QObject):
         self.meter.reset(self.pipeline.counters.filter_cpu_s)
         self.overviews.reset()
         self.health.start(info)
-        self.acquisition.board.reset()
-        self.alarms.reset()
-        recorded = (getattr(self.connection.device.recording, "metadata", {})  # type: ignore[union-attr]
-                    if is_replay(self.connection.device) else {})
+        recorded = {} if device is None or device.recording is None else (
+            device.recording.metadata)
         for note in (recorded_events_note(recorded), recorded_alarms_note(recorded)):
             if note:
                 self.deviceMessage.emit(1, note)
@@ -219,10 +215,10 @@ class DeviceWorker(QObject):
     def set_simulator_target(self, roll_deg: float, pitch_deg: float) -> None:
         """Tilt an interactive simulator (ignored by devices that cannot be tilted)."""
         device = self.connection.device
-        if device is None or not getattr(device, "is_interactive", False):
+        if device is None or not device.is_steerable:
             return
         try:
-            device.set_target_attitude(roll_deg, pitch_deg)  # type: ignore[attr-defined]
+            device.set_target_attitude(roll_deg, pitch_deg)
         except DeviceError as exc:
             self.error.emit(str(exc))
 
@@ -245,26 +241,9 @@ class DeviceWorker(QObject):
             self._close_device(message)
 
     def _emit_status(self) -> None:
-        device = self.connection.device
-        if device is None:
-            return
-        counters = self.pipeline.counters
-        rate, load = self.meter.measure(counters.samples, counters.filter_cpu_s)
-        update = self.overviews.changed(device)
-        health = self.health.health()
-        latest = self.health.latest_fault() if health and "fault" in health.values() else None
-        self.status.emit(StreamStatus(
-            url=device.url, measured_rate_hz=rate, samples=counters.samples,
-            lost_samples=counters.lost_samples, gaps=counters.gaps, pipeline_load=load,
-            replay=replay_position(device),
-            overview=None if update is None else update[0],
-            gaps_s=None if update is None else update[1],
-            health=health,
-            fault="" if latest is None else f"{latest.channel} {latest.kind}: {latest.message}",
-            board=self.acquisition.board.take_changed(),
-            alarms=tuple((limit.quantity, limit.spec()) for limit in self.alarms.active()),
-            alarm_marks_s=None if update is None else recorded_alarm_marks(device),
-        ))
+        status = stream_status(self.acquisition, self.meter, self.overviews)
+        if status is not None:
+            self.status.emit(status)
 
     @Slot()
     def reset_health(self) -> None:
@@ -382,35 +361,26 @@ class DeviceWorker(QObject):
             self.error.emit("Connect a device before recording.")
             return
         self.stop_recording()
-        alarms = [limit.spec() for limit in self.alarms.config.enabled]
         try:
-            status = self.recording.start(device, self.pipeline, path, note,
-                                          extra={**self.acquisition.board.start_metadata(),
-                                                 **({"alarms": alarms} if alarms else {})})
+            status = self.acquisition.start_recording(path, note)
         except (ValueError, RecordingError) as exc:
             self.error.emit(str(exc))
             return
-        self.health.begin_recording()
-        self.alarms.begin_recording()
         self.recordingChanged.emit(status)
 
     @Slot()
     def stop_recording(self) -> None:
         """Finish the recording (everything queued is written and synced)."""
-        status = self.recording.stop()
-        if status is not None:
-            self.recordingChanged.emit(None)
-            if status.error:
-                self.error.emit(status.error)
-            crossings = self.alarms.end_recording()
-            also = alarm_events_metadata(crossings, self.alarms.config) if crossings else None
-            stored = self.health.end_recording(status.path if status.rows_written else None,
-                                               self.error.emit,
-                                               {**self.acquisition.board.end_metadata(),
-                                                **(also or {})})
-            if stored:
-                self.deviceMessage.emit(1, f"{stored} fault event(s) stored in "
-                                           f"{status.path.name}")
-            if crossings and status.rows_written:
-                self.deviceMessage.emit(1, f"{len(crossings)} alarm crossing(s) stored in "
-                                           f"{status.path.name}")
+        closed = self.acquisition.stop_recording(background=True, on_error=self.error.emit)
+        if closed is None:
+            return
+        status = closed.status
+        self.recordingChanged.emit(None)
+        if status.error:
+            self.error.emit(status.error)
+        if closed.fault_events:
+            self.deviceMessage.emit(1, f"{len(closed.fault_events)} fault event(s) stored in "
+                                       f"{status.path.name}")
+        if closed.alarm_events and status.rows_written:
+            self.deviceMessage.emit(1, f"{len(closed.alarm_events)} alarm crossing(s) stored in "
+                                       f"{status.path.name}")

@@ -78,6 +78,9 @@ from drivers.sim.scenarios import SCENARIOS, Interactive, Scenario
 from drivers.sim.transient import apply_turn_on_transient
 from drivers.url_options import Option
 
+SIMULATOR_REFERENCE = "the simulator's true orientation"
+"""What a simulator's reference orientation is (a recording's ``reference`` metadata)."""
+
 __all__ = ["SCENARIOS", "SimulatedDevice"]
 
 FIFO_SPAN_S = 1.0
@@ -113,6 +116,8 @@ class SimulatedDevice(Device):
     """
 
     scheme: ClassVar[str] = "sim"
+    steerable: ClassVar[bool] = True
+    knows_truth: ClassVar[bool] = True
     url_options: ClassVar[tuple[Option, ...]] = GENERAL_OPTIONS
 
     @classmethod
@@ -214,6 +219,17 @@ class SimulatedDevice(Device):
             "mag_disturbances": self._magnetometer.world.truth(),
         }
 
+    def truth_metadata(self) -> dict[str, Any]:
+        """The unit's true errors and rate, the injected faults and :attr:`simulator_truth`:
+        what a calibration or a fault detector run on a recording of it should find."""
+        truth: dict[str, Any] = {"unit_errors": self.unit_errors.as_dict(),
+                                 "true_odr_hz": self.true_odr_hz}
+        faults = self.injected_faults
+        if faults:
+            truth["faults"] = list(faults)
+        truth.update(self.simulator_truth)
+        return truth
+
     @property
     def injected_faults(self) -> list[dict[str, object]]:
         """The faults of the URL's ``fault=`` options, as a recording's metadata lists them."""
@@ -223,6 +239,22 @@ class SimulatedDevice(Device):
     def is_interactive(self) -> bool:
         """True when :meth:`set_target_attitude` can move the sensor."""
         return isinstance(self.scenario, Interactive)
+
+    @property
+    def is_steerable(self) -> bool:
+        """The interactive scenario follows :meth:`set_target_attitude` (drivers.base)."""
+        return self.is_interactive
+
+    @property
+    def reference_source(self) -> str:
+        return SIMULATOR_REFERENCE
+
+    @classmethod
+    def unpaced_url(cls, url: str) -> str:
+        """``url`` with ``realtime=0`` unless it says how to pace."""
+        if "realtime" in url:
+            return url
+        return url + ("&" if "?" in url else "?") + "realtime=0"
 
     def set_target_attitude(self, roll_deg: float, pitch_deg: float, yaw_deg: float = 0.0) -> float:
         """Tilt the virtual sensor (``sim://interactive`` only). Thread-safe.

@@ -265,7 +265,7 @@ def recording_metadata(
     if device is not None:
         metadata[KEY_DEVICE] = device_to_json(device)
         metadata[KEY_SENSOR_SETTINGS] = sensor_settings_from_device(device)
-        magnetometer = getattr(device, "magnetometer", None)
+        magnetometer = device.magnetometer  # DeviceInfo.magnetometer
         if magnetometer is not None:
             metadata[KEY_MAGNETOMETER] = magnetometer_to_json(
                 magnetometer, None if calibration is None else calibration.magnetometer)
@@ -302,14 +302,5 @@ def simulator_metadata(device: Any) -> dict[str, Any]:
     """``{"simulator": {...}}`` for a simulated device: its unit's true errors and its URL
     options, so a recording carries what a calibration of it should find. Empty for others.
     """
-    unit_errors = getattr(device, "unit_errors", None)
-    if unit_errors is None or not hasattr(unit_errors, "as_dict"):
-        return {}
-    simulator: dict[str, Any] = {"unit_errors": unit_errors.as_dict(),
-                                 "true_odr_hz": getattr(device, "true_odr_hz", None)}
-    faults = getattr(device, "injected_faults", None)
-    if faults:
-        simulator["faults"] = list(faults)
-    # With a magnetometer: the earth's field and the disturbances' truth (drivers.sim.device).
-    simulator.update(getattr(device, "simulator_truth", None) or {})
-    return {KEY_SIMULATOR: simulator}
+    truth = {} if device is None else device.truth_metadata()  # drivers.base.Device declares it
+    return {KEY_SIMULATOR: truth} if truth else {}
