@@ -22,18 +22,29 @@ order, default 0), ``speed`` I2C clock in Hz (default 400000), ``force=1`` to al
 part answers), ``selftest_fault=1`` (the self-test changes nothing), ``fail_after`` seconds
 (the adapter is pulled), ``part=lsm6dso32`` (a look-alike answering 0x6C whose accelerometer
 ranges are double: it reads half the acceleration).
+
+The magnetometer on the same bus (issue 31): ``mag=lis3mdl|lis2mdl|none`` on ``emulated`` puts
+that emulated chip beside the LSM6DSOX (default none), with the simulator's ``place``, ``date``
+and ``magdist`` and ``mag_fail_after`` seconds (the chip stops acknowledging); on ``mcp2221``
+the driver probes for an LIS3MDL (0x1C, 0x1E) or LIS2MDL (0x1E) (``mag=auto``, the default)
+unless ``mag=none``. A chip found is configured (:mod:`~drivers.lsm6dsox_direct.mag_driver`),
+polled on every FIFO poll, and its samples land as ``RawBlock.mag_raw`` on the first
+accelerometer row at or after their read time on the LSM6DSOX's clock (its TIMESTAMP
+registers, read right after the magnetometer), NaN rows between. If it stops answering, a
+warning says so and the rows stay NaN while the accelerometer streams on.
 """
 
 from __future__ import annotations
 
 import contextlib
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import ClassVar
 from urllib.parse import parse_qsl, urlsplit
 
 import numpy as np
 
+from app.core.devices import DeviceMessage, MagnetometerInfo
 from app.core.samples import RawBlock, ScaleFactors
 from drivers import lsm6dsox
 from drivers.base import Device, DeviceDescriptor, DeviceInfo
@@ -45,9 +56,11 @@ from drivers.errors import (
     DeviceUrlError,
 )
 from drivers.lsm6dsox_direct import mcp2221
+from drivers.lsm6dsox_direct import registers as reg
 from drivers.lsm6dsox_direct.bus import I2CBus
 from drivers.lsm6dsox_direct.driver import Lsm6dsoxDriver, SelfTestResult, StreamSettings
 from drivers.lsm6dsox_direct.fifo import DecodedSamples
+from drivers.lsm6dsox_direct.mag_driver import MagnetometerDriver
 from drivers.sim.error_model import unique_id_for_seed
 from drivers.sim.options import SimOptions, parse_sim_url
 
@@ -84,6 +97,11 @@ class DirectOptions:
     fail_after_s: float | None = None
     part: str = "LSM6DSOX"
     """The emulated part (``EmulatedLsm6dsox.PART_ACCEL_RANGE_FACTOR``)."""
+    mag: str = "none"
+    """The magnetometer: ``none``, ``auto`` (probe; mcp2221), ``lis3mdl`` or ``lis2mdl``
+    (emulated)."""
+    mag_fail_after_s: float | None = None
+    """Emulated: the magnetometer stops acknowledging after this many seconds."""
 
 
 def _fail(url: str, message: str) -> DeviceUrlError:
@@ -119,6 +137,33 @@ def _positive(url: str, key: str, text: str) -> float:
     return value
 
 
+# -- the magnetometer option (issue 31): this block and its one call in parse_lsm6dsox_url --------
+MAG_WORDS = {"emulated": ("none", "lis3mdl", "lis2mdl"), "mcp2221": ("auto", "none")}
+"""``mag=`` values per bus; the first is the default."""
+
+
+def _magnetometer_options(url: str, bus: str, raw: dict[str, str]) -> dict[str, object]:
+    """``mag`` (and, emulated, ``mag_fail_after``). On ``mcp2221`` the keys are taken out of
+    ``raw``; on ``emulated`` ``mag`` stays for the simulator's parser (``place``, ``date`` and
+    ``magdist`` need it there)."""
+    if "mag_odr" in raw:
+        raise _fail(url, "mag_odr is for sim:// only; the direct driver picks the "
+                         "magnetometer's rate from what the bus can poll")
+    word = raw.get("mag", MAG_WORDS[bus][0]).lower()
+    if word not in MAG_WORDS[bus]:
+        raise _fail(url, f"mag={raw['mag'][:40]!r}: on lsm6dsox://{bus} use "
+                         f"{' or '.join(MAG_WORDS[bus])}")
+    options: dict[str, object] = {"mag": word}
+    if bus == "mcp2221":
+        raw.pop("mag", None)
+    if "mag_fail_after" in raw:
+        if bus != "emulated" or word == "none":
+            raise _fail(url, "mag_fail_after needs an emulated magnetometer (mag=lis3mdl or "
+                             "lis2mdl on lsm6dsox://emulated)")
+        options["mag_fail_after_s"] = _positive(url, "mag_fail_after", raw.pop("mag_fail_after"))
+    return options
+
+
 def parse_lsm6dsox_url(url: str, overrides: dict[str, object] | None = None) -> DirectOptions:
     """Validate an ``lsm6dsox://BUS?options`` URL (``overrides`` win over the query)."""
     parts = urlsplit(url)
@@ -140,6 +185,7 @@ def parse_lsm6dsox_url(url: str, overrides: dict[str, object] | None = None) -> 
             raise _fail(url, f"option {key!r} needs a value ({key}=...)")
 
     options: dict[str, object] = {"bus": bus}
+    options.update(_magnetometer_options(url, bus, raw))  # the magnetometer (issue 31)
     if "odr" in raw:
         odr = _positive(url, "odr", raw["odr"])
         problem = lsm6dsox.odr_problem(odr)
@@ -233,6 +279,9 @@ class Lsm6dsoxDirectDevice(Device):
         self._given_bus = bus
         self._bus: I2CBus | None = None
         self._driver: Lsm6dsoxDriver | None = None
+        self._mag: MagnetometerDriver | None = None
+        self._mag_pending: list[tuple[float, np.ndarray]] = []
+        self._messages: list[DeviceMessage] = []
         self._scale = ScaleFactors(
             accel_m_s2_per_lsb=lsm6dsox.accel_m_s2_per_lsb(self.options.accel_fs_g),
             gyro_rad_s_per_lsb=lsm6dsox.gyro_rad_s_per_lsb(self.options.gyro_fs_dps),
@@ -251,6 +300,15 @@ class Lsm6dsoxDirectDevice(Device):
     def bus(self) -> I2CBus | None:
         """The I2C bus while open."""
         return self._bus
+
+    @property
+    def magnetometer(self) -> MagnetometerDriver | None:
+        """The magnetometer's driver while open and found (None after it failed)."""
+        return self._mag
+
+    def take_messages(self) -> list[DeviceMessage]:
+        messages, self._messages = self._messages, []
+        return messages
 
     @property
     def settings(self) -> StreamSettings | None:
@@ -314,6 +372,7 @@ class Lsm6dsoxDirectDevice(Device):
         self._bus, self._driver = bus, driver
         self._reset_timeline()
         self._poll_interval_s = max(bus.min_poll_interval_s, min(0.05, 32.0 / settings.odr_hz))
+        mag_info = self._open_magnetometer(bus)
         return DeviceInfo(
             url=self.url,
             name=self._name(bus),
@@ -330,8 +389,33 @@ class Lsm6dsoxDirectDevice(Device):
                 "freq_fine": settings.freq_fine,
                 "tick_s": settings.tick_s,
                 "configuration": [[r, v] for r, v in settings.sequence],
+                **({"mag_configuration": [[r, v] for r, v in self._mag.settings.sequence]}
+                   if self._mag is not None and self._mag.settings is not None else {}),
             },
+            magnetometer=mag_info,
         )
+
+    def _open_magnetometer(self, bus: I2CBus) -> MagnetometerInfo | None:
+        """Probe for a magnetometer (unless ``mag=none``) and set it up at the fastest rate at
+        or below half the poll rate; None when none answers (the stream has no mag columns)."""
+        self._mag = None
+        self._mag_pending = []
+        self._scale = replace(self._scale, mag_ut_per_lsb=1.0)
+        if self.options.mag == "none":
+            return None
+        mag = MagnetometerDriver.probe(bus, label=self.url)
+        if mag is None:
+            return None
+        try:
+            # At most half the poll rate: at least two polls per field sample, so none is
+            # overwritten unread (ZYXOR) when the chip's own clock runs a little fast.
+            settings = mag.configure(0.5 / self._poll_interval_s)
+        except DeviceIOError as exc:
+            self._messages.append(DeviceMessage(2, f"{exc}; streaming without it"))
+            return None
+        self._mag = mag
+        self._scale = replace(self._scale, mag_ut_per_lsb=settings.ut_per_lsb)
+        return settings.info()
 
     def _read(self, timeout_s: float) -> RawBlock | None:
         driver, bus = self._driver, self._bus
@@ -339,6 +423,7 @@ class Lsm6dsoxDirectDevice(Device):
         try:
             deadline = bus.monotonic() + max(0.0, timeout_s)
             while True:
+                self._poll_magnetometer(driver)
                 decoded = driver.poll()
                 if decoded is not None:
                     return self._block(decoded, driver, bus)
@@ -356,6 +441,10 @@ class Lsm6dsoxDirectDevice(Device):
             return
         with contextlib.suppress(DeviceError):  # unplugged: nothing left to switch off
             driver.stop()
+        mag, self._mag = self._mag, None
+        if mag is not None:
+            with contextlib.suppress(DeviceError):
+                mag.stop()
         if bus is not self._given_bus:
             bus.close()
 
@@ -366,11 +455,16 @@ class Lsm6dsoxDirectDevice(Device):
             return mcp2221.Mcp2221Bus(serial=opts.serial, index=opts.index, speed_hz=opts.speed_hz)
         from drivers.lsm6dsox_direct.emulated_chip import EmulatedLsm6dsox
 
-        return EmulatedLsm6dsox(
+        chip = EmulatedLsm6dsox(
             opts.sim, address=opts.address, who_am_i=opts.who_am_i,
             self_test_working=not opts.selftest_fault, fail_after_s=opts.fail_after_s,
             part=opts.part,
         )
+        if opts.mag == "none":
+            return chip
+        from drivers.lsm6dsox_direct.emulated_mag import make_emulated_bus
+
+        return make_emulated_bus(chip, opts.mag.upper(), fail_after_s=opts.mag_fail_after_s)
 
     def _name(self, bus: I2CBus) -> str:
         if self.options.bus == "emulated":
@@ -384,6 +478,43 @@ class Lsm6dsoxDirectDevice(Device):
             return "EMU-" + unique_id_for_seed(sim.seed)[4:]
         serial = getattr(bus, "serial", "") or f"index{self.options.index}"
         return f"MCP2221A-{serial}-0x{self.options.address:02X}"
+
+    def _poll_magnetometer(self, driver: Lsm6dsoxDriver) -> None:
+        """Read a new field sample, if the chip has one, and the LSM6DSOX's timestamp right
+        after it: the sample waits in ``_mag_pending`` for the first row at or after that time.
+        A magnetometer that stops answering is reported once and dropped; the accelerometer
+        streams on (its rows' field is NaN)."""
+        mag = self._mag
+        if mag is None or driver.decoder is None:
+            return
+        try:
+            counts = mag.poll()
+        except DeviceIOError as exc:
+            self._mag = None
+            self._messages.append(DeviceMessage(
+                2, f"the magnetometer stopped answering ({exc}); the field is NaN from here "
+                   "while the accelerometer streams on"))
+            return
+        if counts is None:
+            return
+        raw_ticks = int.from_bytes(driver.read(reg.TIMESTAMP0, 4), "little")
+        self._mag_pending.append((driver.decoder.unwrap_ticks(raw_ticks), counts))
+
+    def _place_magnetometer(self, ticks: np.ndarray) -> np.ndarray | None:
+        """(N, 3) ``mag_raw`` for rows at ``ticks``: each pending sample on the first row at
+        or after its read time (the newest wins a row), NaN elsewhere; later ones wait."""
+        if self.info is None or self.info.magnetometer is None:
+            return None
+        out = np.full((len(ticks), 3), np.nan)
+        waiting = []
+        for read_ticks, counts in self._mag_pending:
+            row = int(np.searchsorted(ticks, read_ticks, side="left"))
+            if row < len(ticks):
+                out[row] = counts
+            else:
+                waiting.append((read_ticks, counts))
+        self._mag_pending = waiting
+        return out
 
     def _reset_timeline(self) -> None:
         self._origin_ticks: float | None = None
@@ -403,6 +534,7 @@ class Lsm6dsoxDirectDevice(Device):
             self._time_offset_s = self._last_t_s + paused_s + settling / settings.odr_hz
             self._pending_lost = max(0, round(paused_s * settings.odr_hz) - 1) + settling
             self._origin_ticks = None
+        self._mag_pending = []  # their ticks were on the clock the reset restarted
 
     def _block(self, decoded: DecodedSamples, driver: Lsm6dsoxDriver, bus: I2CBus) -> RawBlock:
         settings = driver.settings
@@ -423,4 +555,5 @@ class Lsm6dsoxDirectDevice(Device):
             scale=self._scale,
             gap=lost > 0,
             lost_samples=int(np.sum(lost)),
+            mag_raw=self._place_magnetometer(decoded.ticks),
         )
