@@ -121,8 +121,15 @@ class EmulatedMagnetometer:
         """The nominal output rate the registers set (0 when not converting)."""
         return self._rate_nominal_hz if self._running else 0.0
 
+    @property
+    def samples_converted(self) -> int:
+        """Samples converted since continuous mode (or the rate) was last written."""
+        self._advance()
+        return self._produced
+
     def truth(self) -> dict[str, np.ndarray]:
-        """Every sample converted so far: ``t_true_s`` (since the bus's power-on),
+        """Every sample converted so far (of a long unread stretch only the newest 64, which
+        is all a reader could see): ``t_true_s`` (since the bus's power-on),
         ``field_sensor_ut`` (the true field in the accelerometer's frame) and ``raw`` (counts)."""
         if not self._truth:
             return {}
