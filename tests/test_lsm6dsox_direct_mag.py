@@ -309,3 +309,22 @@ def test_the_emulated_url_puts_the_chip_on_the_bus() -> None:
     assert math.isclose(bus.monotonic(), bus.lsm6dsox.monotonic())
     plain = Lsm6dsoxDirectDevice("lsm6dsox://emulated?seed=3")._make_bus()
     assert isinstance(plain, EmulatedLsm6dsox)
+
+
+def test_the_field_goes_on_after_a_self_test() -> None:
+    bus, _ = make_bus("LIS3MDL", ideal=True)
+    device, before = stream(bus, "mag=lis3mdl", 1.5)
+    assert device.info is not None and "LIS3MDL" in device.info.name
+    assert device.self_test().passed
+    after: list[RawBlock] = []
+    stop = bus.monotonic() + 1.5
+    while bus.monotonic() < stop:
+        block = device.read(0.1)
+        if block is not None:
+            after.append(block)
+    for blocks in (before, after):
+        t_s, mag_raw = joined(blocks, "t_s"), joined(blocks, "mag_raw")
+        count = np.count_nonzero(~np.isnan(mag_raw[:, 0]))
+        assert abs(count - 10.0 * (t_s[-1] - t_s[0])) <= 3  # 10 Hz on either side
+    assert joined(after, "t_s")[0] > joined(before, "t_s")[-1]
+    device.close()

@@ -469,7 +469,9 @@ class Lsm6dsoxDirectDevice(Device):
     def _name(self, bus: I2CBus) -> str:
         if self.options.bus == "emulated":
             sim = getattr(bus, "sim", self.options.sim)
-            return f"Emulated LSM6DSOX, register level ({sim.scenario})"
+            mag = getattr(bus, "magnetometer", None)
+            chips = "LSM6DSOX" + (f" + {mag.part}" if mag is not None else "")
+            return f"Emulated {chips}, register level ({sim.scenario})"
         return f"LSM6DSOX at 0x{self.options.address:02X} on {bus.description}"
 
     def _unique_id(self, bus: I2CBus) -> str:
