@@ -214,7 +214,7 @@ def test_the_driver_finds_the_chip_and_delivers_the_wmm_field(part: str) -> None
     mag_raw = joined(blocks, "mag_raw")
     accel_raw = joined(blocks, "accel_raw")
     # The rows are the LSM6DSOX's newest batched samples: their true times from its truth.
-    lsm_truth = bus.lsm6dsox.truth()  # type: ignore[attr-defined]
+    lsm_truth = bus.lsm6dsox.truth()
     n = len(accel_raw)
     assert np.array_equal(lsm_truth["accel_raw"][-n:], accel_raw)
     t_rows = lsm_truth["t_true_s"][-n:]
@@ -243,7 +243,7 @@ def test_the_driver_finds_the_chip_and_delivers_the_wmm_field(part: str) -> None
     cos = np.sum(accel * mag_ut, axis=1) / np.linalg.norm(accel, axis=1) / np.linalg.norm(
         mag_ut, axis=1)
     assert np.allclose(np.degrees(np.arccos(cos)), 90.0 + field.dip_deg, atol=0.5)
-    expected = quat.rotate_inverse(bus.lsm6dsox.scenario.orientation(  # type: ignore[attr-defined]
+    expected = quat.rotate_inverse(bus.lsm6dsox.scenario.orientation(
         truth["t_true_s"]), np.broadcast_to(field.enu_magnetic_ut(), (len(truth["raw"]), 3)))
     assert np.allclose(truth["raw"] * info.magnetometer.ut_per_lsb, expected,
                        atol=info.magnetometer.ut_per_lsb)

@@ -43,6 +43,7 @@ from app.core.earth_field import DEFAULT_PLACE, earth_field
 from drivers.errors import DeviceIOError
 from drivers.lsm6dsox_direct import mag_registers as mreg
 from drivers.lsm6dsox_direct.bus import I2CBus
+from drivers.lsm6dsox_direct.emulated_chip import EmulatedLsm6dsox
 from drivers.sim.error_model import MagnetometerErrors
 from drivers.sim.magnetometer import MAG_CHIPS, MagneticWorld, SimulatedMagnetometer
 from drivers.sim.options import SimOptions
@@ -306,23 +307,24 @@ class EmulatedBus(I2CBus):
     max_read_bytes = 65535
     description = "emulated I2C bus"
 
-    def __init__(self, lsm6dsox: I2CBus, *others: EmulatedMagnetometer) -> None:
+    def __init__(self, lsm6dsox: EmulatedLsm6dsox, *others: EmulatedMagnetometer) -> None:
         self.lsm6dsox = lsm6dsox
         self.others = others
-        self.targets: dict[int, I2CBus | EmulatedMagnetometer] = {lsm6dsox.address: lsm6dsox}  # type: ignore[attr-defined]
+        self.targets: dict[int, EmulatedLsm6dsox | EmulatedMagnetometer] = {
+            lsm6dsox.address: lsm6dsox}
         for target in others:
             if target.address in self.targets:
                 raise ValueError(f"two emulated chips at I2C address 0x{target.address:02X}")
             self.targets[target.address] = target
-        self.sim = getattr(lsm6dsox, "sim", None)
+        self.sim = lsm6dsox.sim
 
     @property
     def magnetometer(self) -> EmulatedMagnetometer | None:
         """The first emulated magnetometer on the bus, if any."""
         return next(iter(self.others), None)
 
-    def _target(self, address: int) -> I2CBus | EmulatedMagnetometer:
-        self.lsm6dsox.check_adapter()  # type: ignore[attr-defined]
+    def _target(self, address: int) -> EmulatedLsm6dsox | EmulatedMagnetometer:
+        self.lsm6dsox.check_adapter()
         target = self.targets.get(address)
         if target is None:
             raise DeviceIOError(f"no ACK from I2C address 0x{address:02X}: nothing answers there")
@@ -344,15 +346,15 @@ class EmulatedBus(I2CBus):
         self.lsm6dsox.delay(seconds)
 
 
-def make_emulated_bus(lsm6dsox: I2CBus, part: str | None, *, address: int | None = None,
+def make_emulated_bus(lsm6dsox: EmulatedLsm6dsox, part: str | None, *, address: int | None = None,
                       record_truth: bool = False, fail_after_s: float | None = None
                       ) -> EmulatedBus:
-    """An :class:`EmulatedBus` with ``lsm6dsox`` (an ``EmulatedLsm6dsox``) and, unless ``part``
+    """An :class:`EmulatedBus` with ``lsm6dsox`` and, unless ``part``
     is None, an emulated magnetometer that shares its clock, power-on time and scenario."""
     chips = []
     if part is not None:
         chips.append(EmulatedMagnetometer(
-            part, lsm6dsox.sim, lsm6dsox.scenario, lsm6dsox.monotonic,  # type: ignore[attr-defined]
-            lsm6dsox.power_on_s, address=address, record_truth=record_truth,  # type: ignore[attr-defined]
+            part, lsm6dsox.sim, lsm6dsox.scenario, lsm6dsox.monotonic,
+            lsm6dsox.power_on_s, address=address, record_truth=record_truth,
             fail_after_s=fail_after_s))
     return EmulatedBus(lsm6dsox, *chips)
