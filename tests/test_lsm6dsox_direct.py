@@ -498,3 +498,45 @@ def test_mcp2221_errors_become_messages(monkeypatch: pytest.MonkeyPatch) -> None
     bus.close()
     with pytest.raises(DeviceIOError, match="closed"):
         bus.read_registers(0x6A, reg.WHO_AM_I, 1)
+
+
+@pytest.mark.parametrize("part", ["LIS3MDL", "LIS2MDL", None])
+def test_mcp2221_probes_for_a_magnetometer_on_its_bus(
+        monkeypatch: pytest.MonkeyPatch, part: str | None) -> None:
+    from drivers.lsm6dsox_direct import mag_registers as mreg
+    from drivers.lsm6dsox_direct.emulated_mag import make_emulated_bus
+
+    bus = make_emulated_bus(EmulatedLsm6dsox(SimOptions("static")), part)
+    library = fake_easymcp2221(bus)  # type: ignore[arg-type]
+    monkeypatch.setattr(mcp2221, "import_library", lambda: library)
+    device = create_device("lsm6dsox://mcp2221?odr=104")
+    info = device.open()
+    device.close()
+    others = [c for c in library.calls if c[0] == "I2C_write" and c[1] != 0x6A]
+    if part is None:  # nothing answers: the stream is as before
+        assert info.magnetometer is None
+        assert {c[1] for c in others} == {0x1C, 0x1E}
+        return
+    assert info.magnetometer is not None and info.magnetometer.path == "bus"
+    assert (info.magnetometer.chip, info.magnetometer.address) == (part, bus.magnetometer.address)
+    writes = [(c[2][0], c[2][1]) for c in others if c[3] == "regular"]
+    rate = info.magnetometer.odr_hz
+    if part == "LIS3MDL":
+        expected = [(mreg.LIS3MDL_CTRL_REG2, mreg.LIS3MDL_SOFT_RST),
+                    *mreg.lis3mdl_sequence(rate), (mreg.LIS3MDL_CTRL_REG3, 0x03)]
+    else:
+        expected = [(mreg.LIS2MDL_CFG_REG_A, mreg.LIS2MDL_SOFT_RST),
+                    *mreg.lis2mdl_sequence(rate), (mreg.LIS2MDL_CFG_REG_A, 0x03)]
+    assert writes == expected  # reset, configuration, and power-down at close
+
+
+def test_mcp2221_mag_none_leaves_the_bus_alone(monkeypatch: pytest.MonkeyPatch) -> None:
+    from drivers.lsm6dsox_direct.emulated_mag import make_emulated_bus
+
+    bus = make_emulated_bus(EmulatedLsm6dsox(SimOptions("static")), "LIS3MDL")
+    library = fake_easymcp2221(bus)  # type: ignore[arg-type]
+    monkeypatch.setattr(mcp2221, "import_library", lambda: library)
+    device = create_device("lsm6dsox://mcp2221?odr=104&mag=none")
+    assert device.open().magnetometer is None
+    device.close()
+    assert {c[1] for c in library.calls if c[0] in ("I2C_write", "I2C_read")} == {0x6A}

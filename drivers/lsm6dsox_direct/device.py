@@ -22,6 +22,16 @@ order, default 0), ``speed`` I2C clock in Hz (default 400000), ``force=1`` to al
 part answers), ``selftest_fault=1`` (the self-test changes nothing), ``fail_after`` seconds
 (the adapter is pulled), ``part=lsm6dso32`` (a look-alike answering 0x6C whose accelerometer
 ranges are double: it reads half the acceleration).
+
+The magnetometer on the same bus (issue 31): ``mag=lis3mdl|lis2mdl|none`` on ``emulated`` puts
+that emulated chip beside the LSM6DSOX (default none), with the simulator's ``place``, ``date``
+and ``magdist`` and ``mag_fail_after`` seconds (the chip stops acknowledging); on ``mcp2221``
+the driver probes for an LIS3MDL (0x1C, 0x1E) or LIS2MDL (0x1E) (``mag=auto``, the default)
+unless ``mag=none``. A chip found is configured (:mod:`~drivers.lsm6dsox_direct.mag_driver`),
+polled on every FIFO poll, and its samples land as ``RawBlock.mag_raw`` on the first
+accelerometer row at or after their read time on the LSM6DSOX's clock (its TIMESTAMP
+registers, read right after the magnetometer), NaN rows between. If it stops answering, a
+warning says so and the rows stay NaN while the accelerometer streams on.
 """
 
 from __future__ import annotations
@@ -33,6 +43,7 @@ from urllib.parse import parse_qsl, urlsplit
 
 import numpy as np
 
+from app.core.devices import DeviceMessage, MagnetometerInfo
 from app.core.samples import RawBlock, ScaleFactors
 from drivers import lsm6dsox
 from drivers.base import Device, DeviceDescriptor, DeviceInfo
@@ -44,9 +55,11 @@ from drivers.errors import (
     DeviceUrlError,
 )
 from drivers.lsm6dsox_direct import mcp2221
+from drivers.lsm6dsox_direct import registers as reg
 from drivers.lsm6dsox_direct.bus import I2CBus
 from drivers.lsm6dsox_direct.driver import Lsm6dsoxDriver, SelfTestResult, StreamSettings
 from drivers.lsm6dsox_direct.fifo import DecodedSamples
+from drivers.lsm6dsox_direct.mag_driver import MagnetometerDriver
 from drivers.sim.error_model import unique_id_for_seed
 from drivers.sim.options import SimOptions, parse_sim_url
 from drivers.sim.options import options_for_url as sim_options_for_url
@@ -90,6 +103,9 @@ MCP2221_OPTIONS: tuple[Option, ...] = (
            maximum=400_000, field="speed_hz", help="mcp2221: I2C clock"),
     Option("force", "flag", False,
            help=f"mcp2221: 1 allows an odr above {mcp2221.MAX_ODR_HZ:g} Hz (expect gaps)"),
+    Option("mag", "choice", "auto", choices=("auto", "none"),
+           help="mcp2221: auto probes the bus for an LIS3MDL (0x1C, 0x1E) or an LIS2MDL (0x1E) "
+                "and streams it; none leaves the bus alone"),
 )
 """Options of ``lsm6dsox://mcp2221``."""
 EMULATED_OWN_OPTIONS: tuple[Option, ...] = (
@@ -104,6 +120,8 @@ EMULATED_OWN_OPTIONS: tuple[Option, ...] = (
     Option("part", "choice", "LSM6DSOX", choices=("lsm6dsox", "lsm6dso32"), parse=_part,
            help="emulated: lsm6dso32 is a look-alike answering 0x6C whose accelerometer ranges "
                 "are double"),
+    Option("mag_fail_after", "number", None, unit="s", positive=True, field="mag_fail_after_s",
+           help="emulated: seconds after which the magnetometer stops acknowledging"),
 )
 """Options of ``lsm6dsox://emulated`` beside the simulator's."""
 
@@ -127,6 +145,11 @@ class DirectOptions:
     fail_after_s: float | None = None
     part: str = "LSM6DSOX"
     """The emulated part (``EmulatedLsm6dsox.PART_ACCEL_RANGE_FACTOR``)."""
+    mag: str = "auto"
+    """The magnetometer: ``none``, ``auto`` (probe; mcp2221), ``lis3mdl`` or ``lis2mdl``
+    (emulated)."""
+    mag_fail_after_s: float | None = None
+    """Emulated: the magnetometer stops acknowledging after this many seconds."""
 
 
 def parse_lsm6dsox_url(url: str, overrides: dict[str, object] | None = None) -> DirectOptions:
@@ -157,6 +180,12 @@ def parse_lsm6dsox_url(url: str, overrides: dict[str, object] | None = None) -> 
         if key in sim_options:
             raise url_error(url, f"option {key!r} is for sim:// only; the emulated chip is "
                                  "paced by the clock")
+    if "mag_odr" in sim_options:
+        raise url_error(url, "mag_odr is for sim:// only; the direct driver picks the "
+                             "magnetometer's rate from what the bus can poll")
+    # The emulated magnetometer on the bus: only when the URL asks (a scenario's own chip,
+    # sim://magtour's, stays off the bus unless mag= says so).
+    sim_options.setdefault("mag", "none")
     values = parsed.values
     scenario = values.pop("scenario", DEFAULT_EMULATED_SCENARIO)
     try:
@@ -164,6 +193,10 @@ def parse_lsm6dsox_url(url: str, overrides: dict[str, object] | None = None) -> 
     except DeviceUrlError as exc:
         accepted = ", ".join(o.name for o in COMMON_OPTIONS + EMULATED_OWN_OPTIONS)
         raise url_error(url, f"{exc} (lsm6dsox://emulated also accepts {accepted})") from None
+    values["mag"] = values["sim"].mag or "none"  # type: ignore[attr-defined]
+    if values.get("mag_fail_after_s") is not None and values["mag"] == "none":
+        raise url_error(url, "mag_fail_after needs an emulated magnetometer (mag=lis3mdl or "
+                             "lis2mdl on lsm6dsox://emulated)")
     return DirectOptions(bus, **values)  # type: ignore[arg-type]
 
 
@@ -205,6 +238,9 @@ class Lsm6dsoxDirectDevice(Device):
         self._given_bus = bus
         self._bus: I2CBus | None = None
         self._driver: Lsm6dsoxDriver | None = None
+        self._mag: MagnetometerDriver | None = None
+        self._mag_pending: list[tuple[float, np.ndarray]] = []
+        self._messages: list[DeviceMessage] = []
         self._scale = ScaleFactors(
             accel_m_s2_per_lsb=lsm6dsox.accel_m_s2_per_lsb(self.options.accel_fs_g),
             gyro_rad_s_per_lsb=lsm6dsox.gyro_rad_s_per_lsb(self.options.gyro_fs_dps),
@@ -223,6 +259,15 @@ class Lsm6dsoxDirectDevice(Device):
     def bus(self) -> I2CBus | None:
         """The I2C bus while open."""
         return self._bus
+
+    @property
+    def magnetometer(self) -> MagnetometerDriver | None:
+        """The magnetometer's driver while open and found (None after it failed)."""
+        return self._mag
+
+    def take_messages(self) -> list[DeviceMessage]:
+        messages, self._messages = self._messages, []
+        return messages
 
     @property
     def settings(self) -> StreamSettings | None:
@@ -286,6 +331,7 @@ class Lsm6dsoxDirectDevice(Device):
         self._bus, self._driver = bus, driver
         self._reset_timeline()
         self._poll_interval_s = max(bus.min_poll_interval_s, min(0.05, 32.0 / settings.odr_hz))
+        mag_info = self._open_magnetometer(bus)
         return DeviceInfo(
             url=self.url,
             name=self._name(bus),
@@ -302,8 +348,33 @@ class Lsm6dsoxDirectDevice(Device):
                 "freq_fine": settings.freq_fine,
                 "tick_s": settings.tick_s,
                 "configuration": [[r, v] for r, v in settings.sequence],
+                **({"mag_configuration": [[r, v] for r, v in self._mag.settings.sequence]}
+                   if self._mag is not None and self._mag.settings is not None else {}),
             },
+            magnetometer=mag_info,
         )
+
+    def _open_magnetometer(self, bus: I2CBus) -> MagnetometerInfo | None:
+        """Probe for a magnetometer (unless ``mag=none``) and set it up at the fastest rate at
+        or below half the poll rate; None when none answers (the stream has no mag columns)."""
+        self._mag = None
+        self._mag_pending = []
+        self._scale = replace(self._scale, mag_ut_per_lsb=1.0)
+        if self.options.mag == "none":
+            return None
+        mag = MagnetometerDriver.probe(bus, label=self.url)
+        if mag is None:
+            return None
+        try:
+            # At most half the poll rate: at least two polls per field sample, so none is
+            # overwritten unread (ZYXOR) when the chip's own clock runs a little fast.
+            settings = mag.configure(0.5 / self._poll_interval_s)
+        except DeviceIOError as exc:
+            self._messages.append(DeviceMessage(2, f"{exc}; streaming without it"))
+            return None
+        self._mag = mag
+        self._scale = replace(self._scale, mag_ut_per_lsb=settings.ut_per_lsb)
+        return settings.info()
 
     def _read(self, timeout_s: float) -> RawBlock | None:
         driver, bus = self._driver, self._bus
@@ -311,6 +382,7 @@ class Lsm6dsoxDirectDevice(Device):
         try:
             deadline = bus.monotonic() + max(0.0, timeout_s)
             while True:
+                self._poll_magnetometer(driver)
                 decoded = driver.poll()
                 if decoded is not None:
                     return self._block(decoded, driver, bus)
@@ -328,6 +400,10 @@ class Lsm6dsoxDirectDevice(Device):
             return
         with contextlib.suppress(DeviceError):  # unplugged: nothing left to switch off
             driver.stop()
+        mag, self._mag = self._mag, None
+        if mag is not None:
+            with contextlib.suppress(DeviceError):
+                mag.stop()
         if bus is not self._given_bus:
             bus.close()
 
@@ -338,16 +414,23 @@ class Lsm6dsoxDirectDevice(Device):
             return mcp2221.Mcp2221Bus(serial=opts.serial, index=opts.index, speed_hz=opts.speed_hz)
         from drivers.lsm6dsox_direct.emulated_chip import EmulatedLsm6dsox
 
-        return EmulatedLsm6dsox(
+        chip = EmulatedLsm6dsox(
             opts.sim, address=opts.address, who_am_i=opts.who_am_i,
             self_test_working=not opts.selftest_fault, fail_after_s=opts.fail_after_s,
             part=opts.part,
         )
+        if opts.mag == "none":
+            return chip
+        from drivers.lsm6dsox_direct.emulated_mag import make_emulated_bus
+
+        return make_emulated_bus(chip, opts.mag.upper(), fail_after_s=opts.mag_fail_after_s)
 
     def _name(self, bus: I2CBus) -> str:
         if self.options.bus == "emulated":
             sim = getattr(bus, "sim", self.options.sim)
-            return f"Emulated LSM6DSOX, register level ({sim.scenario})"
+            mag = getattr(bus, "magnetometer", None)
+            chips = "LSM6DSOX" + (f" + {mag.part}" if mag is not None else "")
+            return f"Emulated {chips}, register level ({sim.scenario})"
         return f"LSM6DSOX at 0x{self.options.address:02X} on {bus.description}"
 
     def _unique_id(self, bus: I2CBus) -> str:
@@ -356,6 +439,43 @@ class Lsm6dsoxDirectDevice(Device):
             return "EMU-" + unique_id_for_seed(sim.seed)[4:]
         serial = getattr(bus, "serial", "") or f"index{self.options.index}"
         return f"MCP2221A-{serial}-0x{self.options.address:02X}"
+
+    def _poll_magnetometer(self, driver: Lsm6dsoxDriver) -> None:
+        """Read a new field sample, if the chip has one, and the LSM6DSOX's timestamp right
+        after it: the sample waits in ``_mag_pending`` for the first row at or after that time.
+        A magnetometer that stops answering is reported once and dropped; the accelerometer
+        streams on (its rows' field is NaN)."""
+        mag = self._mag
+        if mag is None or driver.decoder is None:
+            return
+        try:
+            counts = mag.poll()
+        except DeviceIOError as exc:
+            self._mag = None
+            self._messages.append(DeviceMessage(
+                2, f"the magnetometer stopped answering ({exc}); the field is NaN from here "
+                   "while the accelerometer streams on"))
+            return
+        if counts is None:
+            return
+        raw_ticks = int.from_bytes(driver.read(reg.TIMESTAMP0, 4), "little")
+        self._mag_pending.append((driver.decoder.unwrap_ticks(raw_ticks), counts))
+
+    def _place_magnetometer(self, ticks: np.ndarray) -> np.ndarray | None:
+        """(N, 3) ``mag_raw`` for rows at ``ticks``: each pending sample on the first row at
+        or after its read time (the newest wins a row), NaN elsewhere; later ones wait."""
+        if self.info is None or self.info.magnetometer is None:
+            return None
+        out = np.full((len(ticks), 3), np.nan)
+        waiting = []
+        for read_ticks, counts in self._mag_pending:
+            row = int(np.searchsorted(ticks, read_ticks, side="left"))
+            if row < len(ticks):
+                out[row] = counts
+            else:
+                waiting.append((read_ticks, counts))
+        self._mag_pending = waiting
+        return out
 
     def _reset_timeline(self) -> None:
         self._origin_ticks: float | None = None
@@ -375,6 +495,7 @@ class Lsm6dsoxDirectDevice(Device):
             self._time_offset_s = self._last_t_s + paused_s + settling / settings.odr_hz
             self._pending_lost = max(0, round(paused_s * settings.odr_hz) - 1) + settling
             self._origin_ticks = None
+        self._mag_pending = []  # their ticks were on the clock the reset restarted
 
     def _block(self, decoded: DecodedSamples, driver: Lsm6dsoxDriver, bus: I2CBus) -> RawBlock:
         settings = driver.settings
@@ -395,4 +516,5 @@ class Lsm6dsoxDirectDevice(Device):
             scale=self._scale,
             gap=lost > 0,
             lost_samples=int(np.sum(lost)),
+            mag_raw=self._place_magnetometer(decoded.ticks),
         )

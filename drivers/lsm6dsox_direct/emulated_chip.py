@@ -177,6 +177,11 @@ class EmulatedLsm6dsox(I2CBus):
     def monotonic(self) -> float:
         return self._clock()
 
+    @property
+    def power_on_s(self) -> float:
+        """The clock's reading at power-on (chips sharing the bus count time from it)."""
+        return self._power_on_s
+
     def delay(self, seconds: float) -> None:
         if self.virtual_clock is not None:
             self.virtual_clock.advance(seconds)
@@ -235,13 +240,18 @@ class EmulatedLsm6dsox(I2CBus):
         return {key: np.concatenate([c[key] for c in self._truth]) for key in self._truth[0]}
 
     # -- internals: registers --------------------------------------------------------------------
-    def _transfer(self, address: int) -> None:
+    def check_adapter(self) -> None:
+        """Raise :class:`DeviceIOError` when the bus is closed or the adapter was pulled
+        (``fail_after_s``): what every transfer on the bus, to any address, checks first."""
         if self._closed:
             raise DeviceIOError("the emulated I2C bus is closed")
         if self.fail_after_s is not None and self._now() >= self.fail_after_s:
             raise DeviceIOError(
                 f"emulated I2C adapter unplugged after {self.fail_after_s:g} s (fail_after option)"
             )
+
+    def _transfer(self, address: int) -> None:
+        self.check_adapter()
         if address != self.address:
             raise DeviceIOError(
                 f"no ACK from I2C address 0x{address:02X}: nothing answers there (the emulated "

@@ -231,6 +231,17 @@ class FifoDecoder:
         del state.anchor_slots[:-_ANCHORS_KEPT]
         del state.anchor_ticks[:-_ANCHORS_KEPT]
 
+    def unwrap_ticks(self, raw_ticks: int) -> float:
+        """A TIMESTAMP register reading (32 bits) on the unwrapped tick axis of the decoded
+        samples, taken as the reading nearest the last decoded one."""
+        state = self._state
+        if state.last_raw_ticks is None:
+            return float(raw_ticks)
+        step = (int(raw_ticks) - state.last_raw_ticks) % _TICK_WRAP
+        if step >= _TICK_WRAP // 2:
+            step -= _TICK_WRAP
+        return state.last_unwrapped_ticks + step
+
     def _ticks(self, sample_slots: np.ndarray) -> np.ndarray:
         """Each sample's time: its anchor, or the nearest earlier one plus whole slot periods."""
         state = self._state
