@@ -56,10 +56,8 @@ import dataclasses
 import logging
 import math
 import secrets
-import threading
 import time
 from collections import deque
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, ClassVar
 from urllib.parse import urlencode
@@ -78,6 +76,12 @@ from drivers.errors import (
     SettingRefusedError,
 )
 from drivers.link import protocol as p
+from drivers.link.client import (
+    COMMAND_TIMEOUT_S,
+    POLL_S,
+    LinkClient,
+    ack_message,
+)
 from drivers.link.decoder import LinkCounters, LinkDecoder
 from drivers.link.framing import DELIMITER, encode_packet
 from drivers.link.ports import (
@@ -86,7 +90,7 @@ from drivers.link.ports import (
     open_error,
     port_info,
 )
-from drivers.link.shared_port import SensorInUse, SharedPort
+from drivers.link.shared_port import SensorInUse
 from drivers.url_options import Option, parse_options
 
 if TYPE_CHECKING:
@@ -99,13 +103,8 @@ DEFAULT_HELLO_TIMEOUT_S = 2.0
 MAX_TIMEOUT_S = 3600.0
 """The longest ``timeout=`` a URL may ask to wait for the board's HELLO."""
 HELLO_RESEND_S = 0.5
-COMMAND_TIMEOUT_S = 1.0
 SELF_TEST_TIMEOUT_S = 3.0
-POLL_S = 0.02
-"""Longest a single port read blocks (bounds how late a read returns after its timeout)."""
 WRITE_TIMEOUT_S = 1.0
-PROBE_BYTES = 4096
-"""Bytes kept from the start of the connection to say what was seen."""
 TEXT_LINES_TO_DECIDE = 3
 LINK_NOTE_INTERVAL_S = 1.0
 """At most one message a second about frames lost on the link (a bad cable makes many)."""
@@ -128,14 +127,6 @@ OPTIONS: tuple[Option, ...] = (
            help="which sensor of a board with several (1 is the LSM6DSOX at 0x6B)"),
 )
 """The ``serial://`` options (a bare port also takes the ``text://`` driver's)."""
-
-ACK_MESSAGES: dict[int, str] = {
-    p.ACK_BAD_ARGUMENT: "the board refused the arguments",
-    p.ACK_UNSUPPORTED: "the firmware does not support this command",
-    p.ACK_SENSOR_ERROR: "the sensor did not respond as expected (check the sensor board "
-                        "and its connection)",
-    p.ACK_BUSY: "the board is busy",
-}
 
 WHO_AM_I_OTHERS: dict[int, str] = {
     0x69: "an LSM6DS3", 0x6A: "an LSM6DSL or LSM6DS3TR-C", 0x6B: "an LSM6DSR or ISM330DHCX",
@@ -253,23 +244,10 @@ class SerialLinkDevice(Device):
         self.port = options.port
         self.info_packet: p.Info | None = None
         self.config_packet: p.Config | None = None
-        self._link: SharedPort | None = None
         self.sensor_packet: p.Sensor | None = None
-        self._decoder = LinkDecoder(sensor=options.sensor)
-        self._state = threading.Condition()
-        self._command_lock = threading.RLock()
-        self._blocks: deque[RawBlock] = deque()
+        self._client = LinkClient(options.port, options.sensor)
         self._last_read_s = -math.inf
-        self._replies: deque[p.Packet] = deque(maxlen=64)
-        self._logs: deque[p.Log] = deque(maxlen=200)
-        self._unread_logs: deque[p.Log] = deque(maxlen=200)
-        self._probe = bytearray()
-        self._streaming = False
-        self._disconnected = False
-        self._board_status: BoardStatus | None = None
-        self._link_losses = [0, 0, 0]  # gaps, corrupt frames, samples not yet reported
         self._link_note_at = -math.inf
-        self._paused_while_streaming: p.Sensor | None = None
 
     # -- discovery -----------------------------------------------------------------------------
     @classmethod
@@ -289,13 +267,13 @@ class SerialLinkDevice(Device):
 
         Thread-safe. A property, as the text driver's ``counters``.
         """
-        with self._state:
-            return self._decoder.counters()
+        with self._client.state:
+            return self._client.decoder.counters()
 
     def recent_logs(self) -> list[p.Log]:
         """The board's latest LOG messages, oldest first. Thread-safe."""
-        with self._state:
-            return list(self._logs)
+        with self._client.state:
+            return list(self._client.logs)
 
     @property
     def supports_self_test(self) -> bool:
@@ -304,41 +282,39 @@ class SerialLinkDevice(Device):
     def take_messages(self) -> list[DeviceMessage]:
         """The board's LOG messages since the last call, and what was lost on the link
         (at most one such message a second). Thread-safe."""
-        with self._state:
-            logs = list(self._unread_logs)
-            self._unread_logs.clear()
+        with self._client.state:
+            logs = list(self._client.unread_logs)
+            self._client.unread_logs.clear()
             messages = [DeviceMessage(entry.level, entry.text) for entry in logs]
-            gaps, frames, lost = self._link_losses
+            gaps, frames, lost = self._client.link_losses
             now = time.monotonic()
             if gaps and now - self._link_note_at >= LINK_NOTE_INTERVAL_S:
                 self._link_note_at = now
-                self._link_losses = [0, 0, 0]
+                self._client.link_losses = [0, 0, 0]
                 messages.append(DeviceMessage(2, link_loss_message(gaps, frames, lost)))
         return messages
 
     @property
     def board_status(self) -> BoardStatus | None:
         """The latest STATUS the board sent (once a second while streaming). Thread-safe."""
-        with self._state:
-            return self._board_status
+        with self._client.state:
+            return self._client.board_status
 
     def request_status(self, timeout_s: float = COMMAND_TIMEOUT_S) -> BoardStatus | None:
         """Ask for a STATUS now (GET_STATUS); None when the firmware predates it. Thread-safe."""
         self._require_open()
-        with self._command_lock:
-            with self._state:
-                self._replies = deque((r for r in self._replies if not isinstance(r, p.Status)),
-                                      maxlen=self._replies.maxlen)
-            self._send(p.GetStatus())
-            answer = self._wait_for(
+        with self._client.command_lock:
+            self._client.forget(lambda r: isinstance(r, p.Status))
+            self._client.send(p.GetStatus())
+            answer = self._client.wait_for(
                 lambda pkt: isinstance(pkt, p.Status) or (
                     isinstance(pkt, p.Ack) and pkt.command == p.GET_STATUS), timeout_s)
         if answer is None:
             raise DeviceIOError(f"{self.port}: no STATUS within {timeout_s:g} s")
         if isinstance(answer, p.Ack):
             return None
-        with self._state:
-            return self._board_status
+        with self._client.state:
+            return self._client.board_status
 
     @property
     def usb_serial(self) -> str | None:
@@ -353,16 +329,16 @@ class SerialLinkDevice(Device):
         with its clock still running, ``t_s + device_clock_origin_s`` continues across the
         reconnect; when it is smaller than before, the board was reset.
         """
-        with self._state:
-            return self._decoder.clock_origin_s
+        with self._client.state:
+            return self._client.decoder.clock_origin_s
 
     def ping(self, timeout_s: float = COMMAND_TIMEOUT_S) -> float:
         """Round-trip time of PING -> PONG in seconds. Thread-safe."""
         self._require_open()
         token = secrets.randbits(32)
         start = time.perf_counter()
-        self._send(p.Ping(token))
-        pong = self._wait_for(lambda pkt: isinstance(pkt, p.Pong) and pkt.token == token,
+        self._client.send(p.Ping(token))
+        pong = self._client.wait_for(lambda pkt: isinstance(pkt, p.Pong) and pkt.token == token,
                               timeout_s)
         if pong is None:
             raise DeviceIOError(f"{self.port}: no PONG within {timeout_s:g} s")
@@ -375,20 +351,19 @@ class SerialLinkDevice(Device):
         when the board refuses or does not answer.
         """
         self._require_open()
-        link = self._link
+        link = self._client.link
         if link is not None and link.users > 1:
             raise DeviceError(
                 f"{self.port}: the self-test stops the board's stream, and another sensor of "
                 "this board is open: close it first")
-        with self._command_lock:
-            was_streaming = self._streaming
+        with self._client.command_lock:
+            was_streaming = self._client.streaming
             if was_streaming:
-                self._command(p.Stop(), "stopping the stream for the self-test")
-                self._streaming = False
+                self._client.command(p.Stop(), "stopping the stream for the self-test")
+                self._client.streaming = False
             try:
-                self._command(p.SelfTest(), "self-test", timeout_s)
-                result = self._wait_for(lambda pkt: isinstance(pkt, p.SelfTestResult),
-                                        timeout_s)
+                self._client.command(p.SelfTest(), "self-test", timeout_s)
+                result = self._client.expect(p.SelfTestResult, timeout_s)
                 if result is None:
                     raise DeviceIOError(f"{self.port}: no SELFTEST result within {timeout_s:g} s")
                 return result
@@ -399,16 +374,13 @@ class SerialLinkDevice(Device):
     def send_command(self, packet: p.Packet, timeout_s: float = COMMAND_TIMEOUT_S) -> p.Ack:
         """Send any command and return its ACK (not checked). Thread-safe."""
         self._require_open()
-        with self._command_lock:
-            return self._exchange(packet, timeout_s)
+        with self._client.command_lock:
+            return self._client.exchange(packet, timeout_s)
 
     # -- Device template ------------------------------------------------------------------------
     def _open(self) -> DeviceInfo:
-        self._disconnected = False
-        self._paused_while_streaming = None
         try:
-            self._link, opened = SharedPort.acquire(self.port, self.options.sensor,
-                                                    self._open_port, self._on_data)
+            opened = self._client.attach(self._open_port)
         except SensorInUse:
             raise DeviceOpenError(
                 f"{self.port} is busy: this program has sensor {self.options.sensor} of it "
@@ -416,7 +388,7 @@ class SerialLinkDevice(Device):
         try:
             return self._handshake() if opened else self._join()
         except BaseException:
-            self._close_port()
+            self._client.close_port()
             raise
 
     def _read(self, timeout_s: float) -> RawBlock | None:
@@ -430,36 +402,36 @@ class SerialLinkDevice(Device):
         settle = min(deadline, self._last_read_s + span)
         enough = max(1, math.ceil(span * info.odr_hz)) if info is not None else 1
         while True:
-            with self._state:
-                if self._blocks:
-                    queued = sum(len(block) for block in self._blocks)
+            with self._client.state:
+                if self._client.blocks:
+                    queued = sum(len(block) for block in self._client.blocks)
                     if queued >= enough or time.monotonic() >= settle:
-                        blocks = list(self._blocks)
-                        self._blocks.clear()
+                        blocks = list(self._client.blocks)
+                        self._client.blocks.clear()
                         self._last_read_s = time.monotonic()
                         merged = merge_raw_blocks(blocks)
                         if len(merged) > 1:  # a change of scale: the rest waits its turn
-                            self._blocks.extend(merged[1:])
+                            self._client.blocks.extend(merged[1:])
                         return merged[0] if merged else None
-                paused = self._paused_while_streaming
+                paused = self._client.paused_while_streaming
             if paused is not None:
                 raise DeviceError(self._paused_message(paused, self._pause_reason()))
             if time.monotonic() >= deadline:
                 return None
-            link = self._link
+            link = self._client.link
             if link is None:
                 raise DeviceIOError(f"{self.port} is closed")
             with link.read_lock:
-                self._pump()
+                self._client.pump()
 
     def _close(self) -> None:
-        link = self._link
-        if not self._disconnected and link is not None and link.users == 1:
+        link = self._client.link
+        if not self._client.disconnected and link is not None and link.users == 1:
             with contextlib.suppress(DeviceError):  # the last user stops the board
-                self._write(encode_packet(p.Stop()))
+                self._client.write(encode_packet(p.Stop()))
                 link.streaming = False
-        self._streaming = False
-        self._close_port()
+        self._client.streaming = False
+        self._client.close_port()
 
     # -- opening ------------------------------------------------------------------------------
     def _open_port(self) -> serial.SerialBase:
@@ -475,13 +447,13 @@ class SerialLinkDevice(Device):
         return port
 
     def _handshake(self) -> DeviceInfo:
-        with self._state:  # nothing of an earlier connection carries over
-            self._blocks.clear()
-            self._replies.clear()
-        self._decoder = LinkDecoder()
-        self._decoder.arm_start(new_origin=True)
-        self._probe.clear()
-        self._write(DELIMITER + encode_packet(p.Stop()) + encode_packet(p.Hello()))
+        with self._client.state:  # nothing of an earlier connection carries over
+            self._client.blocks.clear()
+            self._client.replies.clear()
+        self._client.decoder = LinkDecoder()
+        self._client.decoder.arm_start(new_origin=True)
+        self._client.probe.clear()
+        self._client.write(DELIMITER + encode_packet(p.Stop()) + encode_packet(p.Hello()))
         info, config = self._await_hello()
         if info.protocol_version != p.PROTOCOL_VERSION:
             raise DeviceOpenError(
@@ -509,12 +481,12 @@ class SerialLinkDevice(Device):
     def _join(self) -> DeviceInfo:
         """Open another sensor of a board whose port another device has open: HELLO (answered
         while streaming too), this sensor's SENSOR, and the stream as it runs."""
-        with self._state:
-            self._blocks.clear()
-            self._replies.clear()
-        self._decoder = LinkDecoder(sensor=self.options.sensor)
-        self._probe.clear()
-        self._write(encode_packet(p.Hello()))
+        with self._client.state:
+            self._client.blocks.clear()
+            self._client.replies.clear()
+        self._client.decoder = LinkDecoder(sensor=self.options.sensor)
+        self._client.probe.clear()
+        self._client.write(encode_packet(p.Hello()))
         info, config = self._await_hello()
         if self.options.sensor:
             self.sensor_packet = self._await_sensor()
@@ -530,11 +502,11 @@ class SerialLinkDevice(Device):
                 f"+-{ours.gyro_fs_dps} dps; the sensors of one board share their settings: "
                 "open this one with the same settings, or close the other first")
         self.info_packet, self.config_packet = info, config
-        link = self._link
+        link = self._client.link
         if link is not None and not link.streaming:
             self._start_streaming(new_origin=True, mark_gap=False)
         else:
-            self._streaming = True
+            self._client.streaming = True
         return self._device_info(info, ours)
 
     def _sensor_config(self, config: p.Config) -> p.Config:
@@ -558,11 +530,11 @@ class SerialLinkDevice(Device):
         prefix = f"sensor {self.options.sensor} ("
         with contextlib.suppress(DeviceError):
             token = secrets.randbits(32)
-            self._send(p.Ping(token))
-            self._wait_for(lambda pkt: isinstance(pkt, p.Pong) and pkt.token == token,
+            self._client.send(p.Ping(token))
+            self._client.wait_for(lambda pkt: isinstance(pkt, p.Pong) and pkt.token == token,
                            COMMAND_TIMEOUT_S)
-        with self._state:
-            return next((entry.text for entry in reversed(self._logs)
+        with self._client.state:
+            return next((entry.text for entry in reversed(self._client.logs)
                          if entry.text.startswith(prefix) and "paused" in entry.text), "")
 
     def _paused_message(self, sensor: p.Sensor, reason: str) -> str:
@@ -578,11 +550,11 @@ class SerialLinkDevice(Device):
         packets) reach the decoder: a PING, whose PONG comes after it. A board without a
         magnetometer, or firmware before the extension, sends none."""
         token = secrets.randbits(32)
-        self._send(p.Ping(token))
-        self._wait_for(lambda pkt: isinstance(pkt, p.Pong) and pkt.token == token,
+        self._client.send(p.Ping(token))
+        self._client.wait_for(lambda pkt: isinstance(pkt, p.Pong) and pkt.token == token,
                        COMMAND_TIMEOUT_S)
-        with self._state:
-            mag = self._decoder.magnetometer
+        with self._client.state:
+            mag = self._client.decoder.magnetometer
         if mag is not None and mag.paused:
             log.warning("%s: the board's %s is paused at this rate (see its LOG): no field "
                         "samples", self.port, magnetometers.chip_name(mag.chip))
@@ -591,8 +563,8 @@ class SerialLinkDevice(Device):
         """The board's magnetometer as the app describes it; None without one streaming."""
         if self.options.sensor:
             return None
-        with self._state:
-            mag = self._decoder.magnetometer
+        with self._client.state:
+            mag = self._client.decoder.magnetometer
         if mag is None or not mag.answering or mag.paused:
             return None
         return MagnetometerInfo(
@@ -606,14 +578,14 @@ class SerialLinkDevice(Device):
         right after HELLO's answer: its PONG coming first means no such sensor)."""
         index = self.options.sensor
         token = secrets.randbits(32)
-        self._send(p.Ping(token))
-        answer = self._wait_for(
+        self._client.send(p.Ping(token))
+        answer = self._client.wait_for(
             lambda pkt: (isinstance(pkt, p.Sensor) and pkt.sensor_index == index)
             or (isinstance(pkt, p.Pong) and pkt.token == token), COMMAND_TIMEOUT_S)
         if isinstance(answer, p.Sensor):
             return answer
-        with self._state:
-            counts = [pkt.sensor_count for pkt in self._replies if isinstance(pkt, p.Sensor)]
+        with self._client.state:
+            counts = [pkt.sensor_count for pkt in self._client.replies if isinstance(pkt, p.Sensor)]
         has = f"has {counts[0]} sensors" if counts else "has one sensor (it sent no SENSOR)"
         raise DeviceOpenError(
             f"{self.port}: no sensor {index} on this board: it {has}; sensor 1 is a second "
@@ -631,11 +603,11 @@ class SerialLinkDevice(Device):
             if now >= deadline:
                 raise DeviceOpenError(self._wrong_protocol_message())
             if now >= next_hello:
-                self._write(DELIMITER + encode_packet(p.Hello()))
+                self._client.write(DELIMITER + encode_packet(p.Hello()))
                 next_hello += HELLO_RESEND_S
             if self.detect_text and now - start >= HELLO_RESEND_S:
                 self._check_for_text()
-            packet = self._wait_for(lambda pkt: isinstance(pkt, p.Info | p.Config),
+            packet = self._client.wait_for(lambda pkt: isinstance(pkt, p.Info | p.Config),
                                     min(deadline, next_hello) - time.monotonic())
             if isinstance(packet, p.Info):
                 info = packet
@@ -644,18 +616,18 @@ class SerialLinkDevice(Device):
         return info, config
 
     def _check_for_text(self) -> None:
-        with self._state:
-            probe = bytes(self._probe)
-            packets = self._decoder.counters().packets
+        with self._client.state:
+            probe = bytes(self._client.probe)
+            packets = self._client.decoder.counters().packets
         lines = _text_lines(probe)
         if packets == 0 and lines is not None and len(lines) >= TEXT_LINES_TO_DECIDE:
             raise _TextLinesSeen(f"{self.port}: text lines arrive, e.g. {lines[0]!r}", lines[0])
 
     def _wrong_protocol_message(self) -> str:
-        with self._state:
-            probe = bytes(self._probe)
-            counters = self._decoder.counters()
-            last_error = self._decoder.last_error
+        with self._client.state:
+            probe = bytes(self._client.probe)
+            counters = self._client.decoder.counters()
+            last_error = self._client.decoder.last_error
         waited = f"{self.options.hello_timeout_s:g} s"
         head = f"{self.port}: no answer in NUCLEO protocol v1 within {waited} of HELLO. "
         if not probe:
@@ -698,25 +670,24 @@ class SerialLinkDevice(Device):
         accel = current.accel_fs_g if opts.accel_fs_g is None else opts.accel_fs_g
         gyro = current.gyro_fs_dps if opts.gyro_fs_dps is None else opts.gyro_fs_dps
         wanted = f"{lsm6dsox.ODR_LABELS_HZ[odr_code]:g} Hz, +-{accel} g, +-{gyro} dps"
-        with self._state:
-            self._replies = deque(
-                (r for r in self._replies if not isinstance(r, p.Config | p.Sensor)),
-                maxlen=self._replies.maxlen)
-        ack = self._exchange(p.Configure(odr_code, accel, gyro), COMMAND_TIMEOUT_S)
+        with self._client.state:
+            self._client.replies = deque(
+                (r for r in self._client.replies if not isinstance(r, p.Config | p.Sensor)),
+                maxlen=self._client.replies.maxlen)
+        ack = self._client.exchange(p.Configure(odr_code, accel, gyro), COMMAND_TIMEOUT_S)
         if ack.status == p.ACK_BAD_ARGUMENT:
             raise SettingRefusedError(ack_message(self.port, f"configuring {wanted}", ack),
                                       ack.message)
         if not ack.ok:
             raise DeviceOpenError(ack_message(self.port, f"configuring {wanted}", ack))
-        config = self._wait_for(lambda pkt: isinstance(pkt, p.Config), COMMAND_TIMEOUT_S)
+        config = self._client.expect(p.Config, COMMAND_TIMEOUT_S)
         if config is None:
             raise DeviceOpenError(f"{self.port}: the board acknowledged CONFIGURE but sent no "
                                   f"CONFIG within {COMMAND_TIMEOUT_S:g} s")
         if self.options.sensor:  # this sensor's own clock follows in its SENSOR
             index = self.options.sensor
-            sensor = self._wait_for(
-                lambda pkt: isinstance(pkt, p.Sensor) and pkt.sensor_index == index,
-                COMMAND_TIMEOUT_S)
+            sensor = self._client.expect(p.Sensor, COMMAND_TIMEOUT_S,
+                                         lambda pkt: pkt.sensor_index == index)
             if sensor is None:
                 raise DeviceOpenError(f"{self.port}: the board acknowledged CONFIGURE but sent "
                                       f"no SENSOR for sensor {index}")
@@ -731,12 +702,12 @@ class SerialLinkDevice(Device):
         return config
 
     def _start_streaming(self, *, new_origin: bool, mark_gap: bool) -> None:
-        with self._state:
-            self._decoder.arm_start(new_origin=new_origin, mark_gap=mark_gap)
-        self._command(p.Start(), "starting the stream")
-        self._streaming = True
-        if self._link is not None:
-            self._link.streaming = True
+        with self._client.state:
+            self._client.decoder.arm_start(new_origin=new_origin, mark_gap=mark_gap)
+        self._client.command(p.Start(), "starting the stream")
+        self._client.streaming = True
+        if self._client.link is not None:
+            self._client.link.streaming = True
 
     def _device_info(self, info: p.Info, config: p.Config) -> DeviceInfo:
         usb = port_info(self.port)
@@ -771,125 +742,8 @@ class SerialLinkDevice(Device):
 
     # -- commands -----------------------------------------------------------------------------
     def _require_open(self) -> None:
-        if self._link is None:
+        if self._client.link is None:
             raise DeviceError(f"{self.url} is not open")
-
-    def _exchange(self, packet: p.Packet, timeout_s: float) -> p.Ack:
-        """Send a command and wait for its ACK."""
-        command = packet.TYPE
-        with self._state:  # forget stale answers to the same command
-            self._replies = deque(
-                (r for r in self._replies if not (isinstance(r, p.Ack) and r.command == command)),
-                maxlen=self._replies.maxlen,
-            )
-        self._send(packet)
-        ack = self._wait_for(lambda pkt: isinstance(pkt, p.Ack) and pkt.command == command,
-                             timeout_s)
-        if ack is None:
-            name = p.COMMAND_NAMES.get(command, hex(command))
-            raise DeviceIOError(f"{self.port}: no ACK to {name} within {timeout_s:g} s")
-        return ack
-
-    def _command(self, packet: p.Packet, doing: str,
-                 timeout_s: float = COMMAND_TIMEOUT_S) -> p.Ack:
-        """Send a command; raise unless its ACK says ok."""
-        ack = self._exchange(packet, timeout_s)
-        if not ack.ok:
-            raise DeviceError(ack_message(self.port, doing, ack))
-        return ack
-
-    def _send(self, packet: p.Packet) -> None:
-        self._write(encode_packet(packet))
-
-    def _write(self, data: bytes) -> None:
-        link = self._link
-        if link is None:
-            raise DeviceIOError(f"{self.port} is closed")
-        try:
-            link.write(data)
-        except serial.SerialTimeoutException as exc:
-            raise DeviceIOError(f"{self.port}: writing timed out (the board does not read; "
-                                f"is it hung?): {exc}") from exc
-        except (serial.SerialException, OSError) as exc:
-            self._disconnected = True
-            raise DeviceIOError(disconnected_message(self.port, exc)) from exc
-
-    # -- reading ------------------------------------------------------------------------------
-    def _pump(self) -> None:
-        """Read what the port has (waiting at most :data:`POLL_S`) and decode it; every device
-        sharing the port gets the bytes (:meth:`_on_data`).
-
-        Call with the shared port's ``read_lock`` held.
-        """
-        link = self._link
-        if link is None:
-            raise DeviceIOError(f"{self.port} is closed")
-        try:
-            link.pump(lambda exc: DeviceIOError(disconnected_message(self.port, exc)))
-        except DeviceIOError:
-            self._disconnected = True
-            raise
-
-    def _on_data(self, data: bytes) -> None:
-        """Bytes read from the port (by this device or another sharing it): decode them."""
-        with self._state:
-            if len(self._probe) < PROBE_BYTES:
-                self._probe += data[: PROBE_BYTES - len(self._probe)]
-            for packet in self._decoder.feed(data):
-                if isinstance(packet, p.Log):
-                    self._logs.append(packet)
-                    self._unread_logs.append(packet)
-                    log.log(10 + 10 * min(packet.level, 3), "%s: %s", self.port, packet.text)
-                    continue
-                if (isinstance(packet, p.Sensor) and packet.paused and self._streaming
-                        and packet.sensor_index == self.options.sensor):
-                    self._paused_while_streaming = packet
-                if isinstance(packet, p.Status):
-                    counters = self._decoder.counters()
-                    self._board_status = board_status_of(
-                        packet, counters.lost_samples - counters.link_lost_samples)
-                self._replies.append(packet)
-            for report in self._decoder.take_gap_reports():
-                if report.cause == "link":
-                    self._link_losses[0] += 1
-                    self._link_losses[1] += report.corrupt_frames
-                    self._link_losses[2] += report.lost_samples
-            self._blocks.extend(self._decoder.take_blocks())
-            self._state.notify_all()
-
-    def _wait_for(self, match: Callable[[p.Packet], bool], timeout_s: float) -> p.Packet | None:
-        """The first reply matching ``match`` (removed from the queue), or None on timeout.
-
-        Reads the port itself unless another thread is reading it (then waits for that
-        thread to hand the reply over).
-        """
-        deadline = time.monotonic() + max(0.0, timeout_s)
-        while True:
-            with self._state:
-                for index, packet in enumerate(self._replies):
-                    if match(packet):
-                        del self._replies[index]
-                        return packet
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    return None
-                link = self._link
-                if link is None:
-                    raise DeviceIOError(f"{self.port} is closed")
-                if link.read_lock.locked():
-                    self._state.wait(min(remaining, POLL_S))
-                    continue
-            if link.read_lock.acquire(blocking=False):
-                try:
-                    self._pump()
-                finally:
-                    link.read_lock.release()
-
-    def _close_port(self) -> None:
-        link, self._link = self._link, None
-        if link is not None:
-            link.release(self._on_data)
-
 
 class PortDevice(SerialLinkDevice):
     """A bare port name (``/dev/ttyACM0``, ``COM3``): protocol v1 or text lines, detected.
@@ -976,36 +830,12 @@ class PortDevice(SerialLinkDevice):
 
 
 # -- messages ---------------------------------------------------------------------------------
-def board_status_of(packet: p.Status, host_gap_samples: int = 0) -> BoardStatus:
-    """The app's record of a STATUS packet (``host_gap_samples``: see :class:`BoardStatus`)."""
-    return BoardStatus(
-        reset_cause=packet.reset_cause_text, uptime_s=packet.uptime_ms / 1000.0,
-        streaming=packet.streaming, sensor_ok=packet.sensor_ok,
-        clock_fallback=packet.clock_fallback,
-        **{name: getattr(packet, name) for name in BoardStatus.COUNTERS
-           if name != "mag_i2c_errors"},
-        mag_i2c_errors=packet.mag_i2c_errors or 0,
-        host_gap_samples=host_gap_samples,
-    )
-
-
 def link_loss_message(gaps: int, corrupt_frames: int, lost_samples: int) -> str:
     """``link: 3 corrupt frames, ~40 samples lost`` (and how many gaps, when more than one)."""
     frames = "frame" if corrupt_frames == 1 else "frames"
     where = f" in {gaps} gaps" if gaps > 1 else ""
     return (f"link: {corrupt_frames} corrupt {frames}, ~{lost_samples} samples lost{where} "
             "(bytes lost between the board and this computer)")
-
-
-def disconnected_message(port: str, exc: BaseException) -> str:
-    return f"{port} was disconnected (cable unplugged or board reset): {exc}"
-
-
-def ack_message(port: str, doing: str, ack: p.Ack) -> str:
-    """A sentence for a refused command."""
-    meaning = ACK_MESSAGES.get(ack.status, f"unknown ACK status {ack.status}")
-    said = f": {ack.message}" if ack.message else ""
-    return f"{port}: {doing} failed, {meaning} (status {ack.status}, {ack.status_text}){said}"
 
 
 def who_am_i_message(port: str, who_am_i: int) -> str:

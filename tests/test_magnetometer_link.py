@@ -24,10 +24,10 @@ from app.services.board_health import describe_rise
 from drivers import magnetometers
 from drivers.emulated_nucleo import MAG_FIELD_DATE, EmulatedNucleo, mag_fits
 from drivers.link import protocol as p
+from drivers.link.client import board_status_of
 from drivers.link.decoder import LinkDecoder
 from drivers.link.framing import FrameSplitter, encode_packet, unframe
 from drivers.registry import create_device
-from drivers.serial_link import board_status_of
 from drivers.sim.device import SimulatedDevice
 
 ROOT = Path(__file__).resolve().parent.parent
