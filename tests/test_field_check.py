@@ -4,17 +4,20 @@ and the pipeline's field ring that carries them to the views."""
 from __future__ import annotations
 
 import math
+from datetime import date
 
 import numpy as np
 import pytest
 
 from app.core.calibration import MagnetometerCalibration, SensorCalibration
-from app.core.earth_field import DEFAULT_PLACE, earth_field
+from app.core.earth_field import DEFAULT_PLACE, Place, earth_field
 from app.core.field_check import (
     FieldMonitor,
+    ReferenceSettings,
     check_disturbance,
     dip_deg,
     field_norm,
+    learn_at_rest,
     learned_reference,
     wmm_reference,
 )
@@ -200,3 +203,26 @@ def test_source_without_a_magnetometer_leaves_the_field_ring_empty():
     pipeline.process(raw_with_field(0, 52, field=False))
     assert pipeline.counters.samples == 52
     assert not pipeline.has_field and len(pipeline.field) == 0
+
+
+def test_learning_at_rest_refuses_a_moving_field():
+    still = learn_at_rest(np.full(20, 48.0) + 0.1 * np.sin(np.arange(20)), np.full(20, 66.0))
+    assert still.total_ut == pytest.approx(48.0, abs=0.1)
+    with pytest.raises(ValueError, match="moved"):
+        learn_at_rest(np.linspace(40, 60, 20), np.full(20, 66.0))
+    with pytest.raises(ValueError, match="hold the sensor still"):
+        learn_at_rest(np.full(5, 48.0), np.full(5, np.nan))
+
+
+def test_reference_settings_round_trip_and_refuse_bad_input():
+    settings = ReferenceSettings(Place(-33.9, 151.2, 10.0), date(2027, 3, 1))
+    again = ReferenceSettings.from_dict(settings.to_dict())
+    assert again == settings
+    assert again.reference().dip_deg < 0  # Sydney: the field points up
+    assert ReferenceSettings.from_dict({}).place == DEFAULT_PLACE
+    for bad, words in (({"latitude_deg": "north"}, "latitude_deg"),
+                       ({"latitude_deg": 95.0}, "latitude"),
+                       ({"date": "yesterday"}, "YYYY-MM-DD"),
+                       ({"date": "2031-01-01"}, "outside")):
+        with pytest.raises(ValueError, match=words):
+            ReferenceSettings.from_dict(bad)

@@ -206,3 +206,66 @@ def check_disturbance(norm_ut: np.ndarray, dip: np.ndarray, reference: FieldRefe
     return Disturbance(disturbed, fraction,
                        f"field disturbed in {fraction:.0%} of samples: {'; '.join(parts)} "
                        f"({reference.source})")
+
+
+REST_MAX_FIELD_SPREAD_UT = 1.0
+REST_MAX_DIP_SPREAD_DEG = 1.0
+"""Samples learnt from must be this still (standard deviation): the field of a sensor turned
+or carried is not a reference."""
+
+
+def learn_at_rest(norm_ut: np.ndarray, dip: np.ndarray) -> FieldReference:
+    """:func:`learned_reference` from samples that must have been taken at rest; raises
+    ValueError saying why not (no steady sample, or the field moved)."""
+    norm_ut = np.asarray(norm_ut, dtype=float)
+    dip = np.asarray(dip, dtype=float)
+    good = np.isfinite(norm_ut) & np.isfinite(dip)
+    if np.count_nonzero(good) < 2:
+        raise ValueError("no steady field sample to learn the reference from: hold the "
+                         "sensor still")
+    spread_ut, spread_deg = float(np.std(norm_ut[good])), float(np.std(dip[good]))
+    if spread_ut > REST_MAX_FIELD_SPREAD_UT or spread_deg > REST_MAX_DIP_SPREAD_DEG:
+        raise ValueError(f"the field moved while learning ({spread_ut:.1f} uT, "
+                         f"{spread_deg:.1f}° spread): hold the sensor still, away from "
+                         f"moving iron")
+    return learned_reference(norm_ut, dip)
+
+
+@dataclass(frozen=True, slots=True)
+class ReferenceSettings:
+    """Where and when the WMM reference is computed (a user setting): the place, and the
+    date (None: today)."""
+
+    place: Place = DEFAULT_PLACE
+    when: date | None = None
+
+    def reference(self) -> FieldReference:
+        return wmm_reference(self.place, self.when)
+
+    def to_dict(self) -> dict[str, object]:
+        return {"latitude_deg": self.place.latitude_deg,
+                "longitude_deg": self.place.longitude_deg,
+                "altitude_m": self.place.altitude_m,
+                "date": None if self.when is None else self.when.isoformat()}
+
+    @classmethod
+    def from_dict(cls, value: dict[str, object]) -> ReferenceSettings:
+        """Inverse of :meth:`to_dict`; raises ValueError naming what is wrong."""
+        numbers = {}
+        for key in ("latitude_deg", "longitude_deg", "altitude_m"):
+            item = value.get(key, getattr(DEFAULT_PLACE, key))
+            if isinstance(item, bool) or not isinstance(item, int | float) \
+                    or not math.isfinite(item):
+                raise ValueError(f"the field reference's {key!r} is not a number")
+            numbers[key] = float(item)
+        text = value.get("date")
+        when = None
+        if text is not None:
+            try:
+                when = date.fromisoformat(str(text))
+            except ValueError:
+                raise ValueError(f"the field reference's date {text!r} is not YYYY-MM-DD") \
+                    from None
+        settings = cls(Place(**numbers), when)
+        settings.reference()  # a date outside the model's span is refused now, not later
+        return settings

@@ -54,6 +54,7 @@ from app.gui.calibration_wizard import CalibrationWizard
 from app.gui.device_bar import DeviceBar
 from app.gui.device_panel import DevicePanel
 from app.gui.elided_label import ElidedLabel
+from app.gui.field_view import FieldPresenter, FieldView  # magview #31
 from app.gui.filter_panel import FilterPanel
 from app.gui.health_lights import HealthLights
 from app.gui.joint_panel import JointPanel
@@ -85,7 +86,7 @@ INSTRUMENT_MAX_PX = 400
 """Largest digits in the full-screen instrument mode (they fill the half screen)."""
 AVERAGING_S = (0.05, 0.2, 0.5, 1.0, 2.0, 5.0)
 LEVEL_RANGES_DEG = (0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 90.0)
-FILLING_DOCKS = frozenset({"plots", "messages", "attitude3d"})
+FILLING_DOCKS = frozenset({"plots", "messages", "attitude3d", "field"})  # magview #31: +field
 """Docks whose contents fill any size (the others scroll inside their dock)."""
 DEVICE_MESSAGE_WARNING = 2
 DEVICE_MESSAGE_ERROR = 3
@@ -200,6 +201,12 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.docks["joint"], self.docks["attitude3d"])
         self.tabifyDockWidget(self.docks["attitude3d"], self.docks["arm"])
         self.docks["attitude3d"].hide()  # opened from the View menu (then in this tab group)
+        # --- magview (#31): the Field dock, beside the live plots, for a source with a field ---
+        self.field_view = FieldView()
+        self._add_dock("field", "Magnetic field", self.field_view, bottom)
+        self.tabifyDockWidget(self.docks["plots"], self.docks["field"])
+        self.docks["field"].hide()
+        # --- end magview ---
         self.docks["arm"].hide()
         self.docks["plots"].raise_()
         self.docks["filter"].raise_()
@@ -243,6 +250,14 @@ class MainWindow(QMainWindow):
         # The arm is solved only while someone can see it (see _on_device_attitude).
         self._device_q = None
         self.presenter.attitudeChanged.connect(self._on_device_attitude)
+        # --- magview (#31): the field views follow the frame clock; shown while a field comes ---
+        self.field_presenter = FieldPresenter(session, self.field_view, self)
+        self.presenter.clock.tick.connect(self.field_presenter.refresh)
+        self.field_presenter.availabilityChanged.connect(self.docks["field"].setVisible)
+        self.field_presenter.problem.connect(self.show_error)
+        self.sections.register("field_reference", self.field_presenter.settings_dict,
+                               self.field_presenter.apply_settings)
+        # --- end magview ---
         self.joint_panel.attitudesChanged.connect(self._on_group_attitudes)
         self.docks["arm"].visibilityChanged.connect(
             lambda shown: shown and self._device_q is not None
