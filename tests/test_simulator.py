@@ -120,17 +120,22 @@ def integrate_gyro(q0: np.ndarray, gyro_rad_s: np.ndarray, dt_s: np.ndarray) -> 
 # -- URL, discovery, identity ------------------------------------------------------------------
 def test_discover_lists_every_scenario_and_each_opens() -> None:
     found = [d for d in available_devices() if d.kind == "simulator"]
-    assert [d.url for d in found] == [f"sim://{name}" for name in SCENARIOS]
+    # Every scenario, then the interactive one with a magnetometer (issue 31).
+    assert [d.url for d in found] == [
+        *(f"sim://{name}" for name in SCENARIOS), "sim://interactive?mag=lis3mdl"]
     for descriptor in found:
         device = create_device(descriptor.url)
         assert isinstance(device, SimulatedDevice)
-        assert descriptor.description.startswith("Simulated LSM6DSOX: ")
+        chip = device.mag_chip
+        label = "Simulated LSM6DSOX" + (f" + {chip.name}" if chip else "")
+        assert descriptor.description.startswith(f"{label}: ")
         device = SimulatedDevice(descriptor.url, realtime=False, block=64)
         with device:
             info = device.info
             assert info is not None
-            scenario = descriptor.url.removeprefix("sim://")
+            scenario = descriptor.url.removeprefix("sim://").partition("?")[0]
             assert scenario in info.name and info.extra["scenario"] == scenario
+            assert (info.magnetometer is None) == (chip is None)
             assert info.sensor == "LSM6DSOX"
             assert info.firmware == f"simulator {__version__}"
             assert re.fullmatch(r"SIM-[0-9A-F]{24}", info.unique_id)

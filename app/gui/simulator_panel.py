@@ -120,6 +120,8 @@ class SimulatorPanel(QWidget):
         """List the simulator's scenarios (descriptors of kind ``simulator``)."""
         self.scenario_combo.clear()
         for descriptor in simulators:
+            if urlsplit(descriptor.url).query:  # a variant (e.g. with a magnetometer), not a motion
+                continue
             scenario = urlsplit(descriptor.url).netloc
             self.scenario_combo.addItem(scenario, scenario)
             self.scenario_combo.setItemData(

@@ -71,8 +71,9 @@ def recording_blocks(recording: Recording, seconds: float | None = None) -> Iter
 def _head(block: RawBlock, n: int) -> RawBlock:
     ref = None if block.reference_quat is None else block.reference_quat[:n]
     gap = None if block.gap is None else block.gap[:n]
+    mag = None if block.mag_raw is None else block.mag_raw[:n]
     return RawBlock(block.t_s[:n], block.accel_raw[:n], block.gyro_raw[:n], block.temp_raw[:n],
-                    block.scale, gap, block.lost_samples, ref)
+                    block.scale, gap, block.lost_samples, ref, mag)
 
 
 def diagnose_events(

@@ -97,6 +97,7 @@ def _cut(raw: RawBlock, count: int) -> RawBlock:
         temp_raw=raw.temp_raw[:count], scale=raw.scale,
         gap=None if gap is None else gap[:count], lost_samples=raw.lost_samples,
         reference_quat=None if ref is None else ref[:count],
+        mag_raw=None if raw.mag_raw is None else raw.mag_raw[:count],
     )
 
 

@@ -22,7 +22,12 @@ interactive. Options every scenario accepts:
 - ``clock_offset`` s and ``clock_ppm``: the timestamps start at the offset and run that many
   ppm fast (a device clock of its own, for tests of the time alignment of several devices)
 - ``fault=KIND:CHANNEL[:SIZE]@START[-END]``, repeatable: an injected sensor fault
-  (:mod:`app.core.faults.injection`, :mod:`drivers.sim.faults`), e.g. ``fault=stuck:gx@10``
+  (:mod:`app.core.faults.injection`, :mod:`drivers.sim.faults`), e.g. ``fault=stuck:gx@10``;
+  with a magnetometer also on ``mx``..``mz`` (SIZE in uT)
+- ``mag=lis3mdl|lis2mdl|none``: a magnetometer beside the chip (default none; ``magtour``:
+  lis3mdl), with ``mag_odr`` (its rate), ``place=LAT,LON[,ALT_M]``, ``date=YYYY-MM-DD`` (the
+  World Magnetic Model's field there and then) and ``magdist=...`` (disturbances); see
+  :mod:`drivers.sim.magnetometer`
 
 plus the scenario's own options (``SCENARIOS[name].parameters``), such as ``roll``/``pitch``.
 
@@ -46,11 +51,12 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from app.core import quaternion as quat
+from app.core.earth_field import DEFAULT_PLACE, EarthField, earth_field
 from app.core.orientation import quaternion_from_roll_pitch
 from app.core.samples import RawBlock, ScaleFactors
 from app.core.version import __version__
@@ -60,11 +66,13 @@ from drivers.errors import DeviceError, DeviceIOError, DeviceUrlError
 from drivers.sim.error_model import (
     REFERENCE_TEMP_DEGC,
     STREAM_SCENARIO,
+    MagnetometerErrors,
     MeasurementModel,
     UnitErrors,
     unique_id_for_seed,
 )
 from drivers.sim.faults import SimulatedFaults
+from drivers.sim.magnetometer import MAG_CHIPS, MagChip, MagneticWorld, SimulatedMagnetometer
 from drivers.sim.options import SimOptions, parse_sim_url
 from drivers.sim.scenarios import SCENARIOS, Interactive, Scenario
 from drivers.sim.transient import apply_turn_on_transient
@@ -95,8 +103,12 @@ class SimulatedDevice(Device):
     ----------
     options : the validated URL options.
     unit_errors : the true errors of this unit (ideal when ``errors=0``): what a calibration
-        should find.
+        should find; ``unit_errors.magnetometer`` the magnetometer's, with ``mag=``.
     scenario : the true motion; ``scenario.motion(t)`` gives it at true times ``t``.
+    mag_chip : the simulated magnetometer (``mag=``), None without one.
+    earth_field : the World Magnetic Model's field for ``place`` and ``date``, None without a
+        magnetometer; in the simulator's earth frame (ENU, y to magnetic north) it is
+        ``earth_field.enu_magnetic_ut()``.
     """
 
     scheme: ClassVar[str] = "sim"
@@ -111,6 +123,17 @@ class SimulatedDevice(Device):
         except ValueError as exc:  # parameters that contradict each other
             raise DeviceUrlError(f"{url}: {exc}") from None
         unit = self.scenario.unit_errors(self.options.seed)
+        self.mag_chip: MagChip | None = MAG_CHIPS[self.options.mag] if self.options.mag else None
+        if self.mag_chip is not None and self.options.mag_odr_hz is not None:
+            self.mag_chip = self.mag_chip.at_rate(self.options.mag_odr_hz)
+        self.earth_field: EarthField | None = None
+        if self.mag_chip is not None:
+            unit = replace(unit, magnetometer=MagnetometerErrors.draw(unit.seed))
+            try:
+                self.earth_field = earth_field(self.options.place or DEFAULT_PLACE,
+                                               self.options.date)
+            except ValueError as exc:  # a date outside the model's span
+                raise DeviceUrlError(f"{url}: {exc}") from None
         if self.options.warmup is not None:
             rise, tau = self.options.warmup
             unit = replace(unit, self_heating_degc=rise, self_heating_time_constant_s=tau)
@@ -128,7 +151,9 @@ class SimulatedDevice(Device):
             gyro_rad_s_per_lsb=self._measurement.gyro_lsb_rad_s,
             temp_degc_per_lsb=1.0 / lsm6dsox.TEMP_LSB_PER_DEGC,
             temp_offset_degc=lsm6dsox.TEMP_OFFSET_DEGC,
+            **({"mag_ut_per_lsb": self.mag_chip.ut_per_lsb} if self.mag_chip else {}),
         )
+        self._magnetometer = self._new_magnetometer()
         self._faults = self._new_faults()
 
     # -- what the GUI and tests use ------------------------------------------------------------
@@ -148,6 +173,39 @@ class SimulatedDevice(Device):
     def measurement(self) -> MeasurementModel:
         """Noise levels, LSB sizes and the current bias random-walk state."""
         return self._measurement
+
+    @property
+    def magnetometer(self) -> SimulatedMagnetometer | None:
+        """The simulated magnetometer (its chip, errors and the true field), None without one."""
+        return self._magnetometer
+
+    def device_time(self, t_true_s: np.ndarray) -> np.ndarray:
+        """Device-clock timestamps of true times (as the rows' ``t_s`` are made)."""
+        t_s = np.asarray(t_true_s, dtype=np.float64) * (self.true_odr_hz / self.odr_hz)
+        if self.options.clock_ppm or self.options.clock_offset_s:
+            t_s = t_s * (1.0 + 1e-6 * self.options.clock_ppm) + self.options.clock_offset_s
+        return t_s
+
+    @property
+    def simulator_truth(self) -> dict[str, Any]:
+        """What the simulator's metadata adds beyond ``unit_errors``: with a magnetometer the
+        earth's field (``earth_field``: place, year, ENU vector, strength, dip, declination;
+        ``earth_frame``) and the disturbances' truth (``mag_disturbances``)."""
+        if self.earth_field is None or self._magnetometer is None:
+            return {}
+        field_ = self.earth_field
+        place = field_.place
+        return {
+            "earth_frame": "ENU, y to magnetic north (x magnetic east, z up)",
+            "earth_field": {
+                "place": [place.latitude_deg, place.longitude_deg, place.altitude_m],
+                "year": field_.year,
+                "enu_ut": field_.enu_magnetic_ut().tolist(),
+                "total_ut": field_.total_ut, "dip_deg": field_.dip_deg,
+                "declination_deg": field_.declination_deg,
+            },
+            "mag_disturbances": self._magnetometer.world.truth(),
+        }
 
     @property
     def injected_faults(self) -> list[dict[str, object]]:
@@ -178,11 +236,20 @@ class SimulatedDevice(Device):
 
     @classmethod
     def discover(cls) -> list[DeviceDescriptor]:
-        """One entry per scenario (the simulator is always available)."""
-        return [
-            DeviceDescriptor(f"sim://{name}", f"Simulated LSM6DSOX: {sc.description}", "simulator")
+        """One entry per scenario (the simulator is always available), and the interactive one
+        with a magnetometer."""
+        def label(scenario: type[Scenario]) -> str:
+            chip = scenario.magnetometer
+            return "Simulated LSM6DSOX" + (f" + {MAG_CHIPS[chip].name}" if chip else "")
+
+        found = [
+            DeviceDescriptor(f"sim://{name}", f"{label(sc)}: {sc.description}", "simulator")
             for name, sc in SCENARIOS.items()
         ]
+        found.append(DeviceDescriptor(
+            "sim://interactive?mag=lis3mdl",
+            f"Simulated LSM6DSOX + LIS3MDL: {Interactive.description}", "simulator"))
+        return found
 
     # -- Device template -----------------------------------------------------------------------
     def _open(self) -> DeviceInfo:
@@ -190,6 +257,7 @@ class SimulatedDevice(Device):
             if self._opened_before:
                 self.scenario = self._new_scenario()
                 self._measurement = self._new_measurement()
+                self._magnetometer = self._new_magnetometer()
                 self._faults = self._new_faults()
             self._opened_before = True
             self._next_index = 0
@@ -197,9 +265,10 @@ class SimulatedDevice(Device):
             self._start_wall_s = self._clock()
             self._join_shared_epoch()
         opts = self.options
+        chip = self.mag_chip
         return DeviceInfo(
             url=self.url,
-            name=f"Simulated LSM6DSOX ({opts.scenario})",
+            name=f"Simulated LSM6DSOX{f' + {chip.name}' if chip else ''} ({opts.scenario})",
             unique_id=self.unique_id,
             sensor="LSM6DSOX",
             odr_hz=self.odr_hz,
@@ -217,6 +286,7 @@ class SimulatedDevice(Device):
                 **({"clock_domain": self._clock_domain()} if self._epoch_key() else {}),
                 **({"faults": self.injected_faults} if opts.faults else {}),
             },
+            magnetometer=None if chip is None else chip.info(),
         )
 
     def _read(self, timeout_s: float) -> RawBlock | None:
@@ -291,7 +361,17 @@ class SimulatedDevice(Device):
 
     def _new_faults(self) -> SimulatedFaults:
         return SimulatedFaults(self.options.faults, self.options.seed,
-                               self._measurement.accel_lsb_m_s2, self._measurement.gyro_lsb_rad_s)
+                               self._measurement.accel_lsb_m_s2, self._measurement.gyro_lsb_rad_s,
+                               self.scale.mag_ut_per_lsb)
+
+    def _new_magnetometer(self) -> SimulatedMagnetometer | None:
+        errors = self.unit_errors.magnetometer
+        if self.mag_chip is None or self.earth_field is None or errors is None:
+            return None
+        world = MagneticWorld.build(self.earth_field.enu_magnetic_ut(),
+                                    self.options.mag_disturbances, self.unit_errors.seed)
+        return SimulatedMagnetometer(self.mag_chip, errors, world, self.unit_errors.seed,
+                                     white_noise=self.options.noise)
 
     def _sample_limit(self) -> int:
         """Index of the first sample never delivered (fail_after), or a huge number."""
@@ -342,6 +422,10 @@ class SimulatedDevice(Device):
                     first + start, specific_force, motion.angular_rate_rad_s, temp_degc[start:stop]
                 )
                 reference[start:stop] = motion.orientation_quat
+            mag_raw = None
+            if self._magnetometer is not None:
+                mag_raw = self._magnetometer.block(first, n, self.true_odr_hz,
+                                                   self.scenario.orientation, self.device_time)
         if self.options.settling:  # sample k of the stream is the (k+1)th after the ODR write
             accel_raw, gyro_raw = apply_turn_on_transient(
                 np.arange(first + 1, first + n + 1), accel_raw, gyro_raw,
@@ -351,6 +435,9 @@ class SimulatedDevice(Device):
         if self.options.clock_ppm or self.options.clock_offset_s:
             t_s = t_s * (1.0 + 1e-6 * self.options.clock_ppm) + self.options.clock_offset_s
         accel_raw, gyro_raw = self._faults.apply(t_s, accel_raw, gyro_raw)
+        if mag_raw is not None:
+            rows = ~np.isnan(mag_raw[:, 0])
+            mag_raw[rows] = self._faults.apply_mag(t_s[rows], mag_raw[rows])
         gap = np.zeros(n, dtype=bool)
         gap[0] = lost > 0
         return RawBlock(
@@ -362,4 +449,5 @@ class SimulatedDevice(Device):
             gap=gap,
             lost_samples=lost,
             reference_quat=reference,
+            mag_raw=mag_raw,
         )

@@ -13,6 +13,15 @@ Measurement model per channel (accelerometer in m/s^2, gyroscope in rad/s), with
     raw = clip(rint(measured / lsb), -32768, 32767)          # int16 LSB, saturates
 
 with ``M = (I + diag(scale_error)) @ (I + cross_axis)``.
+
+A magnetometer beside the accelerometer (``sim://...?mag=lis3mdl``, :mod:`drivers.sim.magnetometer`)
+has errors of its own, :class:`MagnetometerErrors`, on a stream of their own
+(:data:`STREAM_MAG_UNIT`), so adding one never changes the accelerometer's unit::
+
+    m_chip = soft_iron @ alignment @ b + hard_iron + white_noise      # uT, chip axes
+    raw = clip(rint(m_chip / lsb), -32768, 32767)
+
+where ``b`` is the true field in the accelerometer's (sensor) frame.
 """
 
 from __future__ import annotations
@@ -38,6 +47,10 @@ STREAM_ACCEL_NOISE = 2
 STREAM_GYRO_NOISE = 3
 STREAM_ACCEL_WALK = 4
 STREAM_GYRO_WALK = 5
+# 6 is app.core.faults.injection.STREAM_FAULTS.
+STREAM_MAG_UNIT = 7
+STREAM_MAG_NOISE = 8
+STREAM_MAG_DISTURBANCE = 9
 
 ACCEL_BIAS_LIMIT_M_S2 = 20e-3 * G  # zero-g level, typical +-20 mg
 ACCEL_SCALE_LIMIT = 0.01  # sensitivity tolerance +-1 %
@@ -61,6 +74,16 @@ SELF_HEATING_TIME_CONSTANT_S = (120.0, 480.0)
 FREQ_FINE_LIMIT = 20
 CLOCK_RESIDUAL_LIMIT = 2e-4
 
+# The magnetometer's unit (assumed figures, typical of a small board): hard iron from the board's
+# parts, tens of uT; soft iron a few % of scale with cross terms; the magnetometer chip turned
+# against the accelerometer chip by 1-2 degrees (two packages soldered separately); its own
+# oscillator a little off nominal.
+MAG_HARD_IRON_LIMIT_UT = 40.0
+MAG_SOFT_SCALE_LIMIT = 0.05
+MAG_SOFT_CROSS_LIMIT = 0.03
+MAG_ALIGNMENT_DEG = (1.0, 2.0)
+MAG_ODR_ERROR_LIMIT = 0.02
+
 INT16_MIN = -32768
 INT16_MAX = 32767
 
@@ -79,6 +102,88 @@ def accel_noise_rms_m_s2(accel_fs_g: int, odr_hz: float) -> float:
 def gyro_noise_rms_rad_s(odr_hz: float) -> float:
     """White-noise RMS per gyroscope axis: density x sqrt(ODR / 2)."""
     return math.radians(lsm6dsox.GYRO_NOISE_DPS_PER_SQRT_HZ) * math.sqrt(odr_hz / 2.0)
+
+
+@dataclass(frozen=True, eq=False)
+class MagnetometerErrors:
+    """A simulated magnetometer's own errors against the accelerometer (the calibration's truth).
+
+    The chip measures ``soft_iron @ alignment @ b + hard_iron`` (uT) of the true field ``b`` in
+    the accelerometer's frame: ``alignment`` (a rotation, accelerometer axes -> magnetometer
+    chip axes) is the turn between the two chips, ``soft_iron`` (symmetric) the distortion of
+    the board's soft iron and the chip's own scale, ``hard_iron`` the board's permanent field.
+    """
+
+    hard_iron_ut: np.ndarray
+    soft_iron: np.ndarray
+    alignment: np.ndarray
+    alignment_deg: float
+    odr_error: float
+    """Fractional error of the chip's own output rate (its oscillator)."""
+    phase: float
+    """Where in its first period the chip's first sample falls (0 ... 1)."""
+
+    @classmethod
+    def draw(cls, seed: int) -> MagnetometerErrors:
+        """The magnetometer of unit ``seed`` (its own random stream)."""
+        rng = np.random.default_rng([seed, STREAM_MAG_UNIT])
+        hard = rng.uniform(-MAG_HARD_IRON_LIMIT_UT, MAG_HARD_IRON_LIMIT_UT, size=3)
+        cross = np.triu(rng.uniform(-MAG_SOFT_CROSS_LIMIT, MAG_SOFT_CROSS_LIMIT, (3, 3)), 1)
+        soft = np.eye(3) + np.diag(rng.uniform(-MAG_SOFT_SCALE_LIMIT, MAG_SOFT_SCALE_LIMIT, 3))
+        soft = soft + cross + cross.T
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        angle = float(rng.uniform(*MAG_ALIGNMENT_DEG))
+        return cls(
+            hard_iron_ut=hard, soft_iron=soft,
+            alignment=rotation_matrix(axis * math.radians(angle)), alignment_deg=angle,
+            odr_error=float(rng.uniform(-MAG_ODR_ERROR_LIMIT, MAG_ODR_ERROR_LIMIT)),
+            phase=float(rng.uniform(0.0, 1.0)),
+        )
+
+    def without_errors(self) -> MagnetometerErrors:
+        """An ideal magnetometer: no hard or soft iron, aligned, exact rate (same phase)."""
+        return replace(self, hard_iron_ut=np.zeros(3), soft_iron=np.eye(3),
+                       alignment=np.eye(3), alignment_deg=0.0, odr_error=0.0)
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """``soft_iron @ alignment``: accelerometer-frame field -> chip reading (less hard iron)."""
+        return self.soft_iron @ self.alignment
+
+    def apply(self, field_ut: np.ndarray) -> np.ndarray:
+        """(N, 3) chip readings in uT (no noise, no quantisation) of true fields (N, 3) in the
+        accelerometer's frame."""
+        return np.asarray(field_ut, dtype=np.float64) @ self.matrix.T + self.hard_iron_ut
+
+    def calibration_json(self) -> dict[str, Any]:
+        """The exact correction in the binding ``calibrate-mag`` form, ``m = soft_iron (raw -
+        hard_iron)`` (accelerometer frame): what a perfect calibration finds."""
+        return {"hard_iron_uT": self.hard_iron_ut.tolist(),
+                "soft_iron": np.linalg.inv(self.matrix).tolist()}
+
+    def as_dict(self) -> dict[str, Any]:
+        """The ``mag_*`` keys of :meth:`UnitErrors.as_dict`."""
+        return {
+            "mag_hard_iron_ut": self.hard_iron_ut.tolist(),
+            "mag_soft_iron": self.soft_iron.tolist(),
+            "mag_alignment": self.alignment.tolist(),
+            "mag_alignment_deg": self.alignment_deg,
+            "mag_odr_error": self.odr_error,
+            "mag_phase": self.phase,
+            "mag_calibration": self.calibration_json(),
+        }
+
+
+def rotation_matrix(rotvec: np.ndarray) -> np.ndarray:
+    """The 3x3 matrix of a rotation vector (axis times angle, rad): Rodrigues' formula."""
+    rotvec = np.asarray(rotvec, dtype=np.float64)
+    angle = float(np.linalg.norm(rotvec))
+    if angle == 0.0:
+        return np.eye(3)
+    k = rotvec / angle
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * kx + (1.0 - math.cos(angle)) * (kx @ kx)
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,6 +214,8 @@ class UnitErrors:
     """Clock trim in INTERNAL_FREQ_FINE steps of 0.15 % (what the chip reports)."""
     clock_residual: float
     """Fractional clock error the trim does not capture: true rate = trimmed rate x (1 + this)."""
+    magnetometer: MagnetometerErrors | None = None
+    """The magnetometer beside the chip (``mag=`` URL option), None without one."""
 
     @classmethod
     def draw(cls, seed: int) -> UnitErrors:
@@ -166,6 +273,7 @@ class UnitErrors:
             gyro_bias_walk_rad_s_per_sqrt_s=0.0,
             freq_fine=0,
             clock_residual=0.0,
+            magnetometer=None if self.magnetometer is None else self.magnetometer.without_errors(),
         )
 
     @property
@@ -190,11 +298,15 @@ class UnitErrors:
         return self.ambient_degc + self.self_heating_degc * heating
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain Python values (lists for arrays), e.g. for a recording's metadata."""
-        return {
+        """Plain Python values (lists for arrays), e.g. for a recording's metadata; with a
+        magnetometer also its ``mag_*`` keys (:meth:`MagnetometerErrors.as_dict`)."""
+        values = {
             key: value.tolist() if isinstance(value, np.ndarray) else value
-            for key, value in asdict(self).items()
+            for key, value in asdict(self).items() if key != "magnetometer"
         }
+        if self.magnetometer is not None:
+            values.update(self.magnetometer.as_dict())
+        return values
 
 
 class RandomWalk:

@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import datetime as dt
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from urllib.parse import parse_qsl, urlsplit
 
-from app.core.faults.injection import FaultSpec, parse_fault_spec
+from app.core.earth_field import WMM_VALID_YEARS, Place
+from app.core.faults.injection import FAULT_CHANNELS, FaultSpec, parse_fault_spec
 from drivers import lsm6dsox
 from drivers.errors import DeviceUrlError
+from drivers.sim.magnetometer import DISTURBANCE_KINDS, MAG_CHIPS, DisturbanceSpec
+from drivers.sim.magnetometer import parse_disturbances as _parse_disturbances
 from drivers.sim.scenarios import SCENARIOS, Param
 
 DEFAULT_SCENARIO = "interactive"
@@ -44,9 +48,27 @@ GENERAL_OPTIONS: dict[str, str] = {
     "clock_ppm": "parts per million the timestamps run fast (-10000 ... 10000; a drifting "
                  "device clock, on top of the unit's own)",
     "fault": "inject a fault, KIND:CHANNEL[:SIZE]@START[-END] (repeatable), KIND one of "
-             "noise, stuck, dead, spike, bias, scale; SIZE in g (ax..az) or dps (gx..gz)",
+             "noise, stuck, dead, spike, bias, scale; SIZE in g (ax..az), dps (gx..gz) or "
+             "uT (mx..mz, with a magnetometer)",
 }
 """Options every scenario accepts, with a line of help each."""
+
+# -- the magnetometer's options (issue 31; one block, parsed by _magnetometer_options) --------
+MAG_OPTIONS: dict[str, str] = {
+    "mag": "the magnetometer beside the LSM6DSOX: lis3mdl (80 Hz, +-4 gauss, ultra-high-"
+           "performance), lis2mdl (100 Hz, +-49 gauss) or none (default; sim://magtour: "
+           "lis3mdl)",
+    "mag_odr": "the magnetometer's output rate, Hz: LIS3MDL 0.625, 1.25, 2.5, 5, 10, 20, 40, "
+               "80 (default) or 155 (FAST_ODR); LIS2MDL 10, 20, 50 or 100 (default)",
+    "place": "LAT,LON[,ALT_M] where the earth's field is taken (World Magnetic Model; default "
+             "52.5125,13.3269,50: TU Berlin)",
+    "date": "YYYY-MM-DD the earth's field is taken for (default today; the model covers "
+            f"{WMM_VALID_YEARS[0]:.0f}-{WMM_VALID_YEARS[1]:.0f})",
+    "magdist": "magnetic disturbances, ITEM,ITEM... each KIND[:SIZE[:FREQ]][@START[-END]] "
+               "(device-clock seconds): " + "; ".join(
+                   f"{kind}: {text}" for kind, text in DISTURBANCE_KINDS.items()),
+}
+"""The magnetometer's URL options, with a line of help each (accepted by every scenario)."""
 
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
@@ -78,6 +100,17 @@ class SimOptions:
     """Added to every timestamp (``clock_offset``)."""
     clock_ppm: float = 0.0
     """The timestamps run this many ppm fast (``clock_ppm``)."""
+    # The magnetometer (MAG_OPTIONS).
+    mag: str | None = None
+    """Key of :data:`drivers.sim.magnetometer.MAG_CHIPS`, None without a magnetometer."""
+    mag_odr_hz: float | None = None
+    """The magnetometer's output rate (None: the chip's default)."""
+    place: Place | None = None
+    """Where the earth's field is taken (None: :data:`app.core.earth_field.DEFAULT_PLACE`)."""
+    date: dt.date | None = None
+    """The date the earth's field is taken for (None: today)."""
+    mag_disturbances: tuple[DisturbanceSpec, ...] = ()
+    """``magdist=`` items, in URL order."""
 
 
 def _fail(url: str, message: str) -> DeviceUrlError:
@@ -189,9 +222,9 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
     spec = SCENARIOS[name].parameters
     fault_texts: list[str] = []
     raw = _query(url, parts.query, overrides or {}, fault_texts)
-    unknown = sorted(set(raw) - set(GENERAL_OPTIONS) - set(spec))
+    unknown = sorted(set(raw) - set(GENERAL_OPTIONS) - set(MAG_OPTIONS) - set(spec))
     if unknown:
-        allowed = ", ".join([*GENERAL_OPTIONS, *spec])
+        allowed = ", ".join([*GENERAL_OPTIONS, *MAG_OPTIONS, *spec])
         raise _fail(url, f"unknown option {unknown[0]!r} for sim://{name}; allowed: {allowed}")
 
     options: dict[str, object] = {"scenario": name}
@@ -245,11 +278,70 @@ def parse_sim_url(url: str, overrides: Mapping[str, object] | None = None) -> Si
     options["scenario_params"] = {
         key: _param(url, key, raw[key], spec[key]) for key in spec if key in raw
     }
+    options.update(_magnetometer_options(url, name, raw))
+    channels = FAULT_CHANNELS if options["mag"] else FAULT_CHANNELS[:6]
     faults = []
     for text in fault_texts:
         try:
-            faults.append(parse_fault_spec(text))
+            faults.append(parse_fault_spec(text, channels))
         except ValueError as exc:
             raise _fail(url, str(exc)) from None
     options["faults"] = tuple(faults)
     return SimOptions(**options)  # type: ignore[arg-type]
+
+
+# -- the magnetometer's options ------------------------------------------------------------------
+def _magnetometer_options(url: str, name: str, raw: Mapping[str, str]) -> dict[str, object]:
+    """``mag``, ``place``, ``date`` and ``magdist`` (:data:`MAG_OPTIONS`) as SimOptions fields."""
+    chip = SCENARIOS[name].magnetometer
+    if "mag" in raw:
+        word = raw["mag"].lower()
+        if word not in (*MAG_CHIPS, "none"):
+            raise _fail(url, f"mag={_shown(raw['mag'])} is not a magnetometer the simulator "
+                             f"has; use one of {', '.join(MAG_CHIPS)} or none")
+        chip = None if word == "none" else word
+    given = [key for key in ("mag_odr", "place", "date", "magdist") if key in raw]
+    if given and chip is None:
+        raise _fail(url, f"option {given[0]!r} needs a magnetometer (mag=lis3mdl or lis2mdl)")
+    options: dict[str, object] = {"mag": chip}
+    if "mag_odr" in raw and chip is not None:
+        rate = _number(url, "mag_odr", raw["mag_odr"])
+        try:
+            MAG_CHIPS[chip].at_rate(rate)
+        except ValueError as exc:
+            raise _fail(url, f"mag_odr={_shown(raw['mag_odr'])}: {exc}") from None
+        options["mag_odr_hz"] = rate
+    if "place" in raw:
+        options["place"] = _place(url, raw["place"])
+    if "date" in raw:
+        options["date"] = _date(url, raw["date"])
+    if "magdist" in raw:
+        try:
+            options["mag_disturbances"] = _parse_disturbances(raw["magdist"])
+        except ValueError as exc:
+            raise _fail(url, str(exc)) from None
+    return options
+
+
+def _place(url: str, text: str) -> Place:
+    parts = text.split(",")
+    if len(parts) not in (2, 3):
+        raise _fail(url, f"place={_shown(text)}: expected LAT,LON or LAT,LON,ALT_M (degrees, "
+                         "metres)")
+    values = [_number(url, "place", part) for part in parts]
+    try:
+        return Place(*values)
+    except ValueError as exc:
+        raise _fail(url, f"place={_shown(text)}: {exc}") from None
+
+
+def _date(url: str, text: str) -> dt.date:
+    try:
+        day = dt.date.fromisoformat(text)
+    except ValueError:
+        raise _fail(url, f"date={_shown(text)}: expected YYYY-MM-DD") from None
+    low, high = WMM_VALID_YEARS
+    if not low <= day.year < high:
+        raise _fail(url, f"date={_shown(text)}: the World Magnetic Model in use covers "
+                         f"{low:.0f} to {high:.0f}")
+    return day

@@ -389,7 +389,9 @@ def _tilt(roll: float, pitch: float, yaw: float | None = None) -> dict[str, Para
         "pitch": Param(pitch, -90.0, 90.0, "pitch angle, degrees"),
     }
     if yaw is not None:
-        params["yaw"] = Param(yaw, -180.0, 180.0, "heading, degrees")
+        params["yaw"] = Param(yaw, -180.0, 180.0, "turn about the vertical, degrees, counter-"
+                               "clockwise seen from above; 0: x to magnetic east (the x "
+                               "axis's magnetic compass heading is 90 - yaw)")
     return params
 
 
@@ -414,6 +416,8 @@ class Scenario(ABC):
     """Accelerometer full scale for a URL without ``accel_fs`` (None: the simulator's 4 g)."""
     gyro_fs_dps: ClassVar[int | None] = None
     """Gyroscope full scale for a URL without ``gyro_fs`` (None: the simulator's 250 dps)."""
+    magnetometer: ClassVar[str | None] = None
+    """Magnetometer for a URL without ``mag`` (None: none; see :mod:`drivers.sim.magnetometer`)."""
 
     def __init__(self, rng: np.random.Generator | None = None, **params: float) -> None:
         unknown = sorted(set(params) - set(self.parameters))
@@ -1000,6 +1004,59 @@ class Tour(Scenario):
         return Motion(q, rate, np.zeros((len(t), 3)))
 
 
+class MagTour(Scenario):
+    """A magnetometer calibration tour: the board turned through every direction.
+
+    ``turns`` orientations drawn uniformly over all rotations from the seed, each held for
+    ``hold`` s, reached by smooth turns about a fixed axis (as :class:`Tour`), then the same
+    again. Uniform rotations carry any earth-fixed direction (the field, gravity) uniformly over
+    the sensor's sphere, so the field's direction in the sensor frame covers all of it, and the
+    board lies at every tilt, for a calibration that uses gravity too.
+    """
+
+    name = "magtour"
+    description = "magnetometer calibration tour: turned through every direction"
+    parameters: ClassVar[dict[str, Param]] = {
+        "turns": Param(40, 4, 1000, "orientations in one round of the tour"),
+        "hold": Param(0.3, 0.0, 3600.0, "time held still in each orientation, seconds"),
+        "transition": Param(2.0, 0.2, 60.0, "time to turn to the next orientation, seconds"),
+        "path": Param(0, 0, 2**31 - 1, "which tour: 0 one picked by the seed, others a tour "
+                      "of their own (the same unit on another tour: data a fit never saw)"),
+    }
+    magnetometer = "lis3mdl"
+    STREAM_PATH: ClassVar[int] = 31
+
+    def __init__(self, rng: np.random.Generator | None = None, **params: float) -> None:
+        super().__init__(rng, **params)
+        count = int(self.params["turns"])
+        path = int(self.params["path"])
+        draw = self.rng if path == 0 else np.random.default_rng([path, self.STREAM_PATH])
+        self.orientations = quat.normalize(draw.normal(size=(count, 4)))
+        """(turns, 4) the held orientations (sensor to earth), in tour order."""
+        following = np.roll(self.orientations, -1, axis=0)
+        self._turns = quat.to_rotation_vector(
+            quat.multiply(quat.conjugate(self.orientations), following))
+
+    @property
+    def round_s(self) -> float:
+        """Duration of one round through every orientation, seconds."""
+        return len(self.orientations) * (self.params["hold"] + self.params["transition"])
+
+    def _phase(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        step = self.params["hold"] + self.params["transition"]
+        k = np.floor(t / step)
+        return k.astype(np.int64) % len(self.orientations), t - k * step
+
+    def motion(self, t: np.ndarray) -> Motion:
+        index, within = self._phase(t)
+        duration = self.params["transition"]
+        s, ds_dx = smoothstep((within - self.params["hold"]) / duration)
+        turn = self._turns[index]
+        q = quat.multiply(self.orientations[index], quat.from_rotation_vector(turn * s[:, None]))
+        rate = turn * (ds_dx / duration)[:, None]
+        return Motion(q, rate, np.zeros((len(t), 3)))
+
+
 class Interactive(Scenario):
     """Tilted from the GUI: the attitude glides smoothly to each new target.
 
@@ -1093,7 +1150,7 @@ SCENARIOS: dict[str, type[Scenario]] = {
     cls.name: cls
     for cls in (
         Static, SlowTilt, Wobble, Vibration, Translation, Handheld, Strokes, Arm, Tour,
-        Interactive,
+        MagTour, Interactive,
     )
 }
 """URL name -> scenario class (``cls.description``: one line for the user), in display order."""

@@ -1,7 +1,8 @@
 """Fault injection: ``KIND:CHANNEL[:SIZE]@START[-END]`` specs applied to samples in SI units.
 
 Used by the simulator (``sim://...?fault=...``, through :mod:`drivers.sim.faults`) and by
-``inclinometer evaluate-faults`` on recordings. Kinds (SIZE in g on ax..az, dps on gx..gz):
+``inclinometer evaluate-faults`` on recordings. Kinds (SIZE in g on ax..az, dps on gx..gz, uT
+on the magnetometer's mx..mz, which only a simulator with a magnetometer accepts):
 
 - ``noise:CH:SIGMA`` added white Gaussian noise of standard deviation SIGMA;
 - ``stuck:CH`` the output freezes at its last value before START;
@@ -37,6 +38,9 @@ FAULT_KINDS: dict[str, str] = {
 }
 """Every injectable kind with a line of help."""
 _NEEDS_SIZE = {"noise", "spike", "bias", "scale"}
+MAG_CHANNELS: tuple[str, ...] = ("mx", "my", "mz")
+FAULT_CHANNELS: tuple[str, ...] = (*CHANNELS, *MAG_CHANNELS)
+"""Every channel a fault can be injected into; :attr:`FaultSpec.axis` indexes it."""
 STREAM_FAULTS = 6
 """Random stream (after the simulator's own 0..5) for injected noise."""
 
@@ -53,8 +57,8 @@ class FaultSpec:
 
     @property
     def axis(self) -> int:
-        """Column 0..5 (ax..gz)."""
-        return CHANNELS.index(self.channel)
+        """Column 0..5 (ax..gz), 6..8 for the magnetometer's mx..mz."""
+        return FAULT_CHANNELS.index(self.channel)
 
     def text(self) -> str:
         """The spec as written in a URL (``bias:gx:5@10-20``)."""
@@ -64,22 +68,23 @@ class FaultSpec:
 
     def as_dict(self) -> dict[str, Any]:
         """For a recording's metadata: ``{"spec", "kind", "channel", "size", "unit", ...}``."""
-        unit = "factor" if self.kind == "scale" else ("g" if self.axis < 3 else "dps")
+        unit = "factor" if self.kind == "scale" else (
+            "g" if self.axis < 3 else "dps" if self.axis < 6 else "uT")
         return {"spec": self.text(), "kind": self.kind, "channel": self.channel,
                 "size": self.size, "unit": None if self.size is None else unit,
                 "start_s": self.start_s, "end_s": self.end_s}
 
     def si_size(self) -> float:
-        """SIZE in m/s^2 or rad/s (the factor itself for ``scale``; 0 without SIZE)."""
+        """SIZE in m/s^2, rad/s or uT (the factor itself for ``scale``; 0 without SIZE)."""
         if self.size is None:
             return 0.0
-        if self.kind == "scale":
+        if self.kind == "scale" or self.axis >= 6:
             return self.size
         return self.size * STANDARD_GRAVITY_M_S2 if self.axis < 3 else math.radians(self.size)
 
 
-def parse_fault_spec(text: str) -> FaultSpec:
-    """Parse ``KIND:CHANNEL[:SIZE]@START[-END]``.
+def parse_fault_spec(text: str, channels: tuple[str, ...] = CHANNELS) -> FaultSpec:
+    """Parse ``KIND:CHANNEL[:SIZE]@START[-END]``, CHANNEL one of ``channels``.
 
     Raises
     ------
@@ -99,9 +104,11 @@ def parse_fault_spec(text: str) -> FaultSpec:
     if kind not in FAULT_KINDS:
         raise ValueError(f"fault {text!r}: unknown kind {kind!r}; use one of "
                          f"{', '.join(FAULT_KINDS)}")
-    if channel not in CHANNELS:
+    if channel not in channels:
+        hint = (" (mx..mz need a magnetometer: mag=lis3mdl)"
+                if channel in MAG_CHANNELS and channel not in channels else "")
         raise ValueError(f"fault {text!r}: unknown channel {channel!r}; use one of "
-                         f"{', '.join(CHANNELS)}")
+                         f"{', '.join(channels)}{hint}")
     size: float | None = None
     if len(parts) == 3:
         if kind not in _NEEDS_SIZE:
@@ -150,10 +157,11 @@ class FaultInjector:
         self._rngs = [np.random.default_rng([seed, STREAM_FAULTS, i]) for i in range(len(specs))]
         self._held: list[float | None] = [None] * len(specs)
         self._next_spike = [s.start_s for s in specs]
-        self._last_value = np.zeros(6)
+        self._last_value = np.zeros(len(FAULT_CHANNELS))
 
     def apply(self, t_s: np.ndarray, values: np.ndarray) -> np.ndarray:
-        """Faulty copy of ``values`` (N, 6: ax..gz in m/s^2 and rad/s) at times ``t_s``."""
+        """Faulty copy of ``values`` (N, 6: ax..gz in m/s^2 and rad/s; N, 9 with mx..mz in uT)
+        at times ``t_s``."""
         out = np.array(values, dtype=np.float64, copy=True)
         n = len(t_s)
         if n == 0:
@@ -183,7 +191,8 @@ class FaultInjector:
                                           (self._last_value[c] if t[0] > spec.start_s
                                            else out[first, c]))
                 out[active, c] = self._held[i]
-        self._last_value = np.array(values[-1], dtype=np.float64)
+        last = np.asarray(values, dtype=np.float64)[-1]
+        self._last_value[: last.shape[0]] = last
         return out
 
     def _spikes(self, i: int, spec: FaultSpec, t: np.ndarray, column: np.ndarray,

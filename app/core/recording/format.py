@@ -308,4 +308,6 @@ def simulator_metadata(device: Any) -> dict[str, Any]:
     faults = getattr(device, "injected_faults", None)
     if faults:
         simulator["faults"] = list(faults)
+    # With a magnetometer: the earth's field and the disturbances' truth (drivers.sim.device).
+    simulator.update(getattr(device, "simulator_truth", None) or {})
     return {KEY_SIMULATOR: simulator}
