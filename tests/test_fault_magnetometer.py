@@ -167,3 +167,21 @@ def test_broad_trials_field_raises_no_magnetometer_fault(stem):
     events = list(diagnose_events(str(trial_path(stem)), seconds=40.0, result=result))
     assert "mx" in result.detector.health()  # the field was tested
     assert [e for e in events if e.channel in ("mx", "my", "mz", "mag")] == []
+
+
+@pytest.mark.parametrize("query, expected", [
+    ("handheld?mag=lis3mdl&seed=3", []),
+    ("wobble?mag=lis2mdl&seed=4", []),
+    ("static?mag=lis3mdl&seed=2&magdist=magnet@3,motor", []),
+    ("handheld?mag=lis3mdl&seed=3&fault=stuck:mx@4", [("mx", "stuck")]),
+    ("handheld?mag=lis3mdl&seed=3&fault=spike:my:40@4", [("my", "spike")]),
+    ("static?mag=lis3mdl&seed=2&magdist=magnet:700@3", [("my", "saturation"),
+                                                         ("mz", "saturation")]),
+])
+def test_simulated_magnetometer_faults_and_clean_streams(query, expected):
+    from app.services.diagnosis import diagnose_events
+
+    events = list(diagnose_events(f"sim://{query}&realtime=0", seconds=8.0))
+    found = sorted({(e.channel, e.kind) for e in events
+                    if e.channel in ("mx", "my", "mz", "mag")})
+    assert found == expected
