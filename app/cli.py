@@ -40,6 +40,8 @@ from app.cli_diagnose import add_diagnose_parser, diagnose_command
 from app.cli_errors import DEBUG_ENV, EXIT_USAGE, CommandError, check_output_folder, finite
 from app.cli_faults import add_evaluate_faults_parser, evaluate_faults_command
 from app.cli_joint import add_joint_parser, joint_command, record_arm_command
+from app.cli_magnetometer import add_parser as add_magnetometer_parser
+from app.cli_magnetometer import run as magnetometer_command
 from app.cli_recording import (
     add_param_argument,
     add_recording_parsers,
@@ -97,6 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_evaluate_faults_parser(commands)
     add_calibration_parsers(commands)
     add_joint_parser(commands)
+    add_magnetometer_parser(commands)
     return parser
 
 
@@ -550,6 +553,7 @@ _COMMANDS: dict[str | None, Callable[[argparse.Namespace], int]] = {
     "evaluate-faults": evaluate_faults_command,
     "joint": joint_command,
     "record-arm": record_arm_command,
+    "calibrate-mag": magnetometer_command,
 }
 
 

@@ -9,8 +9,10 @@ A profile holds the calibration parameters, its creation time (UTC, ISO 8601), t
 temperature, the sensor settings (ODR, full scales), the fit residuals, an optional tare, the
 app version and a format version. The ``parameters`` may also hold temperature terms
 (``temperature_reference_degc`` and four coefficient vectors, see
-:func:`app.core.calibration.temperature_to_json`): optional keys within format 1, so profiles
-without them read as before and an older reader ignores them. Safety rules:
+:func:`app.core.calibration.temperature_to_json`) and the magnetometer's terms (key
+``magnetometer``: ``calibrate-mag``'s JSON, :class:`app.core.calibration.MagnetometerCalibration`):
+optional keys within format 1, so profiles without them read as before and an older reader
+ignores them. Safety rules:
 
 - writes are atomic: a temporary file in the same directory, flushed and fsynced, then
   ``os.replace`` (a crash leaves the old file or the new one, never half a file);
@@ -41,7 +43,13 @@ from typing import Any
 import numpy as np
 
 from app.core.bounded_input import InputTooLargeError, JsonInputError, loads_json, read_bounded
-from app.core.calibration import SensorCalibration, temperature_from_json, temperature_to_json
+from app.core.calibration import (
+    MAG_KEY,
+    MagnetometerCalibration,
+    SensorCalibration,
+    temperature_from_json,
+    temperature_to_json,
+)
 from app.core.calibration_procedures.level_reference import TareReference
 from app.core.version import __version__
 
@@ -171,6 +179,9 @@ class CalibrationProfile:
                 "gyro_matrix": np.asarray(cal.gyro_matrix, float).tolist(),
                 # Optional, within format 1: the temperature terms when there are some.
                 **temperature_to_json(cal.temperature),
+                # Optional, within format 1: the magnetometer's terms (calibrate-mag's JSON).
+                **({MAG_KEY: cal.magnetometer.to_json()} if cal.magnetometer is not None
+                   else {}),
             },
             "tare_quaternion": None if self.tare is None else self.tare.to_list(),
             "residuals": _jsonable(self.residuals),
@@ -215,6 +226,12 @@ class CalibrationProfile:
                 temperature_terms = temperature_from_json(params)
             except ValueError as exc:
                 raise corrupt(f"the temperature terms: {exc}") from None
+            magnetometer = None
+            if params.get(MAG_KEY) is not None:
+                try:
+                    magnetometer = MagnetometerCalibration.from_json(params[MAG_KEY])
+                except ValueError as exc:
+                    raise corrupt(f"the magnetometer terms: {exc}") from None
             for name, matrix in (("accel_matrix", accel_matrix), ("gyro_matrix", gyro_matrix)):
                 if abs(np.linalg.det(matrix)) < 1e-6:
                     raise corrupt(f"'{name}' is singular")
@@ -255,6 +272,7 @@ class CalibrationProfile:
                     gyro_matrix=gyro_matrix,
                     name=str(name),
                     temperature=temperature_terms,
+                    magnetometer=magnetometer,
                 ),
                 settings=settings,
                 created_utc=created,

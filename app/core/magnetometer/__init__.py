@@ -1,0 +1,1 @@
+"""The magnetometer's calibration: coverage of the sphere, the fit, simulated tours."""
