@@ -35,10 +35,12 @@ from app.core.samples import STANDARD_GRAVITY_M_S2
 GRAVITY_TAU_S = 0.1
 """Time constant of the accelerometer's low-pass that gives gravity's direction: it averages
 the accelerometer's noise (about 10 samples at 104 Hz) but lags a turn little."""
-STEADY_G_TOLERANCE = 0.05
-"""``| |a| - g |`` up to this fraction of g counts as steady (no linear acceleration)."""
-STEADY_ANGLE_DEG = 2.0
-"""The sample's accelerometer direction within this of the low-passed one counts as steady."""
+STEADY_G_TOLERANCE = 0.03
+"""``| |a| - g |`` up to this fraction of g counts as steady (no linear acceleration; an
+uncalibrated accelerometer's scale and offset errors stay well under it)."""
+STEADY_ANGLE_DEG = 3.0
+"""The sample's accelerometer direction within this of the low-passed one counts as steady
+(the dip is then off by less than this: well inside the disturbance check's tolerances)."""
 WMM_FIELD_TOLERANCE = 0.15
 WMM_DIP_TOLERANCE_DEG = 8.0
 """Against the WMM main field: the model holds no local anomaly and a building's steel moves

@@ -67,6 +67,7 @@ class FieldPlots(QWidget):
         self.graphics.ci.setSpacing(2)
         self.status = ElidedLabel()
         self.status.setObjectName("fieldStatus")
+        self.status.setContentsMargins(6, 0, 6, 0)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addWidget(self.status)
