@@ -78,6 +78,13 @@ def test_coverage_fills_in_and_a_full_tour_is_good(page, artifacts_dir):
     assert np.max(np.abs(cal.hard_iron_ut - truth.hard_iron_ut)) < 1.0
     assert abs(alignment_deg(cal.soft_iron) - truth.alignment_deg) < 0.5
     page.page.grab().save(os.path.join(artifacts_dir, "mag_page_good.png"))
+    # The report's magnetometer section says the same.
+    from app.gui.calibration_report import magnetometer_section_html
+
+    section = magnetometer_section_html(result, page.page.expected)
+    assert "<h2>Magnetometer" in section and "good" in section
+    assert f"{cal.fitness_ut:.3f} µT RMS" in section
+    assert f"local WMM {page.page.expected.total_ut:.2f} µT" in section
 
 
 def test_a_magnet_during_the_tour_is_a_redo_with_its_reason(page):
@@ -88,6 +95,9 @@ def test_a_magnet_during_the_tour_is_a_redo_with_its_reason(page):
     assert page.page.verdict.headline.text().startswith("Redo")
     assert "disturbance" in page.page.verdict.details.text()
     assert not page.page.isComplete() and page.page.calibration is None
+    from app.gui.calibration_report import magnetometer_section_html
+
+    assert "<b>Redo:</b>" in magnetometer_section_html(result)
     page.page.skip.setChecked(True)  # the user may leave the magnetometer as it is
     assert page.page.isComplete() and page.page.calibration is None
     page.page.restart()
