@@ -175,6 +175,7 @@ def test_broad_trials_field_raises_no_magnetometer_fault(stem):
     ("static?mag=lis3mdl&seed=2&magdist=magnet@3,motor", []),
     ("handheld?mag=lis3mdl&seed=3&fault=stuck:mx@4", [("mx", "stuck")]),
     ("handheld?mag=lis3mdl&seed=3&fault=spike:my:40@4", [("my", "spike")]),
+    ("static?mag=lis3mdl&seed=3&fault=spike:mz:10@6", [("mz", "spike")]),
     ("static?mag=lis3mdl&seed=2&magdist=magnet:700@3", [("my", "saturation"),
                                                          ("mz", "saturation")]),
 ])

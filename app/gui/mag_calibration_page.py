@@ -72,7 +72,11 @@ class SphereCoverage(QWidget):
         self.mask = np.zeros(SECTIONS, dtype=bool)
         self.setMinimumSize(280, 150)
         self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
-        theme.notifier().changed.connect(lambda *_: self.update())
+        # A bound method: Qt drops the connection when the widget goes (a lambda would not).
+        theme.notifier().changed.connect(self._on_theme)
+
+    def _on_theme(self, _name: str = "") -> None:
+        self.update()
 
     def set_mask(self, mask: np.ndarray) -> None:
         mask = np.asarray(mask, dtype=bool)

@@ -63,10 +63,13 @@ INT16_MAX, INT16_MIN = 32767, -32768
 
 @njit(cache=True)
 def _scan_field(t, x, run_value, run_start, run_count, prev, prev_t, n_prev, local, peak,
-                sigma, stuck_samples, stuck_s, decay_per_s, flags, spike_t,
+                peak_before, sigma, stuck_samples, stuck_s, decay_per_s, flags, spike_t,
                 spike_size):  # pragma: no cover (compiled)
     """Per field sample: runs (stuck 1 / dead 2) and the out-and-back test (spike 4, flagged
-    on the sample that completes it; ``spike_t`` the spike's own time). Updates the state."""
+    on the sample that completes it; ``spike_t`` the spike's own time). Updates the state.
+
+    A sample is tested against the peak *before* its predecessor's residual entered it: that
+    residual has the spike for a neighbour (half its size) and would hide it."""
     gain = math.sqrt(math.pi / 2.0)
     for k in range(x.shape[0]):
         for c in range(3):
@@ -93,11 +96,12 @@ def _scan_field(t, x, run_value, run_start, run_count, prev, prev_t, n_prev, loc
                 back = abs(x[k, c] - prev[0, c])
                 scale = max(1.22 * sigma[c], gain * local[c])
                 if (r >= SPIKE_SIGMA * scale and r >= SPIKE_MIN_UT and back < 0.5 * r
-                        and r > SPIKE_OVER_PEAK * peak[c]):
+                        and r > SPIKE_OVER_PEAK * peak_before[c]):
                     flags[k, c] |= 4
                     spike_t[k] = prev_t[1]
                     spike_size[k, c] = r
                 local[c] += SPIKE_LOCAL_ALPHA * (min(r, 3.0 * scale + 1e-9) - local[c])
+                peak_before[c] = peak[c] * decay
                 peak[c] = max(peak[c] * decay, min(r, SPIKE_OVER_PEAK * peak[c] + scale))
         for c in range(3):
             prev[0, c] = prev[1, c]
@@ -138,6 +142,7 @@ class MagnetometerCheck:
         self._interval = np.nan if self.odr_hz is None else 1.0 / self.odr_hz
         self._local = np.zeros(3)
         self._peak = np.zeros(3)
+        self._peak_before = np.zeros(3)
         self._last_field_t = np.nan
         self._last_flag: dict[tuple[str, str], float] = {}
 
@@ -200,6 +205,7 @@ class MagnetometerCheck:
         spike_size = np.zeros((len(rows), 3))
         _scan_field(times, values, self._run_value, self._run_start, self._run_count,
                     self._prev, self._prev_t, self._n_prev, self._local, self._peak,
+                    self._peak_before,
                     np.where(np.isfinite(self._sigma), self._sigma, 0.0),
                     self._stuck_samples(), max(STUCK_MIN_S, STUCK_MIN_SAMPLES * interval),
                     math.log(2.0) / SPIKE_PEAK_HALF_LIFE_S, flags, spike_t, spike_size)
