@@ -15,6 +15,7 @@ import numpy as np
 
 from app.core.calibration import IDENTITY_CALIBRATION, SensorCalibration
 from app.core.calibration_procedures.level_reference import TareReference
+from app.core.field_check import FieldMonitor
 from app.core.filters import DEFAULT_FILTER, FILTERS, OrientationFilter, create_filter
 from app.core.orientation import angles_from_quaternion, inclination_error_deg
 from app.core.ring_buffer import RingBuffer
@@ -33,6 +34,16 @@ ORIENTATION_COLUMNS = {
     # From the reference orientation when the source knows it (NaN otherwise):
     "ref_roll": 1, "ref_pitch": 1, "ref_tilt": 1, "incl_error": 1,
 }
+
+
+FIELD_COLUMNS = {
+    "t": 1, "mag": 3, "raw_mag": 3, "accel": 3, "norm": 1, "dip": 1, "gap": 1,
+}
+"""One row per field sample (a magnetometer runs slower than the accelerometer): the
+calibrated field ``mag`` (uT, the accelerometer's frame) and before calibration ``raw_mag``,
+the calibrated accelerometer at the same row, ``|m|`` and the dip against gravity (degrees,
+positive down; NaN where the sensor was not steady, :mod:`app.core.field_check`), and ``gap``
+(lost data since the previous field sample)."""
 
 
 REFERENCE_COLUMNS = ("ref_roll", "ref_pitch", "ref_tilt", "incl_error")
@@ -91,6 +102,10 @@ class Pipeline:
         self.comparisons: dict[str, OrientationFilter] = {}
         """Filters run side by side with the main one, on the same calibrated samples."""
         self.comparison_buffers: dict[str, RingBuffer] = {}
+        self.field = RingBuffer(1024, FIELD_COLUMNS)
+        """Field samples, for a source with a magnetometer (empty otherwise)."""
+        self.field_monitor = FieldMonitor()
+        self._field_gap = False
         self.uncalibrated: SampleBlock | None = None
         """The last block in SI units before calibration (for monitors of the sensor itself,
         such as the fault detector, so they need not convert it again)."""
@@ -103,6 +118,10 @@ class Pipeline:
         self._capacity = capacity
         self.samples = RingBuffer(capacity, SAMPLE_COLUMNS)
         self.orientation = RingBuffer(capacity, ORIENTATION_COLUMNS)
+        # A magnetometer runs at most as fast as the accelerometer: the same rows suffice.
+        self.field = RingBuffer(capacity, FIELD_COLUMNS)
+        self.field_monitor.reset()
+        self._field_gap = False
         self.comparison_buffers = {
             name: RingBuffer(capacity, COMPARISON_COLUMNS) for name in self.comparisons
         }
@@ -209,6 +228,8 @@ class Pipeline:
                 "direction": angles.direction_deg, "gap": block.gap, **ref_columns,
             }
         )
+        if block.mag_ut is not None:
+            self._write_field(block, uncalibrated)
         for name, comparison in self.comparisons.items():
             output = comparison.process(block)
             error = (
@@ -226,4 +247,28 @@ class Pipeline:
         self.counters.blocks += 1
         self.counters.filter_cpu_s += time.thread_time() - cpu_start
         return block
+
+    @property
+    def has_field(self) -> bool:
+        """Whether field samples arrived since the pipeline was configured."""
+        return self.field.total_written > 0
+
+    def _write_field(self, block: SampleBlock, uncalibrated: SampleBlock) -> None:
+        """The block's field samples (rows with a finite field) into :attr:`field`."""
+        assert block.mag_ut is not None and uncalibrated.mag_ut is not None  # a field block
+        rows = self.field_monitor.update(block.t_s, block.accel_m_s2, block.mag_ut)
+        # A field sample after lost data starts a new line, also when the rows lost lay
+        # between two field samples (or in an earlier block without one).
+        lost = np.cumsum(block.gap)
+        if not len(rows):
+            self._field_gap |= bool(lost[-1] > 0)
+            return
+        at = lost[rows.rows]
+        gap = at > np.concatenate([[0], at[:-1]])
+        gap[0] |= self._field_gap
+        self._field_gap = bool(lost[-1] > at[-1])
+        self.field.write({
+            "t": rows.t_s, "mag": rows.mag_ut, "raw_mag": uncalibrated.mag_ut[rows.rows],
+            "accel": rows.accel_m_s2, "norm": rows.norm_ut, "dip": rows.dip_deg, "gap": gap,
+        })
 

@@ -87,6 +87,7 @@ class CalibrationReport:
     truth: list[tuple[str, str, Sequence[float], Sequence[float]]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     temperature: TemperatureSection | None = None
+    magnetometer_html: str = ""  # magview (#31): magnetometer_section_html(...), "" without one
 
 
 def temperature_section(fit, calibration, unit_errors: dict[str, Any] | None = None,
@@ -481,8 +482,48 @@ def report_html(report: CalibrationReport, image_src: str = PLOT_NAME,
     if report.notes:
         parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{e(n)}</li>" for n in report.notes)
                      + "</ul>")
+    parts.append(report.magnetometer_html)  # magview (#31): the magnetometer's section
     parts.append("</body></html>")
     return "\n".join(parts)
+
+
+# --- magview (#31): the magnetometer's section (a separate function, ported with the report) ---
+def magnetometer_section_html(result, expected=None) -> str:
+    """The magnetometer's section: verdict, residual, coverage, field and dip against the
+    local WMM value, hard iron, the soft-iron matrix (with the chip's turn against the
+    accelerometer) and the reasons for a redo. ``result`` a
+    :class:`app.core.magnetometer.fit.MagFitResult`, ``expected`` the WMM
+    :class:`app.core.earth_field.EarthField` (or None)."""
+    from app.core.magnetometer.fit import alignment_deg
+
+    e = html.escape
+    cal = result.calibration
+    rows = [
+        ("Verdict", "good" if result.good else "redo"),
+        ("Fit residual", f"{cal.fitness_ut:.3f} µT RMS of |m| − F"),
+        ("Coverage", f"{cal.coverage:.0%} of the sphere's 80 sections"),
+        ("Field strength F", f"{cal.field_ut:.2f} µT" + (
+            "" if expected is None else f" (local WMM {expected.total_ut:.2f} µT)")),
+        ("Dip", f"{cal.dip_deg:+.2f}°" + (
+            "" if expected is None else f" (local WMM {expected.dip_deg:+.2f}°)")),
+        ("Hard iron", ", ".join(f"{v:+.2f}" for v in cal.hard_iron_ut) + " µT"),
+        ("Chip turned against the accelerometer", f"{alignment_deg(cal.soft_iron):.2f}°"),
+        ("Samples", f"{result.samples_used} field samples, {result.still_samples} at rest, "
+                    f"{result.outliers} dropped as off the sphere"),
+    ]
+    parts = ["<h2>Magnetometer (m = soft_iron (raw − hard_iron))</h2><table>"]
+    parts += [f"<tr><th align='left'>{e(k)}</th><td>{e(v)}</td></tr>" for k, v in rows]
+    parts.append("</table><p>Soft-iron matrix (includes the turn into the accelerometer's "
+                 "axes):</p><table>")
+    for row in cal.soft_iron:
+        parts.append("<tr>" + "".join(f"<td align='right'>{v:+.5f}</td>" for v in row)
+                     + "</tr>")
+    parts.append("</table>")
+    if result.reasons:
+        parts.append("<p><b>Redo:</b></p><ul>"
+                     + "".join(f"<li>{e(r)}</li>" for r in result.reasons) + "</ul>")
+    return "\n".join(parts)
+# --- end magview ---
 
 
 def report_document(report: CalibrationReport) -> QTextDocument:

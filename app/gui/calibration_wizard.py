@@ -61,6 +61,7 @@ from app.core.devices import DeviceInfo
 from app.core.raw_feed import RawSampleFeed
 from app.gui import theme
 from app.gui.file_dialogs import save_file_name
+from app.gui.mag_calibration_page import MagnetometerPage  # magview (#31)
 from app.services.session import DeviceSession
 
 FEED_INTERVAL_MS = 100
@@ -184,6 +185,19 @@ class IntroPage(_Page):
         for button in (self.six_button, self.free_button, self.skip_button):
             group.addButton(button)
             layout.addWidget(button)
+        # magview (#31): the magnetometer's tour, offered when the device has one.
+        has_field = info is not None and info.magnetometer is not None
+        self.mag_box = QCheckBox("Magnetometer too: turn the sensor through every direction")
+        self.mag_box.setChecked(has_field)
+        self.mag_box.setVisible(has_field)
+        layout.addWidget(self.mag_box)
+        self.mag_only_button = QRadioButton(
+            "Magnetometer only (keeps the accelerometer's and gyroscope's calibration)")
+        self.mag_only_button.setVisible(has_field)
+        group.addButton(self.mag_only_button)
+        layout.insertWidget(layout.indexOf(self.skip_button) + 1, self.mag_only_button)
+        self.mag_only_button.toggled.connect(
+            lambda on: on and self.mag_box.setChecked(True))
         form = QFormLayout()
         self.gyro_seconds = QDoubleSpinBox()
         self.gyro_seconds.setRange(2.0, 120.0)
@@ -205,9 +219,14 @@ class IntroPage(_Page):
     def method(self) -> str:
         if self.free_button.isChecked():
             return FREE
-        if self.skip_button.isChecked():
+        if self.skip_button.isChecked() or self.mag_only:
             return ""
         return SIX_POSITION
+
+    @property
+    def mag_only(self) -> bool:
+        """Only the magnetometer's tour (magview #31): the rest of the calibration stays."""
+        return self.mag_only_button.isChecked()
 
 
 class GyroPage(_Page):
@@ -477,8 +496,16 @@ class ResultsPage(_Page):
                 f"{fit.residual_norm_rms_mg:.3f} mg RMS of |a| − 1 g. "
                 "Press Finish to save this profile for the device and apply it."
             )
+        elif wizard.intro.mag_only:  # magview (#31)
+            self.summary.setText("The accelerometer's and gyroscope's calibration stays as it "
+                                 "is.")
         else:
             self.summary.setText("Gyroscope bias measured. Press Finish to save and apply it.")
+        magnetometer = self._magnetometer()  # magview (#31)
+        if magnetometer is not None:
+            self.summary.setText(self.summary.text() + (
+                f" Magnetometer: residual {magnetometer.fitness_ut:.2f} µT RMS, coverage "
+                f"{magnetometer.coverage:.0%} (saved with the profile)."))
         info = wizard.info
         self.name_edit.setText(f"{info.name if info else 'sensor'} calibration")
         self.insist.setVisible(bool(self.worse))
@@ -514,9 +541,21 @@ class ResultsPage(_Page):
                       (capture.events if capture else []) if not e.accepted],
             gyro_source="" if gyro is None else f"gyro step ({gyro.duration_s:.1f} s still)")
         report.tilt_reference = "the reference orientation, else the nominal faces"
+        if self._magnetometer() is not None:  # magview (#31)
+            from app.documents.calibration_report import magnetometer_section_html
+
+            report.magnetometer_html = magnetometer_section_html(
+                wizard.mag_page.result, wizard.mag_page.expected)
         write_report(report, Path(path))
         self.summary.setText(self.summary.text() + f" Report saved: {path}")
         return path
+
+    def _magnetometer(self):
+        """The magnetometer page's good fit, when its tour was part of this run (magview)."""
+        wizard = self._wizard
+        if not wizard.intro.mag_box.isChecked():
+            return None
+        return wizard.mag_page.calibration
 
     def profile(self) -> CalibrationProfile | None:
         wizard = self._wizard
@@ -530,6 +569,11 @@ class ResultsPage(_Page):
             residuals = dict(self.fit.summary())
             method = self.fit.method
             temperature = self.fit.temperature_degc
+        elif wizard.intro.mag_only:  # magview (#31): the calibration in use, plus the field
+            from dataclasses import replace
+
+            calibration = replace(wizard.session.pipeline.calibration, name=name)
+            residuals, method, temperature = {}, "magnetometer", math.nan
         else:
             from app.core.calibration import SensorCalibration
 
@@ -539,6 +583,10 @@ class ResultsPage(_Page):
             temperature = math.nan if gyro is None else gyro.temperature_degc
         if gyro is not None:
             residuals["gyro_bias_std_dps"] = [float(v) for v in gyro.std_error_dps]
+        magnetometer = self._magnetometer()  # magview (#31): a good fit goes in the profile
+        if magnetometer is not None:
+            calibration = calibration.with_magnetometer(magnetometer)
+            residuals["magnetometer_fitness_uT"] = float(magnetometer.fitness_ut)
         return make_profile(
             info.unique_id, calibration,
             SensorSettings(info.odr_hz, info.accel_fs_g, info.gyro_fs_dps, info.sensor),
@@ -562,9 +610,10 @@ class CalibrationWizard(QWizard):
         self.intro = IntroPage(self.info)
         self.gyro_page = GyroPage(self)
         self.poses_page = PosesPage(self)
+        self.mag_page = MagnetometerPage(session)  # magview (#31)
         self.results_page = ResultsPage(self)
-        for page in (self.intro, self.gyro_page, self.poses_page, self.results_page):
-            self.addPage(page)
+        self.page_ids = {page: self.addPage(page) for page in (
+            self.intro, self.gyro_page, self.poses_page, self.mag_page, self.results_page)}
         self.resize(720, 640)
         self.timer = QTimer(self)
         self.timer.timeout.connect(self._feed)
@@ -574,9 +623,15 @@ class CalibrationWizard(QWizard):
 
     def nextId(self) -> int:
         current = self.currentId()
-        if current == self.pageIds()[1] and not self.intro.method:
-            return self.pageIds()[3]  # gyro only: skip the poses
-        return super().nextId()
+        ids = self.page_ids
+        following = super().nextId()
+        if current == ids[self.intro] and self.intro.mag_only:
+            following = ids[self.mag_page]  # magview (#31): no gyro step, no poses
+        if current == ids[self.gyro_page] and not self.intro.method:
+            following = ids[self.mag_page]  # gyro only: skip the poses
+        if following == ids[self.mag_page] and not self.intro.mag_box.isChecked():
+            following = ids[self.results_page]  # magview (#31): no magnetometer tour
+        return following
 
     def new_detector(self) -> StillnessDetector:
         info = self.info
@@ -589,7 +644,7 @@ class CalibrationWizard(QWizard):
     def _feed(self) -> None:
         block = self.feed_source.next_block()
         page = self.currentPage()
-        if block is not None and isinstance(page, _Page):
+        if block is not None and isinstance(page, _Page | MagnetometerPage):
             page.feed(block)
 
     def _on_disconnected(self, reason: str) -> None:

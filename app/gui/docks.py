@@ -40,11 +40,13 @@ DOCKS = (
     DockSpec("alarms", "Alarms", RIGHT),
     DockSpec("log", "Measurement log", BOTTOM),
     DockSpec("joint", "Joint", BOTTOM, hidden=True),
+    # Shown while a source delivers a magnetic field (the field presenter opens and closes it).
+    DockSpec("field", "Magnetic field", BOTTOM, fills=True, hidden=True),
 )
 """The docks in the order they are made (and listed in the View menu)."""
 TABS = (("filter", "simulator"), ("simulator", "device"), ("device", "measure"),
         ("plots", "messages"), ("measure", "alarms"), ("messages", "log"),
-        ("plots", "joint"), ("joint", "attitude3d"), ("attitude3d", "arm"))
+        ("plots", "joint"), ("joint", "attitude3d"), ("attitude3d", "arm"), ("plots", "field"))
 """Tab groups, as Qt's ``tabifyDockWidget(first, second)`` calls in order."""
 IN_FRONT = ("plots", "filter")
 """The tabs in front of their groups at the start and after Reset layout."""

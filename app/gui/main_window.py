@@ -39,6 +39,7 @@ from app.gui.device_bar import DeviceBar
 from app.gui.device_events import DeviceEvents
 from app.gui.device_panel import DevicePanel
 from app.gui.docks import DockLayout
+from app.gui.field_view import FieldPresenter, FieldView
 from app.gui.file_actions import FileActions, recordings_dir
 from app.gui.filter_panel import FilterPanel
 from app.gui.help_dialogs import HelpWindows
@@ -156,12 +157,13 @@ class MainWindow(QMainWindow):
         self.alarms = AlarmsAndLog(self, default_log_path())
         self.alarm_panel, self.log_panel = self.alarms.alarm_panel, self.alarms.log_panel
         self.joint_panel = JointPanel(parent=self)
+        self.field_view = FieldView()
         self.dock_layout = DockLayout(self, {
             "plots": self.plots_dock, "filter": self.filter_panel,
             "simulator": self.simulator_panel, "device": self.device_panel,
             "measure": self.measure_panel, "attitude3d": self.attitude_view,
             "arm": self.arm_panel, "messages": self.messages, "alarms": self.alarm_panel,
-            "log": self.log_panel, "joint": self.joint_panel,
+            "log": self.log_panel, "joint": self.joint_panel, "field": self.field_view,
         })
         self.docks = self.dock_layout.docks
         self._default_layout_pending = True
@@ -169,6 +171,13 @@ class MainWindow(QMainWindow):
     def _wire(self) -> None:
         """Views -> session (queued to the worker) and session -> views."""
         session, events, status = self.session, self.events, self.status_view
+        # The field views follow the frame clock; their dock shows while a field comes.
+        self.field_presenter = FieldPresenter(session, self.field_view, self)
+        self.presenter.clock.tick.connect(self.field_presenter.refresh)
+        self.field_presenter.availabilityChanged.connect(self.docks["field"].setVisible)
+        self.field_presenter.problem.connect(self.show_error)
+        self.sections.register("field_reference", self.field_presenter.settings_dict,
+                               self.field_presenter.apply_settings)
         self.presenter.framesPerSecond.connect(status.show_fps)
         self.hold_button.toggled.connect(lambda on: self.presenter.set_hold(on))
         self.health_lights.resetRequested.connect(events.reset_health)

@@ -18,6 +18,7 @@ import numpy as np
 
 from app.core.faults import FaultDetector, FaultEvent, SensorSpec
 from app.core.recording.errors import RecordingError
+from app.core.recording.format import KEY_MAGNETOMETER
 from app.core.recording.reader import Recording, read_recording
 from app.core.sample_checks import implausible_message, implausible_rows
 from app.core.samples import RawBlock, convert_raw_block
@@ -48,7 +49,9 @@ def is_recording(source: str) -> bool:
 def recording_spec(recording: Recording) -> SensorSpec:
     """The detector's view of a recording's sensor (device metadata and measured rate)."""
     device = recording.device if isinstance(recording.device, dict) else {}
-    return SensorSpec.from_device_dict(device, recording.rate_hz)
+    magnetometer = recording.metadata.get(KEY_MAGNETOMETER)
+    return SensorSpec.from_device_dict(device, recording.rate_hz).with_magnetometer(
+        magnetometer if isinstance(magnetometer, dict) else None)
 
 
 def recording_blocks(recording: Recording, seconds: float | None = None) -> Iterator[RawBlock]:

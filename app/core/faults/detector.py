@@ -54,6 +54,9 @@ Analytical redundancy (needs rest: every channel's window spread within 3 sigma 
     *consistency.* Larger rotations between rests (up to 5 s): the angle between the
     gyro-carried and the measured gravity direction over 3 deg + 3 % of the rotation.
 
+The magnetometer's axes (mx, my, mz), when the stream has them: stuck, dead, spike and
+saturation on its own, slower samples (:mod:`app.core.faults.magnetometer`).
+
 Gaps (``gap`` flag) and a clock that goes back restart every running test; lost samples are
 reported on the ``link`` channel.
 """
@@ -68,6 +71,7 @@ import numpy as np
 from numba import njit
 
 from app.core.faults.events import CHANNELS, FaultEvent, severity_rank
+from app.core.faults.magnetometer import MagnetometerCheck
 from app.core.faults.spec import SensorSpec
 from app.core.samples import STANDARD_GRAVITY_M_S2, RawBlock, SampleBlock
 
@@ -267,6 +271,10 @@ class FaultDetector:
         self.events: list[FaultEvent] = []
         """Every event so far."""
         self.flags = np.zeros((0, 6), dtype=np.uint8)
+        self.magnetometer = MagnetometerCheck(spec.mag_range_ut, spec.mag_ut_per_lsb,
+                                              spec.mag_odr_hz)
+        """The magnetometer's tests (its flags: ``magnetometer.flags``, (N, 3))."""
+        self._field_seen = False
         self.reset()
 
     # -- public --------------------------------------------------------------------------------
@@ -299,6 +307,8 @@ class FaultDetector:
         self._last_flag: dict[tuple[str, str], float] = {}
         self._latched: dict[str, str] = {}
         self._last_t = -np.inf
+        self.magnetometer.reset()
+        self._field_seen = False
 
     def update(self, block: SampleBlock, raw: RawBlock | None = None) -> list[FaultEvent]:
         """Run every test over ``block``; the events declared in it, in time order."""
@@ -329,12 +339,17 @@ class FaultDetector:
             start = stop
         self._last_t = float(t[-1])
         self._emit_sample_flags(t, x, out)
+        if block.mag_ut is not None:
+            self._field_seen = True
+            counts = None if raw is None else raw.mag_raw
+            out.extend(self.magnetometer.update(t, block.mag_ut, gap, counts))
         out.sort(key=lambda e: e.t)
         self.events.extend(out)
         return out
 
     def health(self, now_s: float | None = None) -> dict[str, str]:
-        """``"ok"``, ``"warning"`` or ``"fault"`` per channel (ax..gz, accel, gyro, link).
+        """``"ok"``, ``"warning"`` or ``"fault"`` per channel (ax..gz, accel, gyro, link;
+        and mx, my, mz, mag once a magnetometer's samples came).
 
         Transient kinds count while flagged in the last :data:`HOLD_S`; bias, gravity and
         consistency faults stay until :meth:`reset`.
@@ -347,6 +362,8 @@ class FaultDetector:
                 level = levels.get(kind, "fault")
                 if severity_rank(level) > severity_rank(state[channel]):
                     state[channel] = level
+        if self._field_seen:
+            state.update(self.magnetometer.health(now))
         return state
 
     # -- internals -----------------------------------------------------------------------------

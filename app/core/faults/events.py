@@ -36,7 +36,8 @@ class FaultEvent:
     ----------
     t : seconds on the device clock when it was detected.
     channel : ``"ax"`` .. ``"gz"``, or ``"accel"`` / ``"gyro"`` (the sensor as a whole) or
-        ``"link"`` (lost samples).
+        ``"link"`` (lost samples); with a magnetometer also ``"mx"`` .. ``"mz"`` and ``"mag"``
+        (the chip as a whole).
     kind : one of :data:`KINDS`.
     severity : one of :data:`SEVERITIES`.
     message : one line for the user.

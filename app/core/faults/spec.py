@@ -8,7 +8,7 @@ match :mod:`drivers.lsm6dsox`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from app.core.devices import DeviceInfo
@@ -34,6 +34,8 @@ class SensorSpec:
     accel_fs_g, gyro_fs_dps : full scale; saturation is tested only when known.
     accel_noise_rms_m_s2, gyro_noise_rms_rad_s : datasheet white noise per sample (density x
         sqrt(ODR / 2)); only a starting point, the detector learns the real level at rest.
+    mag_range_ut, mag_ut_per_lsb, mag_odr_hz : the magnetometer's full scale (+-uT), count
+        size and own rate, when there is one and they are known.
     """
 
     odr_hz: float
@@ -43,6 +45,24 @@ class SensorSpec:
     gyro_fs_dps: float | None = None
     accel_noise_rms_m_s2: float | None = None
     gyro_noise_rms_rad_s: float | None = None
+    mag_range_ut: float | None = None
+    mag_ut_per_lsb: float | None = None
+    mag_odr_hz: float | None = None
+
+    def with_magnetometer(self, info: Any) -> SensorSpec:
+        """This spec with a magnetometer's figures (a :class:`MagnetometerInfo` or its
+        metadata dict with ``range_ut``, ``odr_hz`` and ``ut_per_lsb``); None: unchanged."""
+        if info is None:
+            return self
+
+        def figure(name: str) -> float | None:
+            value = info.get(name) if isinstance(info, dict) else getattr(info, name, None)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                return None
+            return float(value) if math.isfinite(value) and value > 0 else None
+
+        return replace(self, mag_range_ut=figure("range_ut"),
+                       mag_ut_per_lsb=figure("ut_per_lsb"), mag_odr_hz=figure("odr_hz"))
 
     @classmethod
     def lsm6dsox(cls, odr_hz: float, accel_fs_g: int, gyro_fs_dps: int) -> SensorSpec:
@@ -67,7 +87,8 @@ class SensorSpec:
         """From what an open device says about itself (and its raw scale factors, if known)."""
         return cls.from_device_dict(
             {"sensor": info.sensor, "odr_hz": info.odr_hz, "accel_fs_g": info.accel_fs_g,
-             "gyro_fs_dps": info.gyro_fs_dps}, info.odr_hz, scale)
+             "gyro_fs_dps": info.gyro_fs_dps}, info.odr_hz, scale
+        ).with_magnetometer(info.magnetometer)
 
     @classmethod
     def from_device_dict(
