@@ -207,23 +207,28 @@ def stored_profile(store: ProfileStore, unique_id: str = "SIM-TEST-1"):
     return profile
 
 
+def live_device():
+    """A device that brings no calibration of its own (not a replay of a recording)."""
+    return create_device("sim://static")
+
+
 def test_run_uncalibrated_is_remembered_and_a_profile_can_be_enabled_or_deleted(tmp_path):
     store = ProfileStore(tmp_path / "profiles")
     stored_profile(store)
     info = device_info()
     state = CalibrationState(Pipeline(), store)
-    assert state.load_for(info, object()) == [] and state.profile is not None
+    assert state.load_for(info, live_device()) == [] and state.profile is not None
     assert "stays disabled" in state.disable() and state.profile is None
     # A reconnect, then a restart (a new state on the same folder): still uncalibrated.
-    assert state.load_for(info, object()) == [] and state.profile is None
+    assert state.load_for(info, live_device()) == [] and state.profile is None
     assert "disabled" in state.notes[0]
     restarted = CalibrationState(Pipeline(), ProfileStore(tmp_path / "profiles"))
-    restarted.load_for(info, object())
+    restarted.load_for(info, live_device())
     assert restarted.profile is None and restarted.pipeline.calibration.is_identity
     # Enabled again: applied now and on the next connection.
     assert restarted.enable() == "" and restarted.profile is not None
     assert not restarted.pipeline.calibration.is_identity
-    restarted.load_for(info, object())
+    restarted.load_for(info, live_device())
     assert restarted.profile is not None and restarted.notes == []
     # A new profile (wizard, import) enables itself; deleting keeps a copy in history.
     restarted.disable()
@@ -232,7 +237,7 @@ def test_run_uncalibrated_is_remembered_and_a_profile_can_be_enabled_or_deleted(
     message = restarted.delete()
     assert "deleted" in message and restarted.profile is None
     assert not store.exists(info.unique_id) and store.history(info.unique_id)
-    restarted.load_for(info, object())
+    restarted.load_for(info, live_device())
     assert restarted.profile is None
     assert "No calibration profile is stored" in restarted.enable()
 

@@ -21,9 +21,12 @@ from PySide6.QtWidgets import (
     QCheckBox,
     QDateEdit,
     QDoubleSpinBox,
+    QFrame,
     QHBoxLayout,
     QLabel,
     QPushButton,
+    QScrollArea,
+    QSizePolicy,
     QVBoxLayout,
     QWidget,
 )
@@ -310,10 +313,22 @@ class FieldView(QWidget):
         super().__init__(parent)
         self.reference_bar = ReferenceBar()
         self.plots = FieldPlots()
+        # The bar scrolls sideways in a narrow dock rather than widening the window (the
+        # dock shares the bottom tab group, which must fit a 1366x768 screen and less).
+        bar = QScrollArea()
+        bar.setWidget(self.reference_bar)
+        bar.setWidgetResizable(True)
+        bar.setFrameShape(QFrame.Shape.NoFrame)
+        bar.setVerticalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        bar.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAsNeeded)
+        bar.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Fixed)
+        bar.setFixedHeight(self.reference_bar.sizeHint().height()
+                           + bar.horizontalScrollBar().sizeHint().height())
+        self.reference_scroller = bar
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         layout.setSpacing(0)
-        layout.addWidget(self.reference_bar)
+        layout.addWidget(bar)
         layout.addWidget(self.plots, 1)
 
 
