@@ -20,11 +20,15 @@ $(STAMP): pyproject.toml
 run: $(STAMP)
 	$(BIN)/inclinometer
 
+# mypy (single-threaded, ~20 s from a cold cache) runs beside the suite; either failing fails.
 test: $(STAMP)
 	$(BIN)/ruff check app drivers tests benchmarks firmware/host
 	$(BIN)/lint-imports --no-cache
-	$(BIN)/mypy
-	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist worksteal --timeout=600
+	@$(BIN)/mypy > .mypy-output 2>&1 & mypy=$$!; \
+	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist worksteal \
+		--timeout=600; tests=$$?; \
+	wait $$mypy; typed=$$?; cat .mypy-output; rm -f .mypy-output; \
+	test $$tests -eq 0 && test $$typed -eq 0
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/pipeline_throughput.py
