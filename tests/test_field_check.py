@@ -126,7 +126,7 @@ def test_disturbance_check_flags_a_magnet_and_passes_the_clean_field():
     result = check_disturbance(norm, dip, reference)
     np.testing.assert_array_equal(np.flatnonzero(result.disturbed), np.arange(40, 60))
     assert result.fraction == pytest.approx(0.2)
-    assert "20%" in result.message and "uT" in result.message
+    assert "20%" in result.message and "µT" in result.message
 
 
 def test_dip_alone_can_show_a_disturbance():

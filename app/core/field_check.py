@@ -200,7 +200,7 @@ def check_disturbance(norm_ut: np.ndarray, dip: np.ndarray, reference: FieldRefe
     parts = []
     if np.any(field_off):
         worst = norm_ut[field_off][np.argmax(np.abs(norm_ut[field_off] - reference.total_ut))]
-        parts.append(f"|m| {worst:.1f} uT against {reference.total_ut:.1f} uT")
+        parts.append(f"|m| {worst:.1f} µT against {reference.total_ut:.1f} µT")
     if np.any(dip_off):
         worst = dip[dip_off][np.argmax(np.abs(dip[dip_off] - reference.dip_deg))]
         parts.append(f"dip {worst:+.1f}° against {reference.dip_deg:+.1f}°")
@@ -227,7 +227,7 @@ def learn_at_rest(norm_ut: np.ndarray, dip: np.ndarray) -> FieldReference:
                          "sensor still")
     spread_ut, spread_deg = float(np.std(norm_ut[good])), float(np.std(dip[good]))
     if spread_ut > REST_MAX_FIELD_SPREAD_UT or spread_deg > REST_MAX_DIP_SPREAD_DEG:
-        raise ValueError(f"the field moved while learning ({spread_ut:.1f} uT, "
+        raise ValueError(f"the field moved while learning ({spread_ut:.1f} µT, "
                          f"{spread_deg:.1f}° spread): hold the sensor still, away from "
                          f"moving iron")
     return learned_reference(norm_ut, dip)
