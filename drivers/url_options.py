@@ -345,7 +345,7 @@ def _jsonable(value: object) -> object:
 
 
 def _default_text(value: object) -> str:
-    if value is None:
+    if value is None or value == ():
         return "-"
     if isinstance(value, bool):
         return "1" if value else "0"
