@@ -13,6 +13,7 @@ import shutil
 import signal
 import sys
 import threading
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -26,7 +27,7 @@ from app.core.safe_output import OutputRefused, check_output
 from app.services.health import fault_line
 from app.services.recorder import parse_duration, record_device, warm_up_filters
 from drivers.errors import DeviceError
-from drivers.registry import create_device
+from drivers.registry import create_device, driver_for
 from drivers.replay import recording_path
 
 EXIT_USAGE = 2
@@ -85,75 +86,42 @@ def _error(message: str) -> None:
     print(f"inclinometer: {message}", file=sys.stderr)
 
 
+class _Refused(Exception):
+    """Arguments ``record`` cannot use: one line on stderr and an exit status."""
+
+    def __init__(self, message: str, code: int = EXIT_USAGE) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+@dataclass(frozen=True)
+class _Settings:
+    """What ``record``'s arguments ask for, checked."""
+
+    comparisons: list[str]
+    alarms: Any
+    duration_s: float | None
+    reconnect_timeout_s: float | None
+    calibration: Any
+    target: Path
+
+
 def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """The ``record`` sub-command."""
     out = sys.stdout if out is None else out
-    names = [args.record_filter] if args.record_filter else []
-    comparisons = [n.strip() for item in args.record_comparisons or [] for n in item.split(",")
-                   if n.strip()]
-    unknown = [n for n in [*names, *comparisons] if n not in FILTERS]
-    if unknown:
-        _error(f"no filter {unknown[0]!r}; choose from {', '.join(FILTERS)}")
-        return EXIT_USAGE
-    offline = [n for n in [*names, *comparisons] if FILTERS[n].offline]
-    if offline:
-        _error(f"{offline[0]!r} is an offline filter (it needs the whole recording) and cannot "
-               f"run while recording; record with a live filter, then run it with "
-               f"'inclinometer replay OUT.csv --filter {offline[0]} --out ANGLES.csv'")
-        return EXIT_USAGE
     try:
-        alarm_config = alarms_from_specs(getattr(args, "alarms", None) or [])
-    except ValueError as exc:
-        _error(f"--alarm: {exc}")
-        return EXIT_USAGE
-    try:
-        duration = None if args.duration is None else parse_duration(args.duration)
-    except ValueError:
-        _error(f"--duration {args.duration!r}: give seconds (30), or 30s, 2m, 1h")
-        return EXIT_USAGE
-    reconnect_timeout: float | None = DEFAULT_RECONNECT_TIMEOUT_S
-    if args.reconnect_timeout is not None:
-        if args.no_reconnect:
-            _error("--reconnect-timeout and --no-reconnect contradict each other: give one")
-            return EXIT_USAGE
-        try:
-            reconnect_timeout = parse_duration(args.reconnect_timeout)
-        except ValueError:
-            _error(f"--reconnect-timeout {args.reconnect_timeout!r}: give seconds (60), or "
-                   "60s, 5m, 1h")
-            return EXIT_USAGE
-    if args.no_reconnect:
-        reconnect_timeout = None
-    calibration = None
-    if args.calibration:
-        try:
-            calibration = read_profile_file(Path(args.calibration)).calibration
-        except ProfileError as exc:
-            _error(str(exc))
-            return EXIT_USAGE
-        except RecursionError:
-            _error(f"{args.calibration}: not a valid calibration profile: its JSON is nested "
-                   "too deeply to read")
-            return EXIT_USAGE
-        except ValueError as exc:  # an integer of thousands of digits
-            _error(f"{args.calibration}: not a valid calibration profile ({one_line(exc)})")
-            return EXIT_USAGE
-    target = Path(args.out)
-    if args.compress and target.suffix.lower() != ".gz":
-        target = target.with_name(target.name + ".gz")
-    try:
-        check_output(target, inputs=_record_inputs(args), overwrite=args.overwrite,
-                     input_name="recording being replayed")
-    except OutputRefused as exc:
+        settings = _settings(args)
+    except _Refused as exc:
         _error(str(exc))
-        return EXIT_FAILED
-    warm_up_filters(args.record_filter, comparisons)  # before the device streams
+        return exc.code
+    warm_up_filters(args.record_filter, settings.comparisons)  # before the device streams
     try:
         device = create_device(args.record_device)
         info = device.open()
     except DeviceError as exc:
         _error(str(exc))
         return EXIT_USAGE
+    target = settings.target
     if not args.quiet:
         print(f"recording {target.name} at {info.odr_hz:g} Hz: "
               f"{_data_rate(target, info.odr_hz, device.reference_source is not None)}",
@@ -170,12 +138,13 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
         previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
         outcome = record_device(
-            device, target, duration_s=duration, note=args.note,
-            filter_name=args.record_filter, comparisons=comparisons,
-            calibration=calibration, overwrite=args.overwrite, stop=stop, on_flush=progress,
-            alarms=AlarmMonitor(alarm_config) if alarm_config.limits else None,
+            device, target, duration_s=settings.duration_s, note=args.note,
+            filter_name=args.record_filter, comparisons=settings.comparisons,
+            calibration=settings.calibration, overwrite=args.overwrite, stop=stop,
+            on_flush=progress,
+            alarms=AlarmMonitor(settings.alarms) if settings.alarms.limits else None,
             on_alarms=lambda events: print_crossings(events, out),
-            reconnect_timeout_s=reconnect_timeout, on_outage=print_outage,
+            reconnect_timeout_s=settings.reconnect_timeout_s, on_outage=print_outage,
             on_faults=lambda events: print_faults(events, out),
             on_message=print_warning,
         )
@@ -188,14 +157,104 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+    return _report(outcome, out)
+
+
+def _settings(args: argparse.Namespace) -> _Settings:
+    """``record``'s arguments checked (raises :class:`_Refused` with the reason)."""
+    return _Settings(
+        comparisons=_filters(args), alarms=_alarms(args),
+        duration_s=_duration(args.duration, "--duration", "30"),
+        reconnect_timeout_s=_reconnect_timeout(args), calibration=_calibration(args),
+        target=_target(args),
+    )
+
+
+def _filters(args: argparse.Namespace) -> list[str]:
+    """The comparison filters (the main one is checked too): live filters that exist."""
+    names = [args.record_filter] if args.record_filter else []
+    comparisons = [n.strip() for item in args.record_comparisons or [] for n in item.split(",")
+                   if n.strip()]
+    unknown = [n for n in [*names, *comparisons] if n not in FILTERS]
+    if unknown:
+        raise _Refused(f"no filter {unknown[0]!r}; choose from {', '.join(FILTERS)}")
+    offline = [n for n in [*names, *comparisons] if FILTERS[n].offline]
+    if offline:
+        raise _Refused(
+            f"{offline[0]!r} is an offline filter (it needs the whole recording) and cannot "
+            f"run while recording; record with a live filter, then run it with "
+            f"'inclinometer replay OUT.csv --filter {offline[0]} --out ANGLES.csv'")
+    return comparisons
+
+
+def _alarms(args: argparse.Namespace) -> Any:
+    try:
+        return alarms_from_specs(getattr(args, "alarms", None) or [])
+    except ValueError as exc:
+        raise _Refused(f"--alarm: {exc}") from None
+
+
+def _duration(text: str | None, option: str, example: str) -> float | None:
+    if text is None:
+        return None
+    try:
+        return parse_duration(text)
+    except ValueError:
+        raise _Refused(f"{option} {text!r}: give seconds ({example}), or {example}s, "
+                       f"{'2m' if option == '--duration' else '5m'}, 1h") from None
+
+
+def _reconnect_timeout(args: argparse.Namespace) -> float | None:
+    if args.reconnect_timeout is not None and args.no_reconnect:
+        raise _Refused("--reconnect-timeout and --no-reconnect contradict each other: give one")
+    if args.no_reconnect:
+        return None
+    if args.reconnect_timeout is None:
+        return DEFAULT_RECONNECT_TIMEOUT_S
+    return _duration(args.reconnect_timeout, "--reconnect-timeout", "60")
+
+
+def _calibration(args: argparse.Namespace) -> Any:
+    if not args.calibration:
+        return None
+    try:
+        return read_profile_file(Path(args.calibration)).calibration
+    except ProfileError as exc:
+        raise _Refused(str(exc)) from None
+    except RecursionError:
+        raise _Refused(f"{args.calibration}: not a valid calibration profile: its JSON is "
+                       "nested too deeply to read") from None
+    except ValueError as exc:  # an integer of thousands of digits
+        raise _Refused(f"{args.calibration}: not a valid calibration profile "
+                       f"({one_line(exc)})") from None
+
+
+def _target(args: argparse.Namespace) -> Path:
+    """The file to write (``.gz`` added with --compress), refused if it would overwrite."""
+    target = Path(args.out)
+    if args.compress and target.suffix.lower() != ".gz":
+        target = target.with_name(target.name + ".gz")
+    try:
+        check_output(target, inputs=_record_inputs(args), overwrite=args.overwrite,
+                     input_name="recording being replayed")
+    except OutputRefused as exc:
+        raise _Refused(str(exc), EXIT_FAILED) from None
+    return target
+
+
+ENDINGS = {
+    "duration": "duration reached", "stopped": "stopped", "interrupted": "stopped by Ctrl-C",
+    "end": "the source ended", "device": "the device failed", "write": "writing failed",
+    "lost": "the device did not come back",
+}
+"""How a recording ended, in words."""
+
+
+def _report(outcome: Any, out: TextIO) -> int:
+    """The closing line (stdout) and what went wrong (stderr); the exit status."""
     status = outcome.status
-    endings = {
-        "duration": "duration reached", "stopped": "stopped", "interrupted": "stopped by Ctrl-C",
-        "end": "the source ended", "device": "the device failed", "write": "writing failed",
-        "lost": "the device did not come back",
-    }
     print(f"{status.path}: {status.rows_written} rows, {status.duration_s:.1f} s of device "
-          f"time ({endings.get(outcome.reason, outcome.reason)})", file=out)
+          f"time ({ENDINGS.get(outcome.reason, outcome.reason)})", file=out)
     if outcome.held_signal:
         _error("the signal came while the file was being closed: it was finished first")
     if outcome.message:
@@ -223,8 +282,8 @@ def print_outage(outage: Any) -> None:
 def _record_inputs(args: argparse.Namespace) -> list[Path]:
     """The files ``record`` reads (a replayed recording, the profile): never its output."""
     paths = [Path(args.calibration)] if args.calibration else []
-    if args.record_device.lower().startswith("replay://"):
-        with contextlib.suppress(DeviceError, ValueError):  # a bad URL: opening it says why
+    with contextlib.suppress(DeviceError, ValueError):  # a bad URL: opening it says why
+        if driver_for(args.record_device).replayable:
             paths.append(recording_path(args.record_device))
     return paths
 
