@@ -70,12 +70,14 @@ def test_record_then_replay_through_the_same_pipeline(qtbot, window, tmp_path, a
         lambda: bool(stream) and stream[-1].replay is not None and not stream[-1].replay[2],
         timeout=TIMEOUT_MS,
     )
-    before = session.pipeline.counters.samples
+    before = session.pipeline.counters
     window.replay_bar.control.emit("seek", 1.0)  # s from the start of the recording
     window.replay_bar.play_button.setChecked(True)
-    # A seek starts the views afresh (time must not run backwards), then data flows again;
-    # the views get the lead-in before the new position (here from the recording's start).
-    qtbot.waitUntil(lambda: session.pipeline.counters.samples < before, timeout=TIMEOUT_MS)
+    # A seek starts the views afresh (time must not run backwards): the pipeline is configured
+    # anew, with new counters (watching the count fall below its old value missed it on a busy
+    # machine, where the lead-in and the play refilled it between two polls); then data flows
+    # again, the lead-in before the new position first (here from the recording's start).
+    qtbot.waitUntil(lambda: session.pipeline.counters is not before, timeout=TIMEOUT_MS)
     qtbot.waitUntil(lambda: session.pipeline.counters.samples > 100, timeout=TIMEOUT_MS)
     first_t = session.pipeline.samples.latest(len(session.pipeline.samples))["t"][0]
     assert first_t == pytest.approx(t[0] + max(0.0, 1.0 - SEEK_LEAD_IN_S), abs=0.05)
