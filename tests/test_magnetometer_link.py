@@ -7,16 +7,14 @@ stream unchanged.
 
 from __future__ import annotations
 
-import importlib
 import os
 import select
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from old_link_reader import load_old_decoder
 
 from app.core.devices import BoardStatus
 from app.core.earth_field import DEFAULT_PLACE, earth_field
@@ -30,29 +28,14 @@ from drivers.link.framing import FrameSplitter, encode_packet, unframe
 from drivers.registry import create_device
 from drivers.sim.device import SimulatedDevice
 
-ROOT = Path(__file__).resolve().parent.parent
 PRE_MAG_COMMIT = "8b3bdf3"
 """The last commit before the magnetometer extension: its decoder knows SAMPLES, STATUS,
 SAMPLES_INDEXED and SENSOR, as every host built before it does."""
 
 
 def load_pre_mag_reader(tmp_path: Path):
-    """The decoder before the extension, from git, as a package of its own (``premag``)."""
-    package = tmp_path / "premag"
-    package.mkdir()
-    (package / "__init__.py").write_text("")
-    for name in ("decoder", "protocol", "framing"):
-        source = subprocess.run(
-            ["git", "-C", str(ROOT), "show", f"{PRE_MAG_COMMIT}:drivers/link/{name}.py"],
-            capture_output=True, text=True, check=True).stdout
-        source = source.replace("from drivers.link import protocol", "from premag import protocol")
-        source = source.replace("from drivers.link.", "from premag.")
-        (package / f"{name}.py").write_text(source)
-    sys.path.insert(0, str(tmp_path))
-    try:
-        decoder = importlib.import_module("premag.decoder")
-    finally:
-        sys.path.remove(str(tmp_path))
+    """The decoder before the magnetometer extension (``premag``)."""
+    decoder = load_old_decoder(tmp_path, PRE_MAG_COMMIT, "premag")
     assert not hasattr(decoder.p, "MAG_SAMPLES")  # really the reader before the extension
     return decoder
 

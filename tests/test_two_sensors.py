@@ -7,9 +7,6 @@ decoder as it was before it, taken from git) still gets sensor 0 intact from the
 
 from __future__ import annotations
 
-import importlib
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -17,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fwcore import FirmwareCore, SharedBus
+from old_link_reader import load_old_decoder
 
 from drivers import lsm6dsox
 from drivers.errors import DeviceError, DeviceOpenError, SettingRefusedError
@@ -118,22 +116,8 @@ def packets_of(data: bytes) -> list[p.Packet]:
 
 
 def load_v1_reader(tmp_path: Path):
-    """The decoder before the extension, from git, as a package of its own (``v1link``)."""
-    package = tmp_path / "v1link"
-    package.mkdir()
-    (package / "__init__.py").write_text("")
-    for name in ("decoder", "protocol", "framing"):
-        source = subprocess.run(
-            ["git", "-C", str(ROOT), "show", f"{V1_READER_COMMIT}:drivers/link/{name}.py"],
-            capture_output=True, text=True, check=True).stdout
-        source = source.replace("from drivers.link import protocol", "from v1link import protocol")
-        source = source.replace("from drivers.link.", "from v1link.")
-        (package / f"{name}.py").write_text(source)
-    sys.path.insert(0, str(tmp_path))
-    try:
-        decoder = importlib.import_module("v1link.decoder")
-    finally:
-        sys.path.remove(str(tmp_path))
+    """The decoder before the two-sensor extension (``v1link``)."""
+    decoder = load_old_decoder(tmp_path, V1_READER_COMMIT, "v1link")
     assert not hasattr(decoder.p, "SAMPLES_INDEXED")  # really the reader before the extension
     return decoder
 
