@@ -39,3 +39,18 @@ def test_dates_outside_the_model_and_places_off_the_earth_are_refused():
 def test_decimal_year_counts_the_days():
     assert decimal_year(date(2026, 1, 1)) == pytest.approx(2026.0 + 0.5 / 365)
     assert decimal_year(2027.25) == 2027.25
+
+
+def test_missing_coefficient_files_are_a_clear_error_not_a_crash(monkeypatch):
+    from app.core import earth_field as module
+
+    def missing():
+        raise FileNotFoundError(2, "No such file or directory")
+
+    monkeypatch.setattr(module, "_model", missing)
+    module.earth_field.cache_clear()
+    try:
+        with pytest.raises(ValueError, match=r"coefficients cannot be read.*reinstall pygeomag"):
+            module.earth_field(DEFAULT_PLACE, 2026.5)
+    finally:
+        module.earth_field.cache_clear()

@@ -103,14 +103,20 @@ def _model():  # type: ignore[no-untyped-def]
 def earth_field(place: Place = DEFAULT_PLACE, when: date | datetime | float | None = None
                 ) -> EarthField:
     """The WMM field at ``place`` on ``when`` (default: today). Raises ValueError for a date
-    outside the model's span (its values would be guesses)."""
+    outside the model's span (its values would be guesses) and when the model's coefficient
+    files cannot be read."""
     year = decimal_year(datetime.now(UTC) if when is None else when)
     low, high = WMM_VALID_YEARS
     if not low <= year < high:
         raise ValueError(f"the World Magnetic Model in use covers {low:.0f} to {high:.0f}; "
                          f"{year:.2f} is outside it")
-    result = _model().calculate(glat=place.latitude_deg, glon=place.longitude_deg,
-                                alt=place.altitude_m / 1000.0, time=year)
+    try:
+        model = _model()
+    except OSError as exc:  # a bundle or an install without the coefficient files
+        raise ValueError(f"the World Magnetic Model's coefficients cannot be read "
+                         f"({exc.strerror or exc}): reinstall pygeomag") from None
+    result = model.calculate(glat=place.latitude_deg, glon=place.longitude_deg,
+                             alt=place.altitude_m / 1000.0, time=year)
     return EarthField(north_ut=result.x / 1000.0, east_ut=result.y / 1000.0,
                       down_ut=result.z / 1000.0, declination_deg=float(result.d),
                       place=place, year=year)

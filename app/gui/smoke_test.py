@@ -202,7 +202,11 @@ def _run_checks(screenshot: str | None) -> str:
         session = DeviceSession()
         errors: list[str] = []
         session.error.connect(errors.append)
-        window = MainWindow(session, settings, SIMULATOR_URL, DEFAULT_FILTER)
+        try:
+            window = MainWindow(session, settings, SIMULATOR_URL, DEFAULT_FILTER)
+        except BaseException:
+            session.shutdown()  # its worker thread must not outlive the failed window
+            raise
         try:
             window.resize(1280, 860)
             window.show()
