@@ -542,3 +542,20 @@ def test_dock_panels_scroll_rather_than_grow_the_window(qtbot, tmp_path):
         assert isinstance(window.docks["arm"], QDockWidget)
     finally:
         window.close()
+
+
+def test_a_reserved_figure_keeps_its_room_when_the_theme_enlarges_the_font(qtbot):
+    """The status bar's fps figure is never cut: its room follows the font, not the pixels of
+    the first theme (a larger status font once elided '17 fps')."""
+    label = ElidedLabel()
+    qtbot.addWidget(label)
+    label.reserve("999 fps")
+    small = label.minimumSizeHint().width()
+    font = label.font()
+    font.setPointSizeF(font.pointSizeF() * 2)
+    label.setFont(font)
+    label.setText("17 fps")
+    assert label.minimumSizeHint().width() > 1.8 * small
+    label.resize(label.minimumSizeHint())
+    label.show()
+    assert not label.isElided()

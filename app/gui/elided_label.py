@@ -27,7 +27,14 @@ class ElidedLabel(QLabel):
         super().__init__(parent)
         self._text = ""
         self._widest = 0.0
+        self._reserve = ""
         self.setText(text)
+
+    def reserve(self, text: str) -> None:
+        """Never give this label less room than ``text`` needs in its current font (a figure
+        that must never be cut, "999 fps"): the room follows font and theme changes."""
+        self._reserve = text
+        self.updateGeometry()
 
     def text(self) -> str:  # type: ignore[override]
         return self._text
@@ -61,15 +68,20 @@ class ElidedLabel(QLabel):
         return QFontMetricsF(self.font()).horizontalAdvance(text)
 
     def sizeHint(self) -> QSize:
-        margins = self.contentsMargins()
-        return QSize(
-            math.ceil(self._widest) + 1 + margins.left() + margins.right() + 2 * self.margin(),
-            self.fontMetrics().height() + margins.top() + margins.bottom() + 2 * self.margin(),
-        )
+        return self._size_for(max(self._widest, self._advance(self._reserve)))
 
     def minimumSizeHint(self) -> QSize:
         hint = self.sizeHint()
+        if self._reserve:
+            return self._size_for(self._advance(self._reserve))
         return QSize(min(hint.width(), self.MINIMUM_WIDTH), hint.height())
+
+    def _size_for(self, text_width: float) -> QSize:
+        margins = self.contentsMargins()
+        return QSize(
+            math.ceil(text_width) + 1 + margins.left() + margins.right() + 2 * self.margin(),
+            self.fontMetrics().height() + margins.top() + margins.bottom() + 2 * self.margin(),
+        )
 
     def isElided(self) -> bool:
         """Whether the text is cut short now."""

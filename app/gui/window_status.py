@@ -36,9 +36,10 @@ class WindowStatus:
         self.device = StatusField("No device")
         self.rate = StatusField()
         self.filter = StatusField()
-        self.fps = ElidedLabel("999 fps")
-        self.fps.setMinimumWidth(self.fps.sizeHint().width())  # never cut
-        self.fps.setText("")
+        self.fps = ElidedLabel()
+        # Never cut, in whatever font the theme gives it (a width fixed in pixels at start
+        # was too narrow after a theme with a larger status font: '17 fps' was elided).
+        self.fps.reserve("999 fps")
         self.calibration = StatusField()
         self.calibration.setObjectName("calibrationStatus")
         self.tare = StatusField()
