@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import os
 import sys
 import tempfile
@@ -87,6 +88,7 @@ def pytest_runtest_teardown(item, nextitem):
     after four GUI test files, and each application-wide stylesheet change then re-polished all
     of them (12-19 s per teardown in test_widgets).
     """
+    _collect_garbage()
     if "PySide6.QtWidgets" not in sys.modules:
         return
     from PySide6.QtCore import QCoreApplication, QEvent
@@ -164,3 +166,24 @@ def live(qtbot, host):
     return SimpleNamespace(
         pipeline=pipeline, presenter=presenter, plots=plots, level=level, handed=handed
     )
+
+
+# -- garbage: collected in the main thread only ----------------------------------------------
+# Python's cycle collector runs in whichever thread allocates. In a device worker or a
+# simulator's thread it freed Qt objects of the main thread mid-timer: a segmentation fault
+# in a later test (reproduced with test_window_fit's value-labels test before a window test).
+# The app collects on a GUI-thread timer (pyqtgraph's GarbageCollector); the tests collect at
+# each test's end, as the automatic collector would, by generation thresholds.
+_THRESHOLDS = gc.get_threshold()
+gc.disable()
+
+
+def _collect_garbage() -> None:
+    young, middle, old = gc.get_count()
+    if young > _THRESHOLDS[0]:
+        gc.collect(0)
+        if middle > _THRESHOLDS[1]:
+            gc.collect(1)
+            if old > _THRESHOLDS[2]:
+                gc.collect(2)
+

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 
+from pyqtgraph.util.garbage_collector import GarbageCollector
 from PySide6.QtWidgets import QApplication
 
 from app import __version__
@@ -29,6 +30,10 @@ def run_gui(
     app.setApplicationVersion(__version__)
     app.setDesktopFileName("org.inclinometer.Inclinometer")  # Wayland finds the icon by it
     theme.apply_theme(app)  # the window then applies the remembered theme
+    # Python's cycle collector runs in whichever thread allocates; in the device worker it
+    # could free a window object mid-timer (a segmentation fault). pyqtgraph's collector
+    # turns automatic collection off and collects on a timer in this, the GUI, thread.
+    collector = GarbageCollector(interval=1.0)  # noqa: F841 - kept alive until exec returns
     session = DeviceSession()
     window = MainWindow(session, create_settings(), device_url, filter_name, alarms)
     window.show()
