@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from old_link_reader import load_old_decoder
+from test_two_sensors import read_samples
 
 from app.core.devices import BoardStatus
 from app.core.earth_field import DEFAULT_PLACE, earth_field
@@ -172,15 +173,6 @@ def test_a_host_from_before_the_extension_reads_the_new_stream_unchanged(chip, t
 
 
 # -- the emulated board through the serial driver -------------------------------------------------
-def read_rows(device, count: int, deadline_s: float = 5.0) -> list:
-    blocks: list = []
-    end = time.monotonic() + deadline_s
-    while sum(len(b) for b in blocks) < count:
-        assert time.monotonic() < end, "samples did not arrive"
-        block = device.read(0.2)
-        if block is not None:
-            blocks.append(block)
-    return blocks
 
 
 @pytest.mark.parametrize(("chip", "rate_hz", "ut_per_lsb"), [
@@ -193,7 +185,7 @@ def test_the_emulated_board_streams_its_magnetometer_to_the_app(chip, rate_hz, u
         device = create_device(board.port)
         info = device.open()
         try:
-            blocks = read_rows(device, 150)
+            blocks = read_samples(device, 150)
             status = device.request_status()
         finally:
             device.close()
@@ -221,7 +213,7 @@ def test_the_magnetometer_pauses_where_the_link_cannot_carry_it() -> None:
         device = create_device(f"serial://{board.port}?baud=115200")
         info = device.open()
         try:
-            blocks = read_rows(device, 100)
+            blocks = read_samples(device, 100)
             logs = [entry.text for entry in device.recent_logs()]
         finally:
             device.close()
