@@ -182,7 +182,3 @@ def slice_block(block: SampleBlock, start: int, stop: int) -> SampleBlock:
         None if mag is None else mag[start:stop],
     )
 
-
-def has_field(block: SampleBlock | RawBlock) -> bool:
-    """True when the block carries a magnetometer's columns (some rows may still be NaN)."""
-    return (block.mag_ut if isinstance(block, SampleBlock) else block.mag_raw) is not None
