@@ -68,6 +68,15 @@ class ParameterSpec:
         return round(number) if self.kind == "int" else number
 
 
+MAGNETOMETER_PARAMETER = ParameterSpec(
+    "magnetometer", "Magnetometer heading", "", True, 0, 1,
+    "Take heading from the magnetometer when the source has one (earth frame ENU, y toward "
+    "magnetic north). Off: heading is carried by the gyroscope alone, from an arbitrary start.",
+    kind="bool",
+)
+"""The switch every 9-axis filter (``uses_magnetometer``) declares among its parameters."""
+
+
 @dataclass(slots=True)
 class OrientationBlock:
     """Per-sample filter output: quaternions (N, 4) and the tilt-meter angles."""
@@ -86,6 +95,10 @@ class OrientationFilter(ABC):
     offline: ClassVar[bool] = False
     """True for an acausal filter (a smoother): it needs the whole recording in one block, so it
     is offered for recorded sessions only, never for a live stream."""
+    uses_magnetometer: ClassVar[bool] = False
+    """True for a 9-axis filter: it takes heading from the magnetometer when the block carries a
+    field (``SampleBlock.mag_ut``); its :data:`MAGNETOMETER_PARAMETER` turns that off. Its
+    quaternion is then sensor-to-earth in ENU with y toward magnetic north."""
     reference_only: ClassVar[bool] = False
     """True for a filter kept as a faithful reference (the thesis's), not meant for measurement:
     labelled so in the filter list and left out of the default side-by-side set."""
