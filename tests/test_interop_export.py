@@ -181,15 +181,16 @@ def test_mcap_in_ned_holds_the_enu_export_converted(wobble_csv, tmp_path):
         a.magnetic_field.x, -a.magnetic_field.y, -a.magnetic_field.z)
 
 
-def test_existing_output_is_refused_without_force(wobble_csv, tmp_path, capsys):
+def test_existing_output_is_refused_without_overwrite_or_force(wobble_csv, tmp_path, capsys):
     out = tmp_path / "imu0.csv"
     out.write_text("keep me\n")
     assert main(["export", str(wobble_csv), "--format", "euroc", str(out)]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "exists; pass --force" in err
+    assert err.count("\n") == 0 and "exists; pass --overwrite" in err
     assert out.read_text() == "keep me\n" and not readme_path(out).exists()
     assert main(["export", str(wobble_csv), "--format", "euroc", str(out), "--force"]) == 0
     assert out.read_text().startswith("timestamp [ns]")
+    assert main(["export", str(wobble_csv), "--format", "euroc", str(out), "--overwrite"]) == 0
     assert main(["export", str(wobble_csv), "--format", "euroc", str(wobble_csv),
                  "--force"]) == 2
     assert "recording itself" in capsys.readouterr().err

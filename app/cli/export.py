@@ -1,5 +1,5 @@
-"""``inclinometer export REC --format mcap|euroc OUT [--frame enu|ned] [--force]``: a recording
-as MCAP (sensor_msgs/Imu with the filter's orientation, sensor_msgs/MagneticField) or as
+"""``inclinometer export REC --format mcap|euroc OUT [--frame enu|ned] [--overwrite]``: a
+recording as MCAP (sensor_msgs/Imu with the filter's orientation, sensor_msgs/MagneticField) or as
 EuRoC/Kalibr ``imu0.csv``. The work is :mod:`app.services.interop_export`'s.
 """
 
@@ -49,7 +49,7 @@ def add_arguments(export: argparse.ArgumentParser) -> None:
                         help="mcap: give no orientation (orientation_covariance[0] = -1)")
     export.add_argument("--raw", action="store_true",
                         help="do not apply the calibration recorded in the file")
-    export.add_argument("--force", action="store_true",
+    export.add_argument("--overwrite", "--force", dest="overwrite", action="store_true",
                         help="replace OUT (and its sidecar) if it exists, never the recording")
 
 
@@ -63,7 +63,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     request = ExportRequest(source, target, args.format, frame=args.frame,
                             frame_id=args.frame_id, filter=args.filter,
                             orientation=not args.no_orientation, raw=args.raw,
-                            overwrite=args.force)
+                            overwrite=args.overwrite)
     try:
         summary = export_recording(
             request, warn=lambda text: print(f"inclinometer: warning: {text}", file=sys.stderr))

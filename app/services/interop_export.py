@@ -132,7 +132,7 @@ def export_recording(request: ExportRequest, warn: Say = _quiet) -> ExportSummar
                 check_output(target, inputs=[request.source], overwrite=request.overwrite,
                              option=OPTION, input_name="recording")
             except OutputRefused as exc:
-                raise ExportRefused(str(exc).replace("--overwrite", "--force")) from None
+                raise ExportRefused(str(exc)) from None
         summary = ExportSummary(request.target, request.format, frame, filter_name=name,
                                 calibration_name=_calibration_name(metadata, request.raw))
         write = _write_mcap if request.format == "mcap" else _write_euroc
@@ -143,8 +143,7 @@ def export_recording(request: ExportRequest, warn: Say = _quiet) -> ExportSummar
         except (RecordingError, ValueError) as exc:
             raise ExportFailed(f"{request.source}: {exc}; nothing was written") from None
         except OSError as exc:  # a full disk: the temporary file is gone, the target untouched
-            raise ExportFailed(write_error_message(exc, request.target, OPTION)
-                               .replace("--overwrite", "--force")) from None
+            raise ExportFailed(write_error_message(exc, request.target, OPTION)) from None
         finally:
             for warning in caught:
                 warn(str(warning.message))
