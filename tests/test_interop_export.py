@@ -246,3 +246,12 @@ def test_an_offline_filter_is_refused_with_the_choice(wobble_csv, tmp_path, caps
                  "--filter", "ekf-smoother"]) == 2
     assert "offline smoother" in capsys.readouterr().err
     assert not (tmp_path / "s.mcap").exists()
+
+
+def test_metadata_values_are_strings_and_json_has_no_nan():
+    from app.core.interop.mcap_ros2 import metadata_strings
+
+    values = metadata_strings({"note": "text", "odr_hz": 104.0, "bias": [0.1, float("nan")],
+                               "nested": {"k": float("inf")}})
+    assert values == {"note": "text", "odr_hz": "104.0", "bias": "[0.1, null]",
+                      "nested": '{"k": null}'}

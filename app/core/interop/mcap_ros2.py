@@ -16,6 +16,7 @@ element itself is not given (the orientation, when exported without one).
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from typing import Any, BinaryIO
 
@@ -55,9 +56,22 @@ CDR_LE = b"\x00\x01\x00\x00"
 """The encapsulation header of little-endian plain CDR."""
 
 
+def _json_safe(value: Any) -> Any:
+    """``value`` with every NaN or infinite float replaced by None (JSON has no NaN)."""
+    if isinstance(value, dict):
+        return {key: _json_safe(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(item) for item in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def metadata_strings(values: Mapping[str, Any]) -> dict[str, str]:
-    """An MCAP metadata record's map (strings only): text as it is, anything else as JSON."""
-    return {str(k): v if isinstance(v, str) else json.dumps(v, allow_nan=False, default=str)
+    """An MCAP metadata record's map (strings only): text as it is, anything else as JSON
+    (a NaN as null)."""
+    return {str(k): v if isinstance(v, str) else json.dumps(_json_safe(v), allow_nan=False,
+                                                            default=str)
             for k, v in values.items()}
 
 
