@@ -3,8 +3,10 @@ its result back as a signal (queued into the receiver's thread)."""
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from pathlib import Path
+from typing import Any
 
 from PySide6.QtCore import QObject, Signal
 
@@ -53,10 +55,16 @@ class ExportJob(QObject):
 
     def _run(self, request: ExportRequest) -> None:
         try:
-            summary = export_recording(request, warn=self.warned.emit)
+            summary = export_recording(request, warn=lambda text: self._emit(self.warned, text))
         except (ExportRefused, ExportFailed) as exc:
-            self.failed.emit(str(exc))
+            self._emit(self.failed, str(exc))
         except Exception as exc:  # a bug: the dialog must still hear that it ended
-            self.failed.emit(f"export stopped: {type(exc).__name__}: {exc}")
+            self._emit(self.failed, f"export stopped: {type(exc).__name__}: {exc}")
         else:
-            self.finished.emit(summary)
+            self._emit(self.finished, summary)
+
+    @staticmethod
+    def _emit(signal: Any, value: object) -> None:
+        """Emit, unless the job's window was closed meanwhile (the file is written anyway)."""
+        with contextlib.suppress(RuntimeError):  # the C++ object is gone
+            signal.emit(value)
