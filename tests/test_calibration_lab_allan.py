@@ -54,6 +54,9 @@ def test_allan_on_a_simulated_static_recording_writes_the_binding_json(static_cs
         np.testing.assert_allclose(adev[:, 0], first, rtol=0.15)
     assert document["temperature_removed"] is True
     assert document["method"] == "likelihood"
+    # Both density conventions, named (issue 34); the old key keeps the datasheet's.
+    assert document["gyro"]["noise_density"] == document["gyro"]["noise_density_one_sided"]
+    assert "tau = 1 s" in document["convention"]["noise_density_allan"]
     assert all(v is None or v > 0 for v in document["gyro"]["random_walk_log_sd"])
 
 

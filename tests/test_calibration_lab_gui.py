@@ -35,10 +35,15 @@ def test_allan_page_plots_and_tabulates_a_static_recording(qtbot, qapp, static_c
     page.show()
     result = page.load_recording(static_csv)
     assert result is not None
-    assert page.table.rowCount() == 6
-    assert page.table.item(0, 0).text() == "Gyro noise density"
+    # Issue 34: the noise density in both conventions, each named (8 rows, were 6).
+    assert page.table.rowCount() == 8
+    assert page.table.item(0, 0).text() == "Gyro noise density, datasheet (1-sided)"
     gyro_density = float(page.table.item(0, 2).text())
     assert gyro_density == pytest.approx(3.8e-3, rel=0.1)
+    assert page.table.item(1, 0).text() == "Gyro noise density, Allan/Kalibr (τ = 1 s)"
+    assert float(page.table.item(1, 2).text()) == pytest.approx(gyro_density / math.sqrt(2),
+                                                                rel=1e-3)
+    assert "N·√(fs/2)" in page.table.item(1, 2).toolTip()
     # Three measured curves, three fitted ones and the asymptotes per plot.
     assert len(page.gyro_plot.getPlotItem().listDataItems()) >= 7
     proposed = page.proposed_parameters()

@@ -71,7 +71,7 @@ def test_a_hostile_input_ends_in_one_line_and_exit_2(index, corpus, capsys):
 def test_a_pipe_as_the_recording_is_refused_by_replay_evaluate_and_allan(tmp_path, capsys):
     data = recording_text(rows=50).encode()
     for argv in (["replay", "{}", "--out", str(tmp_path / "a.csv")], ["evaluate", "{}"],
-                 ["allan", "{}"]):
+                 ["allan", "{}"], ["export", "{}", "--format", "mcap", str(tmp_path / "a.mcap")]):
         path, fd = pipe_path(data)
         try:
             code, err = run([a.replace("{}", path) for a in argv], capsys)
@@ -79,7 +79,7 @@ def test_a_pipe_as_the_recording_is_refused_by_replay_evaluate_and_allan(tmp_pat
             os.close(fd)
         line = assert_one_line(code, err)
         assert path in line
-    assert not (tmp_path / "a.csv").exists()
+    assert not (tmp_path / "a.csv").exists() and not (tmp_path / "a.mcap").exists()
 
 
 def test_an_invalid_recorded_calibration_is_refused_unless_raw(corpus, capsys):
@@ -89,6 +89,10 @@ def test_an_invalid_recorded_calibration_is_refused_unless_raw(corpus, capsys):
     code, err = run(["replay", source, "--raw", "--out", str(corpus / "raw.csv")], capsys)
     assert code == 0, err
     assert (corpus / "raw.csv").stat().st_size > 0
+    line = assert_one_line(*run(["export", source, "--format", "euroc",
+                                 str(corpus / "imu0.csv")], capsys))
+    assert "recorded calibration is invalid" in line and "--raw" in line
+    assert not (corpus / "imu0.csv").exists()
 
 
 def test_odr_1e9_is_refused_where_1000_snaps(capsys):

@@ -67,6 +67,9 @@ def test_replay_refuses_a_hard_link_of_its_recording_even_with_overwrite(recordi
     ["calibrate-temperature", "{src}", "--out", "{out}"],
     ["joint", "{src}", "{src}", "--out", "{out}"],
     ["record", "--device", "sim://static?realtime=0", "--duration", "1", "--quiet", "{out}"],
+    ["allan", "{src}", "--kalibr", "{out}"],
+    ["export", "{src}", "--format", "mcap", "{out}"],
+    ["export", "{src}", "--format", "euroc", "{out}"],
 ])
 def test_every_writing_command_refuses_an_existing_file(recording, tmp_path, capsys, command):
     existing = tmp_path / "existing.out"

@@ -255,7 +255,7 @@ def test_no_text_is_clipped_in_any_dock_or_dialog_at_either_size_in_any_theme(
             qtbot.waitUntil(lambda: "samples" in window.status_rate.text(), timeout=TIMEOUT_MS)
             dialogs = [window.show_shortcut_sheet(), window.show_about(),
                        window.show_user_guide(), window.open_calibration_wizard(),
-                       window.open_allan_page()]
+                       window.open_allan_page(), window.files.export_recording()]
             for name in THEMES:
                 window.set_theme(name)
                 for width, height in SIZES:

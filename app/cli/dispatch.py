@@ -23,6 +23,8 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
      "score the orientation filters on sources with a known true orientation"),
     ("record", "record", "record a device to a CSV file, without the GUI"),
     ("replay", "replay", "run filters over a recording and export their angles to CSV"),
+    ("export", "export",
+     "export a recording to MCAP (ROS 2, Foxglove) or EuRoC/Kalibr CSV, ENU or NED"),
     ("simulate", "simulate",
      "serve an emulated NUCLEO board (link protocol v1) on a pseudo-terminal"),
     ("check-board", "check_board",

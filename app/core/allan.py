@@ -8,7 +8,10 @@ axis (IEEE Std 952, Annex C) to the Allan *variance*::
 
 - ``N``, the **noise density** (white noise), in the datasheet's one-sided convention: one
   sample at rate ``fs`` scatters by ``N sqrt(fs / 2)``, as in the simulator and the EKF's
-  ``gyro_noise`` (so ``adev(1 s) = N / sqrt(2)`` on the -1/2 slope);
+  ``gyro_noise`` (so ``adev(1 s) = N / sqrt(2)`` on the -1/2 slope). Kalibr, allan_variance_ros
+  and IEEE Std 952 read the density off the Allan curve at tau = 1 s instead (continuous-time
+  white noise of strength ``N_c``: one sample scatters by ``N_c sqrt(fs)``), so
+  ``N_c = N / sqrt(2)``; both are reported (:data:`CONVENTIONS`);
 - ``B``, the **bias instability**: the flicker floor ``0.664 B``. It is reported as the
   minimum of the fitted curve divided by 0.664 (the usual read-off of the plot's bottom), so
   it is meaningful also when the floor is only where white noise meets the random walk;
@@ -63,6 +66,20 @@ METHODS = ("likelihood", "allan-fit")
 """How N and K are estimated: the time-domain likelihood (default) or the Allan-curve fit."""
 FIT_ITERATIONS = 4
 """Reweighting passes of the fit (weights from the model, not from the noisy points)."""
+ONE_SIDED_PER_ALLAN = math.sqrt(2.0)
+"""The datasheet's one-sided density over the Allan/Kalibr one, for the same white noise."""
+CONVENTIONS = {
+    "noise_density": "the datasheet's one-sided density N: one sample at rate fs scatters by "
+                     "N*sqrt(fs/2) (kept under this key; the same as noise_density_one_sided)",
+    "noise_density_one_sided": "the datasheet's one-sided density N: one sample at rate fs "
+                               "scatters by N*sqrt(fs/2); compare with ST's datasheet figures",
+    "noise_density_allan": "the Allan/Kalibr/IEEE Std 952 density N_c = N/sqrt(2), the Allan "
+                           "deviation at tau = 1 s: one sample at rate fs scatters by "
+                           "N_c*sqrt(fs); Kalibr's *_noise_density",
+    "random_walk": "K: the bias moves by K*sqrt(t) in t seconds; the same in both conventions "
+                   "(Kalibr's *_random_walk)",
+}
+"""What each density and walk of the JSON means (its ``convention`` object)."""
 
 
 @dataclass(frozen=True)
@@ -114,6 +131,16 @@ class SensorNoiseFigures:
         return np.array([a.noise_density for a in self.axes])
 
     @property
+    def noise_density_one_sided(self) -> np.ndarray:
+        """The datasheet's one-sided density: a sample scatters by ``N sqrt(fs / 2)``."""
+        return self.noise_density
+
+    @property
+    def noise_density_allan(self) -> np.ndarray:
+        """The Allan/Kalibr density (adev at tau = 1 s): a sample scatters by ``N sqrt(fs)``."""
+        return self.noise_density / ONE_SIDED_PER_ALLAN
+
+    @property
     def bias_instability(self) -> np.ndarray:
         return np.array([a.bias_instability for a in self.axes])
 
@@ -133,6 +160,8 @@ class SensorNoiseFigures:
         """The binding form: figures [3], ``tau_s`` [...], ``adev`` [[...] x 3]."""
         return {
             "noise_density": self.noise_density.tolist(),
+            "noise_density_one_sided": self.noise_density_one_sided.tolist(),
+            "noise_density_allan": self.noise_density_allan.tolist(),
             "bias_instability": self.bias_instability.tolist(),
             "random_walk": self.random_walk.tolist(),
             "tau_s": self.tau_s.tolist(),
@@ -163,6 +192,7 @@ class AllanResult:
         return {
             "gyro": self.gyro.to_json(),
             "accel": self.accel.to_json(),
+            "convention": dict(CONVENTIONS),
             "method": self.method,
             "rate_hz": self.rate_hz,
             "duration_s": self.duration_s,

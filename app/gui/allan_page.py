@@ -54,22 +54,35 @@ DEG_H = math.degrees(1.0) * 3600.0
 UG = 1e6 / STANDARD_GRAVITY_M_S2
 
 
-def figure_rows(result: AllanResult) -> list[tuple[str, str, np.ndarray]]:
-    """(label, unit, values (3,)) in the familiar units."""
+def figure_rows(result: AllanResult) -> list[tuple[str, str, np.ndarray, str, str]]:
+    """(label, unit, values (3,), sensor, figure key) in the familiar units. The noise density
+    twice: the datasheet's one-sided convention (a sample at fs scatters by N·√(fs/2)) and the
+    Allan/Kalibr one (the Allan deviation at τ = 1 s: N·√fs), which is √2 smaller."""
     deg = math.degrees(1.0)
     g, a = result.gyro, result.accel
     return [
-        ("Gyro noise density", "°/s/√Hz", g.noise_density * deg),
-        ("Gyro bias instability", "°/h", g.bias_instability * DEG_H),
-        ("Gyro random walk", "°/h/√h", g.random_walk * DEG_H * 60.0),
-        ("Accel noise density", "µg/√Hz", a.noise_density * UG),
-        ("Accel bias instability", "µg", a.bias_instability * UG),
-        ("Accel random walk", "µg/√h", a.random_walk * UG * 60.0),
+        ("Gyro noise density, datasheet (1-sided)", "°/s/√Hz", g.noise_density_one_sided * deg,
+         "gyro", "noise_density"),
+        ("Gyro noise density, Allan/Kalibr (τ = 1 s)", "°/s/√Hz",
+         g.noise_density_allan * deg, "gyro", "noise_density"),
+        ("Gyro bias instability", "°/h", g.bias_instability * DEG_H, "gyro",
+         "bias_instability"),
+        ("Gyro random walk", "°/h/√h", g.random_walk * DEG_H * 60.0, "gyro", "random_walk"),
+        ("Accel noise density, datasheet (1-sided)", "µg/√Hz", a.noise_density_one_sided * UG,
+         "accel", "noise_density"),
+        ("Accel noise density, Allan/Kalibr (τ = 1 s)", "µg/√Hz", a.noise_density_allan * UG,
+         "accel", "noise_density"),
+        ("Accel bias instability", "µg", a.bias_instability * UG, "accel", "bias_instability"),
+        ("Accel random walk", "µg/√h", a.random_walk * UG * 60.0, "accel", "random_walk"),
     ]
 
 
-FIGURE_KEYS = ("noise_density", "bias_instability", "random_walk")
-"""The figure of each row of :func:`figure_rows`, per sensor (gyro rows, then accel rows)."""
+DENSITY_TIP = (
+    "Two conventions for the same white noise. Datasheet (one-sided, as ST's figures): one "
+    "sample at rate fs scatters by N·√(fs/2). Allan/Kalibr/IEEE 952: the Allan deviation at "
+    "τ = 1 s, one sample scatters by N·√fs; Kalibr's imu.yaml wants this one "
+    "(inclinometer allan --kalibr).")
+
 
 CurrentParameters = Callable[[str, list[str]], dict[str, float] | None]
 """(filter name, parameter names) -> the values in use now, None when that filter is not running."""
@@ -131,6 +144,8 @@ class AllanPage(QWidget):
         self.table.verticalHeader().setVisible(False)
         self.table.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
         self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
+        self.table.horizontalHeader().setSectionResizeMode(
+            0, QHeaderView.ResizeMode.ResizeToContents)
         self.table.setMaximumHeight(250)
         layout.addWidget(self.table)
         self.applied_label = QLabel(self._last_source())
@@ -209,12 +224,20 @@ class AllanPage(QWidget):
                    bool(support.supported("accel", "random_walk")[0]))
         rows = figure_rows(result)
         self.table.setRowCount(len(rows))
-        for r, (label, unit, values) in enumerate(rows):
-            shown = support.supported("gyro" if r < 3 else "accel", FIGURE_KEYS[r % 3])
+        for r, (label, unit, values, sensor, key) in enumerate(rows):
+            shown = support.supported(sensor, key)
             cells = [label, unit, *(f"{v:.4g}" if ok else "—"
                                     for v, ok in zip(values, shown, strict=True))]
             for c, text in enumerate(cells):
-                self.table.setItem(r, c, QTableWidgetItem(text))
+                item = QTableWidgetItem(text)
+                if key == "noise_density":
+                    item.setToolTip(DENSITY_TIP)
+                self.table.setItem(r, c, item)
+        self.table.resizeRowsToContents()
+        whole = (self.table.horizontalHeader().sizeHint().height() + 2 * self.table.frameWidth()
+                 + sum(self.table.rowHeight(r) for r in range(len(rows))))
+        self.table.setMaximumHeight(whole)
+        self.table.setMinimumHeight(whole)  # every row in view, the plots take what is left
         self.apply_button.setEnabled(True)
 
     def _plot(self, plot: pg.PlotWidget, figures: SensorNoiseFigures, factor: float,

@@ -1,4 +1,5 @@
-"""The File menu's work: open a recording (it becomes the device), export the plots, record.
+"""The File menu's work: open a recording (it becomes the device), export the plots, export a
+recording for other tools (MCAP, EuRoC/Kalibr), record.
 
 Every dialog goes through :mod:`app.gui.file_dialogs` (it starts where the user last was).
 """
@@ -60,6 +61,30 @@ class FileActions:
             window.show_error(f"Plots not exported: {exc}")
             return
         window.log(f"Exported the plots to {path}")
+
+    def export_recording(self, source: str | None = None) -> Any:
+        """File ▸ Export recording: the dialog (MCAP or EuRoC/Kalibr, ENU or NED), on the
+        recording being replayed when there is one. Returns the dialog (shown, not modal)."""
+        from app.gui.export_dialog import ExportDialog
+        from app.services.export_job import replayed_recording
+
+        window = self.window
+        if source is None:
+            info = window.session.device_info
+            playing = replayed_recording(info.url if info is not None else None)
+            source = str(playing) if playing is not None else None
+        dialog = getattr(window, "export_dialog", None)
+        if dialog is None:
+            dialog = ExportDialog(window, source, recordings_dir())
+            dialog.job.finished.connect(
+                lambda summary: window.log(f"Exported {summary.rows} samples to "
+                                           f"{summary.target} ({summary.frame.upper()})"))
+            window.export_dialog = dialog
+        elif source and not dialog.job.running:
+            dialog.set_source(source)
+        dialog.show()
+        dialog.raise_()
+        return dialog
 
     def start_recording(self, path: str, note: str = "") -> None:
         self.window.session.requestStartRecording.emit(path, note)

@@ -30,6 +30,10 @@ def menu_table() -> list[Entry]:
                      args=(str(path),)) for path in sample_recordings()),
         ActionSpec("export_plots_action", "&Export plots…", FILE, "files.export_plots",
                    tooltip="Save the live plots as PNG or SVG"),
+        ActionSpec("export_recording_action", "Export &recording (MCAP, EuRoC/Kalibr)…", FILE,
+                   "files.export_recording",
+                   tooltip="A recording for Foxglove / ROS 2 (MCAP) or Kalibr (imu0.csv), "
+                   "ENU or NED"),
         ActionSpec("record_action", "&Record…", FILE, "files.record", "Ctrl+R",
                    checkable=True, passes_checked=True),
         Separator(FILE),

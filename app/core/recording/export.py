@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -39,7 +39,7 @@ from app.core.recording.reader import Recording
 from app.core.recording.stream import RecordingStream, device_blocks, prefetched
 from app.core.recording.writer import format_table_bytes
 from app.core.safe_output import output_file
-from app.core.samples import convert_raw_block
+from app.core.samples import SampleBlock, convert_raw_block
 from app.core.scoring import DEFAULT_SKIP_S, SCORE_COLUMN, ErrorAccumulator
 
 ANGLES_MAGIC = "# inclinometer-angles 1"
@@ -240,16 +240,10 @@ def replay_streamed(
     (:class:`~app.core.scoring.ErrorAccumulator`). Offline filters need the whole
     recording: run them with :func:`run_filters` (ValueError here).
     """
-    offline = [name for name in filters if FILTERS[name].offline]
-    if offline:
-        raise ValueError(f"{offline[0]} is an offline filter: it needs the whole recording")
     head = Recording(metadata=stream.metadata, header=stream.header, columns={},
                      path=stream.path)
     cal = resolve_calibration(head, calibration)
-    recorded = recorded_filter_parameters(head)
-    chosen = dict(parameters or {})
-    objects = [create_filter(name, **dict(chosen.get(name, recorded.get(name, {}))))
-               for name in filters]
+    objects = _online_filters(head, filters, parameters)
     results = [StreamedFilter(f.name, f.title or f.name, f.parameter_values()) for f in objects]
     reference = all(name in stream.header for name in REFERENCE_COLUMNS)
     masked = SCORE_COLUMN in stream.header
@@ -265,9 +259,7 @@ def replay_streamed(
         head_lines = [ANGLES_MAGIC, *(metadata_line(k, v) for k, v in metadata.items()),
                       ",".join(names)]
         out.write(("\n".join(head_lines) + "\n").encode("utf-8"))
-        chunks = prefetched(stream.chunks())  # the next chunk parses while this one runs
-        for raw, extra in device_blocks(chunks, block, extra=(SCORE_COLUMN,)):
-            samples = cal.apply(convert_raw_block(raw))
+        for samples, outputs, extra in _filtered(stream, objects, cal, block, (SCORE_COLUMN,)):
             n = len(samples)
             if t0 is None:
                 t0 = float(samples.t_s[0])
@@ -285,10 +277,7 @@ def replay_streamed(
                           else samples.t_s >= t0 + skip_s)
                 scored &= np.all(np.isfinite(ref), axis=1)
                 summary.scored_rows += int(np.count_nonzero(scored))
-            outputs = []
-            for result, orientation_filter in zip(results, objects, strict=True):
-                output = orientation_filter.process(samples)
-                outputs.append(output)
+            for result, output in zip(results, outputs, strict=True):
                 angles = output.angles
                 columns += [angles.roll_deg, angles.pitch_deg, angles.tilt_deg,
                             angles.direction_deg, *output.quat.T]
@@ -308,6 +297,50 @@ def replay_streamed(
                 pending, pending_rows = [], 0
         _write_pending(out, pending)
     return summary
+
+
+def _online_filters(head: Recording, filters: Sequence[str],
+                    parameters: Mapping[str, Mapping[str, Any]] | None) -> list[Any]:
+    """The filters, made with the chosen (else recorded, else default) parameters;
+    ValueError for an offline one (it needs the whole recording: :func:`run_filters`)."""
+    offline = [name for name in filters if FILTERS[name].offline]
+    if offline:
+        raise ValueError(f"{offline[0]} is an offline filter: it needs the whole recording")
+    recorded = recorded_filter_parameters(head)
+    chosen = dict(parameters or {})
+    return [create_filter(name, **dict(chosen.get(name, recorded.get(name, {}))))
+            for name in filters]
+
+
+def _filtered(stream: RecordingStream, objects: Sequence[Any], cal: SensorCalibration,
+              block: int | None, extra: tuple[str, ...] = ()
+              ) -> Iterator[tuple[SampleBlock, list[Any], dict[str, np.ndarray]]]:
+    """The pipeline's stages over a streamed recording, block by block as the device delivered
+    them (or ``block`` rows): the calibrated samples, each filter's output, the ``extra``
+    columns."""
+    chunks = prefetched(stream.chunks())  # the next chunk parses while this one runs
+    for raw, columns in device_blocks(chunks, block, extra=extra):
+        samples = cal.apply(convert_raw_block(raw))
+        yield samples, [f.process(samples) for f in objects], columns
+
+
+def filtered_blocks(
+    stream: RecordingStream,
+    filters: Sequence[str],
+    *,
+    calibration: CalibrationChoice = "recorded",
+    parameters: Mapping[str, Mapping[str, Any]] | None = None,
+    block: int | None = None,
+) -> Iterator[tuple[SampleBlock, list[Any]]]:
+    """What :func:`replay_streamed` runs, for other writers (an export): per device block,
+    the calibrated samples and each online filter's output (``quat``, ``angles``), in one
+    streamed pass. ValueError for an offline filter."""
+    head = Recording(metadata=stream.metadata, header=stream.header, columns={},
+                     path=stream.path)
+    cal = resolve_calibration(head, calibration)
+    objects = _online_filters(head, filters, parameters)
+    for samples, outputs, _ in _filtered(stream, objects, cal, block):
+        yield samples, outputs
 
 
 def _write_pending(out: Any, pending: list[list[np.ndarray]]) -> None:
