@@ -949,7 +949,7 @@ class Arm(Scenario):
         hold = float(self.params["hold"])
         step = hold + float(self.params["transition"])
         index = np.maximum(np.floor(t / step), 0.0).astype(np.int64)
-        s, ds = smoothstep((np.maximum(t, 0.0) - index * step - hold) / (step - hold))
+        s, ds, _ = smootherstep((np.maximum(t, 0.0) - index * step - hold) / (step - hold))
         angles = np.empty((len(t), self.links + 1))
         rates = np.empty_like(angles)
         for k in np.unique(index):
