@@ -256,3 +256,10 @@ def test_record_arm_placements_need_a_column_arm_with_magnetometers(tmp_path, ca
                      "--placements", "2"]) == 2
     assert message in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+
+
+def test_placement_options_need_a_column_arm():
+    from drivers.errors import DeviceUrlError
+    from drivers.sim.device import SimulatedDevice
+    with pytest.raises(DeviceUrlError, match="hold place a column arm: add column=1"):
+        SimulatedDevice("sim://arm?hold=2")

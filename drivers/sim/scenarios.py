@@ -853,6 +853,7 @@ class Arm(Scenario):
     """Accelerometer bias left by a calibration, as a fraction of the raw unit's (2 of 20 mg)."""
     LEVER_STEP_S: ClassVar[float] = 5e-4
     """Step of the central difference that gives the lever arms' acceleration."""
+    COLUMN_ONLY: ClassVar[tuple[str, ...]] = ("spots", "hold", "transition", "scatter")
     COLUMN_HINGE_AXIS: ClassVar[tuple[float, float, float]] = (0.0, -1.0, 0.0)
     """``column=1``: every hinge's axis in the previous link's frame (positive raises a link
     running along +x; the app's :data:`app.core.arm.layout.PITCH_UP`)."""
@@ -868,6 +869,9 @@ class Arm(Scenario):
             raise ValueError(f"arm: sensor={p['sensor']} but the arm has links 0 to {links - 1}")
         if not p["joint_min"] < p["joint_max"]:
             raise ValueError("arm: joint_min must be below joint_max")
+        placing = sorted(set(params) & set(self.COLUMN_ONLY))
+        if placing and not p["column"]:
+            raise ValueError(f"arm: {', '.join(placing)} place a column arm: add column=1")
         rng = self.rng
         level = float(p["level"])
         rotation = np.radians(_between(*Handheld.ROTATION_DEG, level)) * float(p["base"])
