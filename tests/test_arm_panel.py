@@ -210,3 +210,10 @@ def test_theta_is_measured_live_and_per_capture_from_the_magnetometers(panel):
     assert "Placement refused" in panel.message.text()
     assert "not steady" in panel.message.text()
     assert len(panel.placements) == 4
+    # The zero stays while there are placements measured from it.
+    source.t = windows[1][1] - 0.05
+    zero = panel.theta_zero
+    assert not panel.set_theta_zero()
+    assert "Clear them first" in panel.message.text() and panel.theta_zero == zero
+    panel.clear_captures()
+    assert panel.set_theta_zero() and panel.theta_zero != zero

@@ -483,7 +483,10 @@ class ArmPanel(QWidget):
         return self.live_theta
 
     def set_theta_zero(self) -> bool:
-        """θ = 0 at the column's present direction (measured over the averaging window)."""
+        """θ = 0 at the column's present direction (measured over the averaging window);
+        refused while there are placements (their θ is from the present zero)."""
+        if not self._zero_may_change():
+            return False
         captures = self.link_captures(self.window.value())
         if captures is None:
             self.message.setText("θ zero not set: no link has a magnetometer (θ is typed).")
@@ -494,12 +497,21 @@ class ArmPanel(QWidget):
             return False
         self.theta_zero = ThetaZero(theta.psi_deg, f"set at {theta.azimuth_deg:.1f}° magnetic")
         self.message.setText(f"θ = 0 where the column points {theta.azimuth_deg:.1f}° "
-                             "(magnetic); placements captured before keep their own zero.")
+                             "(magnetic).")
         self._live_theta_at = -np.inf
         self._show_theta_source()
         return True
 
+    def _zero_may_change(self) -> bool:
+        if len(self.placements) and "measured" in self.placements.theta_sources:
+            self.message.setText("θ zero not changed: the placements' θ is from the present "
+                                 "zero; Export and Clear them first.")
+            return False
+        return True
+
     def reset_theta_zero(self) -> None:
+        if not self._zero_may_change():
+            return
         self.theta_zero = ThetaZero()
         self._live_theta_at = -np.inf
         self._show_theta_source()
