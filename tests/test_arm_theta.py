@@ -263,3 +263,37 @@ def test_placement_options_need_a_column_arm():
     from drivers.sim.device import SimulatedDevice
     with pytest.raises(DeviceUrlError, match="hold place a column arm: add column=1"):
         SimulatedDevice("sim://arm?hold=2")
+
+
+def test_the_pipelines_rings_give_a_capture_as_the_window_reads_them():
+    """What the window hands the Arm panel: each sensor's pipeline's newest accelerometer
+    and calibrated field (app.services.group_attitudes.sensor_windows)."""
+    from app.core.calibration import MagnetometerCalibration, SensorCalibration
+    from app.core.pipeline import Pipeline
+    from app.services.group_attitudes import sensor_windows
+    from drivers.sim.device import SimulatedDevice
+
+    device = SimulatedDevice(f"{URL}&seed=3&realtime=0&block=8")
+    pipeline = Pipeline(device.odr_hz)
+    pipeline.set_calibration(SensorCalibration(
+        name="magnetometer", magnetometer=MagnetometerCalibration.from_json(
+            device.unit_errors.magnetometer.calibration_json())))
+    device.open()
+    hold_end = device.scenario.placement_windows(1)[0][1]
+    while pipeline.samples.total_written < (hold_end - 0.1) * device.odr_hz:
+        raw = device.read(1.0)
+        if raw is not None:
+            pipeline.process(raw)
+    device.close()
+    (window,) = sensor_windows([pipeline], [1], 1.0)
+    assert window.link == 1 and window.mag_ut is not None
+    assert 90 <= len(window.accel_m_s2) <= 115 and 70 <= len(window.mag_ut) <= 90  # 104/80 Hz
+    capture = capture_link(1, window.accel_m_s2, window.mag_ut, REFERENCE)
+    assert capture.refused == "" and capture.steady
+    assert capture.norm_ut == pytest.approx(REFERENCE.total_ut, abs=1.0)
+    assert capture.dip_deg == pytest.approx(REFERENCE.dip_deg, abs=1.0)
+    # The same samples before the magnetometer's calibration (this unit's hard iron is tens
+    # of uT): refused, never turned into an azimuth.
+    raw = pipeline.field.window(1.0, ["raw_mag"])["raw_mag"]
+    uncalibrated = capture_link(1, window.accel_m_s2, raw, REFERENCE)
+    assert "field disturbed" in uncalibrated.refused and not uncalibrated.has_azimuth
