@@ -131,7 +131,8 @@ def test_repeatability_statistics_of_placements_with_known_spread():
     assert stats["R"].range == pytest.approx(0.8)
     text = placements.to_csv()
     lines = [line for line in text.splitlines() if not line.startswith("#")]
-    assert lines[0].split(",") == ["placement", "samples", "x", "y", "z", "R", "Z", "azimuth_deg"]
+    assert lines[0].split(",") == ["placement", "samples", "x", "y", "z", "R", "Z", "azimuth_deg",
+                                   "theta_from", "column_azimuth_deg"]
     assert lines[1].split(",")[1] == "50"
     sd_row = next(line for line in lines if line.startswith("sd,"))
     assert float(sd_row.split(",")[2]) == pytest.approx(stats["x"].sd)

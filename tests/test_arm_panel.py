@@ -11,7 +11,7 @@ import pytest
 from app.core.arm import ArmLayout, jamris_layout
 from app.core.orientation import quaternion_from_roll_pitch
 from app.gui import theme
-from app.gui.arm_panel import COL_ANGLE, COL_LENGTH, ArmPanel
+from app.gui.arm_panel import COL_ANGLE, COL_LENGTH, SHOWN_COORDINATES, ArmPanel
 
 
 class Clock:
@@ -108,7 +108,7 @@ def test_captured_placements_give_the_statistics_and_export(panel, qapp, tmp_pat
     expected_z = [200 + 600 * np.sin(np.radians(p)) for p in pitches]
     assert stats["Z"].sd == pytest.approx(np.std(expected_z, ddof=1), rel=0.05)
     assert stats["Z"].max - stats["Z"].min == pytest.approx(np.ptp(expected_z), rel=0.05)
-    sd_cell = panel.stats_table.item(1, 1).text()  # row SD, column Z
+    sd_cell = panel.stats_table.item(1, SHOWN_COORDINATES.index("Z")).text()  # row SD
     assert float(sd_cell) == pytest.approx(stats["Z"].sd, abs=0.006)
     assert "5 placements" in panel.count_label.text()
     path = tmp_path / "repeat.csv"
@@ -129,3 +129,91 @@ def test_capture_without_data_says_so(panel):
     assert not panel.capture()
     assert "Nothing to capture" in panel.message.text()
     assert len(panel.placements) == 0
+
+
+# -- theta from the magnetometers (#32) ---------------------------------------------------------
+class SimArmWindows:
+    """The two sensors of sim://arm?column=1 with magnetometers as a capture source: the
+    newest seconds before ``self.t`` (true seconds), the field corrected with each unit's
+    exact calibration (as after calibrate-mag)."""
+
+    URL = ("sim://arm?column=1&mag=lis3mdl&date=2026-06-01&seed=3&spots=4&hold=1.2"
+           "&transition=0.8&realtime=0&block=4096")
+
+    def __init__(self, seconds: float) -> None:
+        from app.core.calibration import MagnetometerCalibration
+        from app.core.samples import convert_raw_block
+        from drivers.sim.device import SimulatedDevice
+        self.devices = [SimulatedDevice(self.URL, sensor=k) for k in (0, 1)]
+        self.scenario = self.devices[0].scenario
+        self.accel, self.mag = [], []
+        for device in self.devices:
+            device.open()
+            blocks = []
+            while sum(len(b) for b in blocks) < seconds * device.odr_hz:
+                raw = device.read(1.0)
+                if raw is not None:
+                    blocks.append(convert_raw_block(raw))
+            device.close()
+            correction = MagnetometerCalibration.from_json(
+                device.unit_errors.magnetometer.calibration_json())
+            self.accel.append(np.concatenate([b.accel_m_s2 for b in blocks]))
+            self.mag.append(correction.apply(np.concatenate([b.mag_ut for b in blocks])))
+        self.t = 0.0
+
+    def __call__(self, seconds: float):
+        from app.services.group_attitudes import SensorWindow
+        rate = self.devices[0].true_odr_hz
+        rows = slice(int((self.t - seconds) * rate), int(self.t * rate))
+        return [SensorWindow(link, accel[rows], mag[rows])
+                for link, accel, mag in zip((1, 2), self.accel, self.mag)]
+
+    def quaternions(self):
+        from app.core import quaternion as quat
+        return [None, *(quat.normalize(d.scenario.orientation(np.array([self.t]))[0])
+                        for d in self.devices)]
+
+
+def test_theta_is_measured_live_and_per_capture_from_the_magnetometers(panel):
+    from app.core.arm import COLUMN_AZIMUTH
+    from app.services.arm_recordings import arm_layout_of
+    source = SimArmWindows(9.0)
+    panel.set_layout(arm_layout_of(source.scenario))
+    panel.set_capture_source(source)
+    windows = source.scenario.placement_windows(4)
+    truths = []
+    for k, (_start, end) in enumerate(windows):
+        source.t = end - 0.05
+        panel.clock.t += 1.0
+        if k == 0:
+            assert panel.set_theta_zero()
+        panel.set_link_orientations(source.quaternions())
+        assert "θ measured by the magnetometers" in panel.theta_label.text()
+        assert panel.capture(), panel.message.text()
+        truths.append(source.scenario.column_angles_deg(np.array([source.t]))[0, 0])
+    expected = (np.array(truths) - truths[0] + 180.0) % 360.0 - 180.0
+    table = panel.placements.table()
+    np.testing.assert_allclose(table[:, 5], expected, atol=1.0)  # theta, degrees
+    assert panel.placements.theta_sources == ("measured",) * 4
+    # The live readout follows the last placement (also theta).
+    assert number(panel.values["azimuth_deg"]) == pytest.approx(expected[-1], abs=1.0)
+    column = SHOWN_COORDINATES.index("azimuth_deg")
+    assert panel.stats_table.horizontalHeaderItem(column).text() == "θ °"
+    stats = panel.placements.statistics()
+    assert float(panel.stats_table.item(4, column).text()) == pytest.approx(
+        stats["azimuth_deg"].range, abs=0.006)
+    assert COLUMN_AZIMUTH in stats
+    # Moving between placements: refused, with the reason, and nothing added.
+    source.t = windows[1][1] + 0.5
+    panel.clock.t += 1.0
+    assert not panel.capture()
+    assert "Placement refused" in panel.message.text()
+    assert "not steady" in panel.message.text()
+    assert len(panel.placements) == 4
+    # The zero stays while there are placements measured from it.
+    source.t = windows[1][1] - 0.05
+    zero = panel.theta_zero
+    assert not panel.set_theta_zero()
+    assert "Clear them first" in panel.message.text() and panel.theta_zero == zero
+    panel.clear_captures()
+    assert panel.set_theta_zero() and panel.theta_zero != zero

@@ -1,4 +1,4 @@
-"""The Arm panel: the measuring arm's layout, its end point (R, Z and x, y, z), repeatability.
+"""The Arm panel: the measuring arm's layout, its end point (R, θ, Z and x, y, z), repeatability.
 
 The arm's maths lives in :mod:`app.core.arm`; this panel edits the layout (a table of links:
 name, length, joint kind and the angle used when no sensor measures the joint), shows the end
@@ -7,14 +7,21 @@ point and keeps the captured placements. It is fed by :meth:`ArmPanel.set_joint_
 quaternion, or None): the main window feeds the Joint dock's sensors (one per link, with the
 joint filter's angle) when it has any, else the one connected device through
 :meth:`ArmPanel.set_device_orientation`, to the link chosen under the table.
+
+With a capture source (:meth:`ArmPanel.set_capture_source`: the sensors' newest accelerometer
+and field) and a magnetometer on a link, the column's angle θ is measured
+(:mod:`app.core.arm.azimuth`) instead of typed: live four times a second, and each Capture
+from the averaged window, refused with the reason when a link moved or its field is disturbed.
 """
 
 from __future__ import annotations
 
+import functools
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 from PySide6.QtCore import Qt, Signal
@@ -43,12 +50,20 @@ from app.core.arm import (
     ArmLayoutError,
     ArmPose,
     Link,
+    LinkCapture,
     Placements,
+    ThetaMeasurement,
+    ThetaZero,
+    capture_link,
     forward,
     jamris_layout,
+    measure_theta,
+    placement_pose,
     pose_from_link_quaternions,
 )
+from app.core.arm.azimuth import column_joint
 from app.core.arm.layout import ALONG_X, PITCH_UP, VERTICAL
+from app.core.field_check import FieldReference, wmm_reference
 from app.gui import file_dialogs
 
 JOINT_KINDS = {
@@ -57,8 +72,23 @@ JOINT_KINDS = {
 }
 """Joint kinds offered in the table: (hinge axis in the previous link, link direction)."""
 STAT_ROWS = ("mean", "sd", "min", "max", "range")
-SHOWN_COORDINATES = ("R", "Z", "x", "y", "z")
+SHOWN_COORDINATES = ("R", "azimuth_deg", "Z", "x", "y", "z")
+"""The table's columns: the paper's R, theta, Z, then x, y, z."""
+HEADERS = {"azimuth_deg": "θ °"}
 HISTORY_S = 30.0
+LIVE_THETA_WINDOW_S = 0.5
+LIVE_THETA_EVERY_S = 0.25
+"""The live theta: measured on the newest half second, four times a second."""
+
+
+class SensorWindowLike(Protocol):
+    link: int
+    accel_m_s2: np.ndarray
+    mag_ut: np.ndarray | None
+
+
+CaptureSource = Callable[[float], Sequence[SensorWindowLike]]
+"""seconds -> the newest seconds of every sensor on the arm (its link, accelerometer, field)."""
 COL_NAME, COL_LENGTH, COL_JOINT, COL_ANGLE = range(4)
 
 
@@ -110,6 +140,14 @@ class ArmPanel(QWidget):
         self.placements = Placements(self.arm.base_position, self.arm.unit)
         self._history: deque[tuple[float, np.ndarray]] = deque()
         self._filling = False
+        self._capture_source: CaptureSource | None = None
+        self.field_reference: Callable[[], FieldReference | None] = _default_reference
+        """What the field should read (the field view's reference in the window)."""
+        self.theta_zero = ThetaZero()
+        self.live_theta: ThetaMeasurement | None = None
+        self._has_field: bool | None = None
+        """Whether the capture source has a magnetometer (None: not known yet)."""
+        self._live_theta_at = -np.inf
         outer = QVBoxLayout(self)
 
         layout_box = QGroupBox("Arm layout")
@@ -153,10 +191,10 @@ class ArmPanel(QWidget):
         end_box = QGroupBox("End point (base frame)")
         grid = QGridLayout(end_box)
         self.values: dict[str, QLabel] = {}
-        for column, name in enumerate(("R", "Z")):
-            tile, value = _tile(name, 22)
+        for column, name in enumerate(("R", "azimuth_deg", "Z")):
+            tile, value = _tile(HEADERS.get(name, name).split()[0], 20)
             self.values[name] = value
-            grid.addWidget(tile, 0, column * 3, 1, 3)
+            grid.addWidget(tile, 0, column * 2, 1, 2)
         for column, name in enumerate(("x", "y", "z")):
             tile, value = _tile(name, 13)
             self.values[name] = value
@@ -165,6 +203,24 @@ class ArmPanel(QWidget):
         self.pose_note.setObjectName("dimLabel")
         self.pose_note.setWordWrap(True)
         grid.addWidget(self.pose_note, 2, 0, 1, 6)
+        theta_row = QHBoxLayout()
+        self.theta_label = QLabel()
+        self.theta_label.setWordWrap(True)
+        self.theta_label.setToolTip(
+            "θ, the column's angle: measured from each link's gravity and magnetic field "
+            "when a link has a magnetometer (calibrate it first), else the angle typed in "
+            "the table. Its zero is magnetic north until set at a placement.")
+        self.zero_button = QPushButton("Set θ zero")
+        self.zero_button.setToolTip("Make the column's present direction θ = 0 (the arm held "
+                                    "still on the reference direction)")
+        self.zero_button.clicked.connect(self.set_theta_zero)
+        self.north_button = QPushButton("Zero at north")
+        self.north_button.setToolTip("θ from magnetic north again")
+        self.north_button.clicked.connect(self.reset_theta_zero)
+        theta_row.addWidget(self.theta_label, 1)
+        theta_row.addWidget(self.zero_button)
+        theta_row.addWidget(self.north_button)
+        grid.addLayout(theta_row, 3, 0, 1, 6)
         outer.addWidget(end_box)
 
         stats_box = QGroupBox("Repeatability over placements")
@@ -208,6 +264,7 @@ class ArmPanel(QWidget):
 
         self.set_layout(self.arm)
         self._show_statistics()
+        self._show_theta_source()
 
     # -- the layout -----------------------------------------------------------------------
     def set_layout(self, layout: ArmLayout) -> None:
@@ -342,10 +399,13 @@ class ArmPanel(QWidget):
         links' sensors; None where there is none): they win over gravity. Joints the sensors
         cannot see (a vertical axis, a link without a sensor) take the angle in the table.
         """
+        known: list[float | None] = list(self.entered_angles())
+        theta = self._update_live_theta()
+        if theta is not None and theta.ok:
+            known[0] = theta.theta_deg
         try:
             pose, observed = pose_from_link_quaternions(
-                self.arm, quaternions, known_deg=self.entered_angles(),
-                measured_deg=measured_deg,
+                self.arm, quaternions, known_deg=known, measured_deg=measured_deg,
             )
         except ArmLayoutError as exc:
             self.message.setText(f"Orientations not used: {exc}")
@@ -371,7 +431,8 @@ class ArmPanel(QWidget):
         coordinates = pose.coordinates()
         unit = self.arm.unit
         for name in SHOWN_COORDINATES:
-            self.values[name].setText(f"{coordinates[name]:.1f} {unit}")
+            self.values[name].setText(f"{coordinates[name]:.1f} °" if name == "azimuth_deg"
+                                      else f"{coordinates[name]:.1f} {unit}")
         angles = ", ".join(
             f"{link.name} {angle:+.1f}°" + (" (sensor)" if observed is not None and seen else "")
             for link, angle, seen in zip(
@@ -379,12 +440,107 @@ class ArmPanel(QWidget):
                 observed if observed is not None else [False] * self.arm.n_joints,
             )
         )
-        self.pose_note.setText(f"Joints: {angles}. Azimuth {coordinates['azimuth_deg']:.1f}°.")
+        self.pose_note.setText(f"Joints: {angles}.")
         self.poseChanged.emit(pose)
 
     # -- placements -----------------------------------------------------------------------
+    # -- theta from the magnetometers -----------------------------------------------------
+    def set_capture_source(self, source: CaptureSource | None) -> None:
+        """Where captures read the sensors' samples (None: captures average the end point,
+        theta typed)."""
+        self._capture_source = source
+        self._has_field = None
+        self.live_theta = None
+        self._live_theta_at = -np.inf
+        self._show_theta_source()
+
+    def link_captures(self, seconds: float) -> list[LinkCapture | None] | None:
+        """Every link's capture over the newest ``seconds`` (None for a link without a
+        sensor), or None when no sensor has a magnetometer (theta stays typed)."""
+        if self._capture_source is None:
+            return None
+        windows = [w for w in self._capture_source(seconds) if 0 <= w.link < self.arm.n_joints]
+        if not any(w.mag_ut is not None for w in windows):
+            return None
+        captures: list[LinkCapture | None] = [None] * self.arm.n_joints
+        reference = self.field_reference()
+        for window in windows:
+            captures[window.link] = capture_link(window.link, window.accel_m_s2, window.mag_ut,
+                                                 reference, self.arm.links[window.link].name)
+        return captures
+
+    def _update_live_theta(self) -> ThetaMeasurement | None:
+        now = self._clock()
+        if now - self._live_theta_at < LIVE_THETA_EVERY_S:
+            return self.live_theta
+        self._live_theta_at = now
+        captures = self.link_captures(LIVE_THETA_WINDOW_S)
+        self._has_field = captures is not None
+        self.live_theta = (None if captures is None else
+                           measure_theta(self.arm, captures, self.theta_zero,
+                                         self.entered_angles()))
+        self._show_theta_source()
+        return self.live_theta
+
+    def set_theta_zero(self) -> bool:
+        """θ = 0 at the column's present direction (measured over the averaging window);
+        refused while there are placements (their θ is from the present zero)."""
+        if not self._zero_may_change():
+            return False
+        captures = self.link_captures(self.window.value())
+        if captures is None:
+            self.message.setText("θ zero not set: no link has a magnetometer (θ is typed).")
+            return False
+        theta = measure_theta(self.arm, captures, self.theta_zero, self.entered_angles())
+        if not theta.ok:
+            self.message.setText(f"θ zero not set: {theta.refused}")
+            return False
+        self.theta_zero = ThetaZero(theta.psi_deg, f"set at {theta.azimuth_deg:.1f}° magnetic")
+        self.message.setText(f"θ = 0 where the column points {theta.azimuth_deg:.1f}° "
+                             "(magnetic).")
+        self._live_theta_at = -np.inf
+        self._show_theta_source()
+        return True
+
+    def _zero_may_change(self) -> bool:
+        if len(self.placements) and "measured" in self.placements.theta_sources:
+            self.message.setText("θ zero not changed: the placements' θ is from the present "
+                                 "zero; Export and Clear them first.")
+            return False
+        return True
+
+    def reset_theta_zero(self) -> None:
+        if not self._zero_may_change():
+            return
+        self.theta_zero = ThetaZero()
+        self._live_theta_at = -np.inf
+        self._show_theta_source()
+
+    def _show_theta_source(self) -> None:
+        theta = self.live_theta
+        measurable = column_joint(self.arm) is not None
+        self.zero_button.setEnabled(measurable and self._capture_source is not None)
+        self.north_button.setEnabled(self.theta_zero.source != ThetaZero().source)
+        if not measurable:
+            text = "θ: the layout has no column at its base (it is typed)."
+        elif theta is None and self._capture_source is not None and self._has_field is None:
+            text = "θ typed in the table until the sensors' samples arrive."
+        elif theta is None:
+            text = "θ typed in the table (no magnetometer on the arm's links)."
+        elif theta.ok:
+            text = (f"θ measured by the magnetometers (zero: {self.theta_zero.source}); the "
+                    f"column points {theta.azimuth_deg:.1f}° magnetic.")
+        else:
+            text = f"θ not measured now: {theta.refused}"
+        self.theta_label.setText(text)
+
     def capture(self) -> bool:
-        """Capture a placement: the mean end point over the averaging window."""
+        """Capture a placement: the mean end point over the averaging window, or with a
+        magnetometer on the arm the links' averaged gravity and field (θ measured; refused
+        with the reason when a link moved or the field is disturbed)."""
+        captures = self.link_captures(self.window.value())
+        if captures is not None:
+            return self._capture_measured(captures)
         now = self._clock()
         recent = [point for t, point in self._history if t >= now - self.window.value()]
         if not recent:
@@ -394,6 +550,21 @@ class ArmPanel(QWidget):
         self.placements.capture(np.array(recent))
         self.message.setText(f"Captured placement {len(self.placements)} "
                              f"(mean of {len(recent)} end points).")
+        self._show_statistics()
+        return True
+
+    def _capture_measured(self, captures: list[LinkCapture | None]) -> bool:
+        result = placement_pose(self.arm, captures, self.theta_zero, self.entered_angles())
+        if result.pose is None:
+            self.message.setText(f"Placement refused: {result.refused}")
+            return False
+        self.placements.base = np.asarray(self.arm.base_position)
+        self.placements.capture(result.pose.end[None, :], result.theta_source,
+                                result.column_azimuth_deg)
+        samples = sum(c.samples for c in captures if c is not None)
+        how = ("θ measured" if result.theta is not None else "θ typed")
+        self.message.setText(f"Captured placement {len(self.placements)} ({how}; "
+                             f"{samples} samples averaged).")
         self._show_statistics()
         return True
 
@@ -409,7 +580,8 @@ class ArmPanel(QWidget):
         stats = self.placements.statistics()
         n = len(self.placements)
         self.count_label.setText(f"{n} placement{'s' if n != 1 else ''} · {self.arm.unit}")
-        self.stats_table.setHorizontalHeaderLabels(list(SHOWN_COORDINATES))
+        self.stats_table.setHorizontalHeaderLabels([HEADERS.get(name, name)
+                                                    for name in SHOWN_COORDINATES])
         for column, name in enumerate(SHOWN_COORDINATES):
             for row, what in enumerate(STAT_ROWS):
                 value = getattr(stats[name], what) if stats else float("nan")
@@ -464,6 +636,15 @@ class ArmPanel(QWidget):
         self.set_layout(layout)
         self.message.setText(f"Loaded the layout {layout.name!r} from {path}")
         return True
+
+
+@functools.lru_cache(maxsize=1)
+def _default_reference() -> FieldReference | None:
+    """The WMM field at the default place today (the window gives the field view's)."""
+    try:
+        return wmm_reference()
+    except ValueError:  # a date outside the model's span: strength and dip unchecked
+        return None
 
 
 __all__ = ["COORDINATES", "JOINT_KINDS", "ArmPanel"]

@@ -7,6 +7,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from app.services.group_attitudes import sensor_windows
+
 MainWindow = Any
 """The window this part works for (not imported: the parts sit below
 :mod:`app.gui.main_window`, which assembles them)."""
@@ -24,6 +26,30 @@ class AttitudeRouting:
         arm, view = window.arm_panel, window.attitude_view
         arm.poseChanged.connect(
             lambda pose: view.set_arm(pose.points, pose.rotations, arm.sensor_links))
+        arm.set_capture_source(self.arm_windows)
+        default_reference = arm.field_reference
+        # The field view's reference (WMM for the user's place, or learnt at rest); its
+        # presenter is made after this part.
+        arm.field_reference = lambda: (
+            window.field_presenter.reference if hasattr(window, "field_presenter")
+            else default_reference())
+
+    def arm_windows(self, seconds: float) -> list:
+        """The newest ``seconds`` of every sensor on the arm, for its captures: the Joint
+        dock's sensors on the arm's last links, else the device on its chosen link."""
+        window = self.window
+        arm = window.arm_panel
+        n_links = arm.arm.n_joints
+        if window.joint_panel.has_sensors:
+            pipelines = window.joint_panel.sensor_pipelines()[:n_links]
+            first = n_links - len(pipelines)
+            links = [first + k for k in range(len(pipelines))]
+        else:
+            link = arm.device_link.currentData()
+            if link is None or not 0 <= link < n_links:
+                return []
+            pipelines, links = [window.presenter.session.pipeline], [link]
+        return sensor_windows(pipelines, links, seconds)
 
     def _on_arm_shown(self, shown: bool) -> None:
         window = self.window

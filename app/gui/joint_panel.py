@@ -341,6 +341,11 @@ class JointPanel(QWidget):
         self.hold = bool(on)
         self.readout.setStyleSheet(f"color: {theme.WARN_AMBER};" if on else "")
 
+    def sensor_pipelines(self) -> list:
+        """Every sensor's pipeline, in the dock's order (the arm's captures read them)."""
+        source = self.replay if self.replay is not None else self.group
+        return [source.pipeline(i) for i in range(len(self._roles()))]
+
     @property
     def has_sensors(self) -> bool:
         """True while the dock has sensors (live or a replayed session)."""

@@ -87,3 +87,26 @@ class GroupAttitudes:
             if np.isfinite(angle):
                 joint = (stream.first, stream.second, angle)
         return GroupFrame(quaternions, tuple(labels), joint)
+
+
+@dataclass(frozen=True)
+class SensorWindow:
+    """The newest seconds of one sensor on an arm's link, for a static capture."""
+
+    link: int
+    accel_m_s2: np.ndarray
+    """(N, 3) calibrated accelerometer."""
+    mag_ut: np.ndarray | None
+    """(M, 3) calibrated field samples, None without a magnetometer."""
+
+
+def sensor_windows(pipelines: list[Pipeline], links: list[int], seconds: float
+                   ) -> list[SensorWindow]:
+    """Each pipeline's newest ``seconds`` of accelerometer and field (its ring buffers), for
+    the link it sits on."""
+    windows = []
+    for pipeline, link in zip(pipelines, links):
+        accel = pipeline.samples.window(seconds, ["accel"])["accel"]
+        mag = pipeline.field.window(seconds, ["mag"])["mag"] if pipeline.has_field else None
+        windows.append(SensorWindow(link, accel, mag))
+    return windows

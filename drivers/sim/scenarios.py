@@ -807,6 +807,17 @@ class Arm(Scenario):
     ``calibrated`` (the default) the units have no scale or cross-axis errors and a residual
     accelerometer bias of at most 2 mg, as after the app's six-face calibration (the
     bias, its drift and temperature dependence, noise and quantisation stay).
+
+    ``column=1`` is the JAMRIS measuring arm instead, standing on a table: a column turning
+    about the vertical by theta (the base's x axis points ``base_azimuth_deg`` from magnetic
+    north), link 0 (the upper arm) raised from the column's top by a hinge about the
+    horizontal, every further link by a parallel hinge (:data:`COLUMN_HINGE_AXIS`), each
+    sensor mounted with x along its link and z up when its joints are at zero (as the app's
+    arm layout assumes). The arm is *placed*: placement ``p`` is held still for ``hold`` s,
+    then it moves to the next over ``transition`` s. The placements visit ``spots`` targets in
+    turn (1: the same spot every time, a repeatability test), each joint ``scatter`` degrees
+    (SD) off its target, as a hand puts a tip on a mark. :meth:`column_angles_deg` is the truth
+    (theta, the upper arm's and every hinge's angle), :meth:`placement_windows` the holds.
     """
 
     name = "arm"
@@ -825,6 +836,15 @@ class Arm(Scenario):
                             "(1 % scale and cross-axis errors, +-20 mg)"),
         "move": Param(30.0, 3.0, 3600.0, "seconds of base motion between rest breaks"),
         "rest": Param(10.0, 0.0, 3600.0, "seconds of each rest break of the base"),
+        "column": Param(False, doc="1: the JAMRIS measuring arm on a table instead (a column "
+                        "turning about the vertical, links raised by horizontal hinges, "
+                        "sensors with x along their link), placed in turn and held still"),
+        "spots": Param(3, 1, 100, "column=1: targets the placements visit in turn (1: the "
+                       "same spot every time)"),
+        "hold": Param(3.0, 0.2, 3600.0, "column=1: seconds each placement is held still"),
+        "transition": Param(2.0, 0.2, 600.0, "column=1: seconds moving between placements"),
+        "scatter": Param(0.2, 0.0, 10.0, "column=1: SD of each joint's placement about its "
+                         "target, degrees"),
     }
     accel_fs_g = 8
     gyro_fs_dps = 2000
@@ -833,6 +853,13 @@ class Arm(Scenario):
     """Accelerometer bias left by a calibration, as a fraction of the raw unit's (2 of 20 mg)."""
     LEVER_STEP_S: ClassVar[float] = 5e-4
     """Step of the central difference that gives the lever arms' acceleration."""
+    COLUMN_ONLY: ClassVar[tuple[str, ...]] = ("spots", "hold", "transition", "scatter")
+    COLUMN_HINGE_AXIS: ClassVar[tuple[float, float, float]] = (0.0, -1.0, 0.0)
+    """``column=1``: every hinge's axis in the previous link's frame (positive raises a link
+    running along +x; the app's :data:`app.core.arm.layout.PITCH_UP`)."""
+    COLUMN_TARGETS_DEG: ClassVar[tuple[tuple[float, float], ...]] = (
+        (-180.0, 180.0), (10.0, 60.0), (-110.0, -20.0))
+    """``column=1``: ranges of the targets' theta, upper-arm angle and further hinges' angles."""
 
     def __init__(self, rng: np.random.Generator | None = None, **params: float) -> None:
         super().__init__(rng, **params)
@@ -842,6 +869,9 @@ class Arm(Scenario):
             raise ValueError(f"arm: sensor={p['sensor']} but the arm has links 0 to {links - 1}")
         if not p["joint_min"] < p["joint_max"]:
             raise ValueError("arm: joint_min must be below joint_max")
+        placing = sorted(set(params) & set(self.COLUMN_ONLY))
+        if placing and not p["column"]:
+            raise ValueError(f"arm: {', '.join(placing)} place a column arm: add column=1")
         rng = self.rng
         level = float(p["level"])
         rotation = np.radians(_between(*Handheld.ROTATION_DEG, level)) * float(p["base"])
@@ -857,7 +887,9 @@ class Arm(Scenario):
             jitter=np.full(3, math.radians(float(_between(*Handheld.JITTER_DPS, level)))),
             breaks=RestBreaks(p["move"], p["rest"]),
         )
-        self.base_quat = quaternion_from_roll_pitch(0.0, 0.0, float(rng.uniform(-180.0, 180.0)))
+        self.base_yaw_deg = float(rng.uniform(-180.0, 180.0))
+        """The base's x axis, counter-clockwise from magnetic east (the earth frame's x)."""
+        self.base_quat = quaternion_from_roll_pitch(0.0, 0.0, self.base_yaw_deg)
         self.links = links
         self.sensor = int(p["sensor"])
         self.axes = np.array([_random_unit(rng) for _ in range(links - 1)])
@@ -877,11 +909,73 @@ class Arm(Scenario):
             for _ in range(links - 1)
         ]
         self._joint_offsets = rng.normal(scale=0.4, size=links - 1)
+        self.column = bool(p["column"])
+        if self.column:
+            self._setup_column(rng, lengths)
+
+    # -- column=1: the JAMRIS arm, placed -------------------------------------------------------
+    def _setup_column(self, rng: np.random.Generator, lengths: np.ndarray) -> None:
+        p = self.params
+        self.axes = np.tile(np.array(self.COLUMN_HINGE_AXIS), (self.links - 1, 1))
+        self.mountings = np.tile(np.array([1.0, 0.0, 0.0, 0.0]), (self.links, 1))
+        self.hinge_offsets = np.column_stack([lengths, np.zeros((self.links, 2))])
+        self.sensor_offsets = self.hinge_offsets * 0.5
+        self.link_lengths_m = lengths
+        spots = int(p["spots"])
+        self._targets = np.column_stack([
+            rng.uniform(*self.COLUMN_TARGETS_DEG[0], size=spots),
+            rng.uniform(*self.COLUMN_TARGETS_DEG[1], size=spots),
+            *(rng.uniform(*self.COLUMN_TARGETS_DEG[2], size=spots)
+              for _ in range(self.links - 1)),
+        ])
+        """(spots, links + 1) theta, the upper arm's and each hinge's target angle, degrees."""
+        self._scatter_key = int(rng.integers(2**62))
+
+    @property
+    def base_azimuth_deg(self) -> float:
+        """The base's x axis as a compass reads it: clockwise from magnetic north, 0-360."""
+        return float((90.0 - self.base_yaw_deg) % 360.0)
+
+    def placement_deg(self, index: int) -> np.ndarray:
+        """(links + 1,) placement ``index``'s angles: theta, upper arm, every hinge (degrees)."""
+        target = self._targets[index % len(self._targets)]
+        scatter = float(self.params["scatter"])
+        noise = np.random.default_rng([self._scatter_key, index]).normal(size=len(target))
+        return target + scatter * noise
+
+    def placement_windows(self, count: int) -> list[tuple[float, float]]:
+        """The first ``count`` placements' holds, (start, end) in true seconds."""
+        step = float(self.params["hold"] + self.params["transition"])
+        return [(k * step, k * step + float(self.params["hold"])) for k in range(count)]
+
+    def _column_angles(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, links + 1) theta, upper arm, hinges (rad) and their rates at true times ``t``."""
+        hold = float(self.params["hold"])
+        step = hold + float(self.params["transition"])
+        index = np.maximum(np.floor(t / step), 0.0).astype(np.int64)
+        s, ds, _ = smootherstep((np.maximum(t, 0.0) - index * step - hold) / (step - hold))
+        angles = np.empty((len(t), self.links + 1))
+        rates = np.empty_like(angles)
+        for k in np.unique(index):
+            rows = index == k
+            a = np.radians(self.placement_deg(int(k)))
+            b = np.radians(self.placement_deg(int(k) + 1))
+            angles[rows] = a + (b - a) * s[rows, None]
+            rates[rows] = (b - a) * (ds[rows, None] / (step - hold))
+        return angles, rates
+
+    def column_angles_deg(self, t: np.ndarray) -> np.ndarray:
+        """``column=1``: (N, links + 1) true theta (the column's turn, counter-clockwise seen
+        from above, from the base's x axis), the upper arm's and every hinge's angle, degrees."""
+        return np.degrees(self._column_angles(np.asarray(t, dtype=np.float64))[0])
 
     # -- the truth a joint-angle estimator seeks ------------------------------------------------
     def joint_angles(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, links-1) true joint angles (rad) and their rates (rad/s) at times ``t``."""
         t = np.asarray(t, dtype=np.float64)
+        if self.column:
+            angles_all, rates_all = self._column_angles(t)
+            return angles_all[:, 2:], rates_all[:, 2:]
         angles = np.empty((len(t), self.links - 1))
         rates = np.empty_like(angles)
         for k, sines in enumerate(self._joint_sines):
@@ -926,8 +1020,20 @@ class Arm(Scenario):
     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         """The sensor's link's orientation (N, 4), body rate (N, 3) or None, and the lever from
         the grip to the sensor (N, 3, earth frame)."""
-        q_hand, rate, _ = self.hand.evaluate(t)
-        q = quat.multiply(self.base_quat, q_hand)
+        if self.column:  # the base stands; the column turns, the upper arm is raised
+            column, column_rates = self._column_angles(t)
+            q = np.broadcast_to(self.base_quat, (len(t), 4))
+            rate = np.zeros((len(t), 3))
+            for k, axis in ((0, np.array([0.0, 0.0, 1.0])),
+                            (1, np.array(self.COLUMN_HINGE_AXIS))):
+                q_turn = quat.from_axis_angle(axis, column[:, k])
+                if with_rate:
+                    q, rate = compose(q, rate, q_turn, column_rates[:, k, None] * axis)
+                else:
+                    q = quat.multiply(q, q_turn)
+        else:
+            q_hand, rate, _ = self.hand.evaluate(t)
+            q = quat.multiply(self.base_quat, q_hand)
         angles, angle_rates = self.joint_angles(t)
         lever = np.zeros((len(t), 3))
         for k in range(self.sensor):
@@ -947,7 +1053,9 @@ class Arm(Scenario):
         h = self.LEVER_STEP_S
         lever_plus = self._chain(t + h, False)[2]
         lever_minus = self._chain(t - h, False)[2]
-        accel = self.hand.evaluate(t)[2] + (lever_plus - 2.0 * lever + lever_minus) / (h * h)
+        accel = (lever_plus - 2.0 * lever + lever_minus) / (h * h)
+        if not self.column:
+            accel += self.hand.evaluate(t)[2]
         mounting = self.mountings[self.sensor]
         assert rate is not None
         q_sensor, rate_sensor = compose(q_link, rate, np.broadcast_to(mounting, q_link.shape),
