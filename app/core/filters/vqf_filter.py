@@ -4,7 +4,20 @@ D. Laidig and T. Seel, "VQF: Highly accurate IMU orientation estimation with bia
 and magnetic disturbance rejection", Information Fusion 91 (2023). The 6D (gyroscope and
 accelerometer) part of the C++ implementation runs here: the gyroscope is integrated, the
 accelerometer is low-pass filtered in an almost-inertial frame (time constant ``tauAcc``), and the
-gyroscope bias is estimated during motion and, faster, at rest.
+gyroscope bias is estimated during motion and, faster, at rest. With a magnetometer (the block
+carries ``mag_ut`` and the ``magnetometer`` switch is on) the 9D part runs too: the heading
+offset ``delta`` between the 6D earth frame and magnetic north is corrected from the field
+(time constant ``tauMag``), about the vertical only, so the field never tilts the inclination;
+while the field's norm or dip leaves the reference learnt undisturbed, the gyroscope alone
+carries the heading (magnetic disturbance rejection). The output is then ``quat9D``:
+sensor-to-earth in ENU, y toward magnetic north (VQF drives the earth-frame field's x to zero,
+its y positive), the frame of BROAD's reference.
+
+The magnetometer is slower than the accelerometer: a row without a new field sample (NaN)
+goes to VQF as ``(0, 0, 0)``, which its ``updateMag`` skips, so the field update runs only on
+real samples, and VQF runs it at the magnetometer's own period ``magTs``, learnt from the times
+of the field rows (:meth:`VQFFilter._update_field_period`). Holding the last sample would feed
+VQF the same field many times: its gain and its disturbance timers would run too fast.
 
 Conventions: VQF's ``quat6D`` is ``(w, x, y, z)`` and rotates sensor-frame vectors into its earth
 frame, z up, heading arbitrary: exactly this project's convention (see
@@ -22,13 +35,19 @@ that sample is replayed at the right Ts with the next block). Each block then go
   accelerometer, as every filter restarts; the gyroscope bias estimate and its uncertainty are
   carried over, since lost samples do not change the sensor's bias;
 - the median step differs from ``Ts`` by more than :data:`RATE_TOLERANCE` (5 %): a new object
-  with the new ``Ts`` continues from the current orientation and bias (its low-pass and
-  rest-detection states start afresh).
+  with the new ``Ts`` continues from the current orientation, bias and heading offset (its
+  low-pass and rest-detection states start afresh);
+- the field period changes by more than that: a new object takes over the whole state.
+
+A restart keeps the magnetic reference (the field norm and dip learnt undisturbed) with the
+bias; the heading offset starts afresh and converges at once from the next field samples (VQF's
+initial gain). Without a field the filter is exactly the 6D filter it was.
 
 Parameters change without losing state: ``tauAcc`` through VQF's ``setTauAcc`` (which adapts
 its low-pass states), the two bias estimators through their ``set...Enabled`` calls, and the
 initial bias uncertainty (which VQF only reads at start-up, and as a cap on the uncertainty)
-by a new object that takes over the complete state of the old one.
+by a new object that takes over the complete state of the old one; ``tauMag`` and the
+disturbance rejection through ``setTauMag`` and ``setMagDistRejectionEnabled``.
 """
 
 from __future__ import annotations
@@ -281,8 +300,8 @@ class VQFFilter(OrientationFilter):
 
     def _update_field_period(self, t_s: np.ndarray, field: np.ndarray) -> None:
         """Learn the magnetometer's period from the times of the rows with a new field sample
-        (VQF integrates its field filters with it); a change over :data:`RATE_TOLERANCE`
-        hands the whole state to an object with the new period."""
+        (VQF's heading gain and its disturbance timers run at it); a change over
+        :data:`RATE_TOLERANCE` hands the whole state to an object with the new period."""
         rows = np.flatnonzero(np.any(field != 0.0, axis=1))
         if len(rows) == 0:
             return
@@ -296,7 +315,10 @@ class VQFFilter(OrientationFilter):
             return
         recent = np.concatenate([self._recent_mag_dt, steps[-RATE_SAMPLE_LIMIT:]])
         self._recent_mag_dt = recent[-RATE_HISTORY:]
-        period = float(np.median(recent))
+        # The mean step, without lost samples (over twice the median): a magnetometer whose
+        # rate is not a whole fraction of the accelerometer's arrives 2, 3, 2, 3... rows apart,
+        # whose median is either, not the period.
+        period = float(np.mean(recent[recent <= 2.0 * np.median(recent)]))
         if self._mag_ts is None or abs(period / self._mag_ts - 1.0) > RATE_TOLERANCE:
             self._mag_ts = period
             if self._vqf is not None:
