@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from app.core import quaternion as quat
-from app.core.filters.madgwick import MadgwickFilter, madgwick_marg_step
-from app.core.filters.mahony import MahonyFilter
+from app.core.filters.madgwick import MadgwickFilter, _madgwick_marg_kernel, madgwick_marg_step
+from app.core.filters.mahony import MahonyFilter, _mahony_marg_kernel
 from app.core.heading_metrics import heading_error_deg
 from app.core.orientation import inclination_error_deg
 from app.core.samples import SampleBlock
@@ -192,3 +192,21 @@ def test_blocks_cut_anywhere_and_a_gap_give_the_same_output(cls, wobble):
                                       for x in dataclasses.astuple(stream)))).quat
               for a, b in itertools.pairwise(cuts)]
     np.testing.assert_array_equal(np.concatenate(pieces), whole)
+
+
+@pytest.mark.parametrize("cls", MARG_CLASSES)
+def test_warm_up_compiles_the_marg_kernel_and_leaves_the_state_alone(cls, wobble):
+    block, _, _ = wobble
+    half = len(block) // 2
+    parts = [SampleBlock(*(None if x is None else x[a:b] for x in dataclasses.astuple(block)))
+             for a, b in ((0, half), (half, len(block)))]
+    plain = cls()
+    expected = np.concatenate([plain.process(p).quat for p in parts])
+    warmed = cls()
+    warmed.warm_up()
+    first = warmed.process(parts[0]).quat
+    warmed.warm_up()
+    second = warmed.process(parts[1]).quat
+    np.testing.assert_array_equal(np.concatenate([first, second]), expected)
+    kernel = _madgwick_marg_kernel if cls is MadgwickFilter else _mahony_marg_kernel
+    assert kernel.signatures  # compiled for the field's types

@@ -29,6 +29,7 @@ chatters by about ``2 beta dt`` per sample around the accelerometer's answer.
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -37,7 +38,13 @@ from numba import njit
 from app.core.filters.base import MAGNETOMETER_PARAMETER, ParameterSpec
 from app.core.filters.complementary import tilt_correct
 from app.core.filters.gyro_integration import AccelStartedFilter, unit_positive, usable_vector
-from app.core.filters.marg import field_in_earth, heading_from_field, no_field, step_field
+from app.core.filters.marg import (
+    field_in_earth,
+    heading_from_field,
+    no_field,
+    step_field,
+    warm_up_block,
+)
 from app.core.samples import SampleBlock
 
 
@@ -220,6 +227,11 @@ class MadgwickFilter(AccelStartedFilter):
         super().reset(initial_quat, last_time_s)
         self._held_field = no_field()
         self._heading_pending = initial_quat is None
+
+    def warm_up(self) -> None:
+        """Compile both forms: the IMU kernel (the base class's block) and the MARG one."""
+        super().warm_up()
+        copy.deepcopy(self)._process(warm_up_block())
 
     def _process(self, block: SampleBlock) -> np.ndarray:
         out = np.empty((len(block), 4))

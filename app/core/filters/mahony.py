@@ -29,6 +29,7 @@ ten seconds, while tilt noise from the accelerometer is filtered with a time con
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -37,7 +38,13 @@ from numba import njit
 from app.core.filters.base import MAGNETOMETER_PARAMETER, ParameterSpec
 from app.core.filters.complementary import gyro_step, tilt_correct
 from app.core.filters.gyro_integration import AccelStartedFilter, unit_positive, usable_vector
-from app.core.filters.marg import field_in_earth, heading_from_field, no_field, step_field
+from app.core.filters.marg import (
+    field_in_earth,
+    heading_from_field,
+    no_field,
+    step_field,
+    warm_up_block,
+)
 from app.core.samples import SampleBlock
 
 
@@ -190,6 +197,11 @@ class MahonyFilter(AccelStartedFilter):
     def gyro_bias_rad_s(self) -> np.ndarray:
         """The current gyro-bias estimate (sensor frame, rad/s)."""
         return self._bias.copy()
+
+    def warm_up(self) -> None:
+        """Compile both forms: the IMU kernel (the base class's block) and the MARG one."""
+        super().warm_up()
+        copy.deepcopy(self)._process(warm_up_block())
 
     def _process(self, block: SampleBlock) -> np.ndarray:
         out = np.empty((len(block), 4))

@@ -20,6 +20,8 @@ import math
 import numpy as np
 from numba import njit
 
+from app.core.samples import SampleBlock
+
 
 @njit(cache=True)
 def carry_field(hx, hy, hz, gx, gy, gz, dt):  # pragma: no cover - compiled
@@ -78,6 +80,16 @@ def step_field(field, i, held, gx, gy, gz, dt):  # pragma: no cover - compiled
         hx, hy, hz = carry_field(hx, hy, hz, gx, gy, gz, dt)
         held[0], held[1], held[2] = hx, hy, hz
     return hx, hy, hz, True
+
+
+def warm_up_block() -> SampleBlock:
+    """A few made-up samples with a field on some rows, to compile a MARG kernel before the
+    first real block (the base class's warm-up block has no field)."""
+    n = 4
+    field = np.tile([0.0, 20.0, -40.0], (n, 1))
+    field[1::2] = np.nan
+    return SampleBlock(np.arange(n) * 0.01, np.tile([0.0, 0.0, 9.81], (n, 1)), np.zeros((n, 3)),
+                       np.zeros(n), np.zeros(n, dtype=bool), None, field)
 
 
 def no_field() -> np.ndarray:
