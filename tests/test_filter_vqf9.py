@@ -203,3 +203,26 @@ def test_offline_vqf_9d_is_the_packages_and_holds_a_slow_field():
     six = OfflineVQF(magnetometer=False).process(stream).quat
     assert heading_error_deg(six, stream.reference_quat).max() > 5.0
     assert heading_error_deg(out, stream.reference_quat)[200:].max() < 1.0
+
+
+def test_disturbance_thresholds_reach_vqf_and_change_mid_stream_with_the_whole_state():
+    truth, block = magnet_stream()
+    f = VQFFilter(mag_norm_threshold=0.5, mag_dip_threshold_deg=40.0)
+    columns = _columns(block)
+    first = f.process(dataclasses.replace(block, **{k: None if v is None else v[:1000]
+                                                    for k, v in columns.items()})).quat
+    f.set_parameter("mag_norm_threshold", 0.05)
+    second = f.process(dataclasses.replace(block, **{k: None if v is None else v[1000:]
+                                                     for k, v in columns.items()})).quat
+    gyro, accel, field = arrays(block)
+    old = vqf.VQF(0.01, magNormTh=0.5, magDipTh=40.0)
+    expected_first = old.updateBatch(gyro[:1000], accel[:1000], field[:1000])["quat9D"]
+    new = vqf.VQF(0.01, magNormTh=0.05, magDipTh=40.0)
+    new.state = old.state
+    expected_second = new.updateBatch(gyro[1000:], accel[1000:], field[1000:])["quat9D"]
+    np.testing.assert_allclose(first, expected_first, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(second, expected_second, rtol=0, atol=1e-12)
+    # A 40 % stronger field is no disturbance with a 50 % threshold: the magnet wins.
+    loose = VQFFilter(mag_norm_threshold=0.5, mag_dip_threshold_deg=40.0)
+    assert heading_error_deg(loose.process(block).quat, truth)[-1] > 15.0
+    assert not loose.magnetic_disturbance

@@ -46,8 +46,9 @@ initial gain). Without a field the filter is exactly the 6D filter it was.
 Parameters change without losing state: ``tauAcc`` through VQF's ``setTauAcc`` (which adapts
 its low-pass states), the two bias estimators through their ``set...Enabled`` calls, and the
 initial bias uncertainty (which VQF only reads at start-up, and as a cap on the uncertainty)
-by a new object that takes over the complete state of the old one; ``tauMag`` and the
-disturbance rejection through ``setTauMag`` and ``setMagDistRejectionEnabled``.
+by a new object that takes over the complete state of the old one (so do the disturbance
+thresholds); ``tauMag`` and the disturbance rejection through ``setTauMag`` and
+``setMagDistRejectionEnabled``.
 """
 
 from __future__ import annotations
@@ -128,6 +129,18 @@ class VQFFilter(OrientationFilter):
             kind="bool",
         ),
         ParameterSpec(
+            "mag_norm_threshold", "Field norm threshold", "", 0.1, 0.01, 1.0,
+            "Relative difference of the field's norm from the learnt reference above which the "
+            "field counts as disturbed (VQF magNormTh; 0.1: 10 %).",
+            presets=(("VQF default", 0.1),),
+        ),
+        ParameterSpec(
+            "mag_dip_threshold_deg", "Field dip threshold", "deg", 10.0, 1.0, 90.0,
+            "Difference of the field's dip from the learnt reference above which the field "
+            "counts as disturbed (VQF magDipTh).",
+            presets=(("VQF default", 10.0),),
+        ),
+        ParameterSpec(
             "motion_bias_estimation", "Bias estimation in motion", "", True, 0, 1,
             "Estimate the gyroscope bias while the sensor moves (VQF motionBiasEstEnabled).",
             kind="bool",
@@ -169,6 +182,8 @@ class VQFFilter(OrientationFilter):
             "biasSigmaInit": float(values["bias_sigma_init_dps"]),
             "tauMag": float(values["tau_mag_s"]),
             "magDistRejectionEnabled": bool(values["mag_disturbance_rejection"]),
+            "magNormTh": float(values["mag_norm_threshold"]),
+            "magDipTh": float(values["mag_dip_threshold_deg"]),
         }
 
     def _new_vqf(self, ts: float, mag_ts: float | None = None) -> Any:
@@ -239,8 +254,8 @@ class VQFFilter(OrientationFilter):
             current.setTauMag(wanted["tauMag"])
         if wanted["magDistRejectionEnabled"] != have["magDistRejectionEnabled"]:
             current.setMagDistRejectionEnabled(wanted["magDistRejectionEnabled"])
-        if wanted["biasSigmaInit"] != have["biasSigmaInit"]:
-            # No setter: a new object with the new parameter takes over the whole state.
+        if any(wanted[key] != have[key] for key in ("biasSigmaInit", "magNormTh", "magDipTh")):
+            # No setter: a new object with the new parameters takes over the whole state.
             self._take_over()
 
     def _take_over(self) -> None:
