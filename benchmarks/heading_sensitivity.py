@@ -73,7 +73,7 @@ def main() -> int:
     for key, default in THRESHOLDS[args.filter]:
         runs += [(f"{key} {default * factor:g}", {key: default * factor})
                  for factor in (0.5, 2.0)]
-    labels = [trials[k][0][:12] for k in disturbed]
+    labels = [" ".join(trials[k][0].split("_")[0:3:2])[:12] for k in disturbed]  # "28 stationary"
     print(f"{args.filter} on {len(trials)} BROAD trials turned by {PROJECT_TURN_DEG} deg; "
           "heading RMSE (deg), mean of all, of the disturbed, and per disturbed trial")
     print(f"{'setting':<32} {'all':>6} {'disturbed':>9} " + " ".join(f"{x:>12}" for x in labels)
