@@ -208,7 +208,8 @@ class MadgwickFilter(AccelStartedFilter):
     title = "Madgwick"
     description = (
         "Gradient-descent fusion (Madgwick 2010): the gyro rate minus a fixed-rate step beta "
-        "towards the accelerometer's tilt."
+        "towards the accelerometer's tilt; with a magnetometer (MARG form) towards the "
+        "field's heading too (ENU, y to magnetic north)."
     )
     parameters = (
         ParameterSpec(

@@ -160,7 +160,8 @@ class MahonyFilter(AccelStartedFilter):
     title = "Mahony"
     description = (
         "Nonlinear complementary filter (Mahony 2008): the gyro corrected by kp times the tilt "
-        "error, with ki learning the gyro bias."
+        "error, with ki learning the gyro bias; with a magnetometer (MARG form) the field's "
+        "direction error too (ENU, y to magnetic north)."
     )
     _extra_state = (*AccelStartedFilter._extra_state, "_bias", "_held_field",
                     "_heading_pending")

@@ -105,7 +105,9 @@ class VQFFilter(OrientationFilter):
     title = "VQF (Laidig & Seel 2023)"
     description = (
         "Gyro integration with accelerometer correction in an almost-inertial frame and "
-        "gyroscope bias estimation during motion and at rest."
+        "gyroscope bias estimation during motion and at rest; with a magnetometer, heading "
+        "from the field (VQF 9D, ENU with y to magnetic north), about the vertical only, "
+        "with magnetic disturbance rejection."
     )
     uses_magnetometer = True
     parameters = (
