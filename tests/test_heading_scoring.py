@@ -194,3 +194,22 @@ def test_turned_source_turns_what_the_filters_see(real_slice):
     np.testing.assert_allclose(seen.mag_ut, turn_vectors(turn, block.mag_ut))
     assert heading_error_deg(seen.reference_quat, turn_reference(turn, block.reference_quat)
                              ).max() < 1e-9
+
+
+def test_the_simulators_true_errors_undo_its_magnetometers_iron_and_turn_too():
+    """measured = S R b + h (soft iron, the chips' turn, hard iron): the compensating
+    calibration gives b back in the accelerometer's frame, so a simulated 9-axis heading is
+    scored without the board's iron in it."""
+    from app.core.evaluation import calibration_from_unit_errors
+    from drivers.sim.error_model import MagnetometerErrors, UnitErrors
+
+    unit = dataclasses.replace(UnitErrors.draw(5), magnetometer=MagnetometerErrors.draw(5))
+    mag = unit.magnetometer
+    truth = np.random.default_rng(0).normal(size=(20, 3)) * 40.0
+    measured = truth @ (mag.soft_iron @ mag.alignment).T + mag.hard_iron_ut
+    n = len(truth)
+    block = SampleBlock(np.arange(n) * 0.01, np.tile([0.0, 0.0, 9.8], (n, 1)), np.zeros((n, 3)),
+                        np.full(n, 25.0), np.zeros(n, bool), None, measured)
+    calibrated = calibration_from_unit_errors(unit).apply(block)
+    np.testing.assert_allclose(calibrated.mag_ut, truth, atol=1e-9)
+    assert calibration_from_unit_errors(UnitErrors.draw(5)).magnetometer is None

@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from app.core.calibration import SensorCalibration
+from app.core.calibration import MagnetometerCalibration, SensorCalibration
 from app.core.filters import FILTERS, OrientationFilter
 from app.core.heading_metrics import turn_block
 from app.core.samples import SampleBlock
@@ -191,15 +191,22 @@ def calibration_from_unit_errors(unit: Any) -> SensorCalibration:
     """The calibration that undoes a simulated unit's static errors at 25 degC.
 
     ``unit`` is a :class:`drivers.sim.error_model.UnitErrors`: ``measured = M @ true + bias``
-    gives ``A = inv(M)`` and ``b = bias``, for the accelerometer and the gyroscope alike.
-    Temperature terms, random walks and noise stay: no calibration can remove them.
+    gives ``A = inv(M)`` and ``b = bias``, for the accelerometer and the gyroscope alike. A
+    magnetometer (``unit.magnetometer``: ``measured = S R b + h``, soft iron ``S``, the chips'
+    turn ``R``, hard iron ``h``) gets ``hard_iron = h`` and ``soft_iron = inv(S R)``, so its
+    field is in the accelerometer's frame and a 9-axis heading is scored without the board's
+    iron in it. Temperature terms, random walks and noise stay: no calibration removes them.
     """
+    mag = getattr(unit, "magnetometer", None)
     return SensorCalibration(
         accel_bias_m_s2=np.asarray(unit.accel_bias_m_s2, dtype=np.float64),
         accel_matrix=np.linalg.inv(unit.accel_matrix),
         gyro_bias_rad_s=np.asarray(unit.gyro_bias_rad_s, dtype=np.float64),
         gyro_matrix=np.linalg.inv(unit.gyro_matrix),
         name=f"true errors of seed {unit.seed}",
+        magnetometer=None if mag is None else MagnetometerCalibration(
+            hard_iron_ut=np.asarray(mag.hard_iron_ut, dtype=np.float64),
+            soft_iron=np.linalg.inv(np.asarray(mag.soft_iron) @ np.asarray(mag.alignment))),
     )
 
 
