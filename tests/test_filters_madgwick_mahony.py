@@ -407,7 +407,7 @@ def test_parameter_schemas():
     beta = MadgwickFilter.parameter_spec("beta")
     assert (beta.unit, beta.default, beta.minimum, beta.maximum) == ("rad/s", 0.041, 0.0, 10.0)
     assert MahonyFilter().parameter_values() == {
-        "kp": 1.0, "ki": 0.3, "exact_integration": True
+        "kp": 1.0, "ki": 0.3, "exact_integration": True, "magnetometer": True
     }
     with pytest.raises(ValueError, match="outside"):
         MadgwickFilter(beta=-0.1)

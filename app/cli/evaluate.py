@@ -1,8 +1,10 @@
 """``inclinometer evaluate SOURCE...``: score the orientation filters against a known truth.
 
-Per source a table (RMSE and maximum of the inclination error, throughput, a flag), and with
-several sources a table of RMSE per source and filter with each filter's mean; ``--json``
-writes every figure.
+Per source a table (RMSE and maximum of the inclination error, throughput, a flag; with a
+magnetometer also the heading and total error RMSE), and with several sources a table of RMSE
+per source and filter with each filter's mean (and the same for heading and total error when
+the sources have a magnetometer); ``--turn`` turns every source's sensor frame first;
+``--json`` writes every figure.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 from app.cli.errors import EXIT_FAILED, CommandError, check_output_folder, finite
 from app.cli.filter_params import (
@@ -28,6 +30,7 @@ from app.cli.recordings import check_recorded_calibration
 from app.core import evaluation
 from app.core.evaluation import FilterScore, SourceResult, StreamSource
 from app.core.filters import FILTERS
+from app.core.heading_metrics import PROJECT_TURN_DEG, turn_quaternion
 from app.core.recording.errors import RecordingError
 from app.core.recording.format import REFERENCE_COLUMNS
 from app.core.recording.reader import read_metadata, read_recording
@@ -104,17 +107,42 @@ def add_arguments(evaluate: argparse.ArgumentParser) -> None:
     evaluate.add_argument("--overwrite", action="store_true",
                           help="replace the --json FILE if it exists")
     evaluate.add_argument(
+        "--turn", nargs="?", const=",".join(f"{a:g}" for a in PROJECT_TURN_DEG),
+        metavar="RX,RY,RZ",
+        help="turn each source's sensor frame by a fixed rotation (a rotation vector in "
+        "degrees; without a value the project's %(const)s) before scoring: accelerometer, "
+        "gyroscope, magnetometer and reference alike. A recording whose sensor starts "
+        "pointing north gives a 6-axis heading right by luck; turned, only the magnetometer "
+        "can find north. Inclination does not change",
+    )
+    evaluate.add_argument(
         "--per-source", action=argparse.BooleanOptionalAction, default=None,
         help="print each source's full table (RMSE, maximum, throughput, flag); default: "
         "when a single SOURCE that is not a glob is given",
     )
 
 
-def _format_score(score: FilterScore, width: int) -> str:
+def _format_score(score: FilterScore, width: int, heading: bool = False) -> str:
     rate = _number(score.samples_per_s, ",.0f")
     flag = score.flag if not score.message else f"{score.flag}: {score.message}"
+    split = ""
+    if heading:
+        split = (f"  {heading_cell(score.heading_rmse_deg, score.magnetic):>11}"
+                 f"  {heading_cell(score.total_rmse_deg, score.magnetic):>11}")
     return (f"  {score.name:<{width}}  {_number(score.rmse_deg, '.3f'):>9}  "
-            f"{_number(score.max_deg, '.3f'):>9}  {rate:>14}  {flag}")
+            f"{_number(score.max_deg, '.3f'):>9}{split}  {rate:>14}  {flag}")
+
+
+def heading_cell(value: float, magnetic: bool) -> str:
+    """A heading or total error; in parentheses for a filter whose heading is not the
+    magnetometer's (a 6-axis heading is the gyroscope's from an arbitrary start)."""
+    text = _number(value, ".3f")
+    return text if magnetic or text == "-" else f"({text})"
+
+
+HEADING_NOTE = ("heading and total error in parentheses: the filter does not take heading from "
+                "the magnetometer, so its heading is the gyroscope's from an arbitrary start "
+                "and means nothing")
 
 
 def _number(value: float, spec: str) -> str:
@@ -244,25 +272,33 @@ def _print_details(
         scored = f"first {skip:g} s not scored"
     print(f"  {result.duration_s:.0f} s, {result.samples} samples at {result.rate_hz:.4g} Hz, "
           f"{result.gaps} gap(s), {treatment}, {scored}", file=out)
-    print(f"  {'filter':<{width}}  {'RMSE deg':>9}  {'max deg':>9}  {'samples/s':>14}  flag",
-          file=out)
+    split = f"  {'heading deg':>11}  {'total deg':>11}" if result.has_field else ""
+    print(f"  {'filter':<{width}}  {'RMSE deg':>9}  {'max deg':>9}{split}  {'samples/s':>14}  "
+          "flag", file=out)
     for score in result.scores:
-        print(_format_score(score, width), file=out)
+        print(_format_score(score, width, result.has_field), file=out)
+    if result.has_field:
+        note = (f"; {HEADING_NOTE}" if any(not s.magnetic for s in result.scores) else "")
+        print(f"  RMSE of inclination, heading and total error{note}", file=out)
     print(file=out)
 
 
 class _Matrix:
     """The table of RMSE per source (rows) and filter (columns), printed row by row."""
 
-    def __init__(self, labels: list[str], filters: list[str], out: TextIO) -> None:
+    def __init__(self, labels: list[str], filters: list[str], out: TextIO,
+                 what: str = "Inclination", key: str = "rmse_deg") -> None:
         self.filters = filters
         self.out = out
+        self.what = what
+        self.key = key
         self.label_width = max(6, *(len(label) for label in labels))
         self.widths = [max(7, len(name)) for name in filters]
         self.flagged: list[str] = []
+        self.starred = False
 
     def header(self) -> None:
-        print("Inclination error RMSE (degrees) per source and filter", file=self.out)
+        print(f"{self.what} error RMSE (degrees) per source and filter", file=self.out)
         cells = "".join(f" {name:>{w}} " for name, w in zip(self.filters, self.widths,
                                                                strict=True))
         print(f"{'source':<{self.label_width}}  {'scored':>7}{cells}".rstrip(), file=self.out)
@@ -271,9 +307,12 @@ class _Matrix:
         cells = []
         for name, width in zip(self.filters, self.widths, strict=True):
             score = result.score(name)
-            value = math.nan if score is None else score.rmse_deg
+            value = math.nan if score is None else getattr(score, self.key)
             mark = " "
-            if score is not None and score.flag != "ok":
+            if self.key != "rmse_deg" and score is not None and not score.magnetic:
+                mark = "*"
+                self.starred = True
+            elif score is not None and score.flag != "ok":
                 mark = "!"
                 why = score.flag if not score.message else f"{score.flag}: {score.message}"
                 self.flagged.append(f"{name} on {label}: {why}")
@@ -283,14 +322,18 @@ class _Matrix:
         self.out.flush()
 
     def footer(self, summary: dict[str, dict[str, float | int]], sources: int) -> None:
-        for key, title in (("mean_rmse_deg", f"mean of {sources}"),
-                           ("worst_rmse_deg", "worst")):
+        rows = ((("mean_rmse_deg", f"mean of {sources}"), ("worst_rmse_deg", "worst"))
+                if self.key == "rmse_deg" else
+                ((f"mean_{self.key}", f"mean of {sources}"),))
+        for key, title in rows:
             cells = "".join(
                 f" {_number(float(summary[name][key]), '.3f'):>{w}} "
                 for name, w in zip(self.filters, self.widths, strict=True))
             print(f"{title:<{self.label_width}}  {'':>7}{cells}".rstrip(), file=self.out)
         for line in self.flagged:
             print(f"  ! {line}", file=self.out)
+        if self.starred:
+            print(f"  * {HEADING_NOTE.replace('in parentheses', 'marked *')}", file=self.out)
 
 
 def _check_options(args: argparse.Namespace, filters: list[str]) -> dict[str, dict]:
@@ -310,7 +353,23 @@ def _check_options(args: argparse.Namespace, filters: list[str]) -> dict[str, di
         raise CommandError(f"--repeats must be from 1 to {MAX_REPEATS}")
     if args.json not in (None, "-"):
         check_output_folder(args.json, "--json")
+    if args.turn is not None:
+        args.turn_quat = parse_turn(args.turn)
     return parameters
+
+
+def parse_turn(text: str) -> Any:
+    """``RX,RY,RZ`` (degrees) as a unit quaternion; CommandError when it is not three finite
+    numbers."""
+    parts = text.split(",")
+    try:
+        angles = [float(part) for part in parts]
+        if len(angles) != 3:
+            raise ValueError
+        return turn_quaternion(angles)
+    except ValueError:
+        raise CommandError(f"--turn {text!r}: give a rotation vector as three angles in "
+                           "degrees, RX,RY,RZ (such as 20,-30,110)") from None
 
 
 def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
@@ -332,6 +391,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         chosen = ", ".join(f"{f}.{k}={v}" for f, values in parameters.items()
                            for k, v in values.items())
         print(f"parameters: {chosen}", file=out)
+    if args.turn is not None:
+        print(f"sensor frame turned by the rotation vector ({args.turn}) degrees", file=out)
     results = _evaluate_all(args, pending, filters, parameters, skip, out)
     for name in filters:
         if FILTERS[name].reference_only:
@@ -342,6 +403,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         settings = {
             "sources": list(args.sources), "skip_s": skip, "seconds": args.seconds,
             "compensated": not args.raw, "repeats": args.repeats, "app_version": __version__,
+            "turn_deg": (None if args.turn is None
+                         else [float(a) for a in args.turn.split(",")]),
         }
         document = evaluation.results_json(results, settings=settings, filters=filters,
                                            parameters=parameters)
@@ -362,7 +425,10 @@ def _evaluate_all(args: argparse.Namespace, pending: list[_Pending], filters: li
     results: list[SourceResult] = []
     for item in pending:
         try:
-            result = evaluation.evaluate_source(item.load(), filters, skip_s=skip,
+            source = item.load()
+            if getattr(args, "turn", None) is not None:
+                source = evaluation.turned_source(source, args.turn_quat)
+            result = evaluation.evaluate_source(source, filters, skip_s=skip,
                                                 repeats=args.repeats, parameters=parameters)
         except (RecordingError, ValueError) as exc:
             raise CommandError(str(exc)) from None
@@ -377,7 +443,16 @@ def _evaluate_all(args: argparse.Namespace, pending: list[_Pending], filters: li
             matrix.header()
             for item, result in zip(pending, results, strict=True):
                 matrix.row(item.short, result)
-        matrix.footer(evaluation.summarize(results), len(results))
+        summary = evaluation.summarize(results)
+        matrix.footer(summary, len(results))
+        if all(r.has_field for r in results):
+            for what, key in (("Heading", "heading_rmse_deg"), ("Total", "total_rmse_deg")):
+                split = _Matrix([p.short for p in pending], filters, out, what, key)
+                print(file=out)
+                split.header()
+                for item, result in zip(pending, results, strict=True):
+                    split.row(item.short, result)
+                split.footer(summary, len(results))
         rules = sorted({r.scoring for r in results})
         print(f"scored: {'; '.join(rules)}; rows without a reference never count", file=out)
     return results

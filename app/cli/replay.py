@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import TextIO
 
 from app.cli.errors import EXIT_FAILED, CommandError, check_output_folder, check_regular_file
+from app.cli.evaluate import HEADING_NOTE, heading_cell
 from app.cli.filter_params import add_param_argument, parse_filter_parameters
 from app.core.scoring import DEFAULT_SKIP_S, SCORE_COLUMN
 from app.services.replay_export import (
@@ -32,8 +33,10 @@ def add_arguments(replay: argparse.ArgumentParser) -> None:
         "Run orientation filters over a recording as fast as possible, through the same "
         "stages as live (the recorded calibration, the recorded device blocks, the "
         "recorded filter parameters), and write t, then per filter roll, pitch, tilt, "
-        "direction (degrees) and the quaternion; with reference columns also the "
-        "reference angles and each filter's inclination error."
+        "direction (degrees) and the quaternion (sensor-to-earth; a 9-axis filter's is ENU "
+        "with y toward magnetic north); with reference columns also the reference angles "
+        "and each filter's inclination error, and with a magnetometer its heading and total "
+        "error."
     )
     replay.add_argument("source", metavar="IN.csv", help="a recording (or replay://PATH)")
     replay.add_argument("--filter", dest="filters", metavar="NAME", nargs="+", action="extend",
@@ -91,8 +94,12 @@ def print_summary(summary: ReplaySummary, out: TextIO) -> None:
               file=out)
     width = max(6, *(len(line.name) for line in summary.filters))
     header = f"  {'filter':<{width}}  {'final roll':>10}  {'final pitch':>11}"
+    split = any(line.errors is not None and "heading_rmse_deg" in line.errors
+                and math.isfinite(line.errors["heading_rmse_deg"]) for line in summary.filters)
     if scored is not None:
         header += f"  {'RMSE deg':>9}  {'max deg':>9}"
+        if split:
+            header += f"  {'heading deg':>11}  {'total deg':>11}"
     print(header, file=out)
     for line in summary.filters:
         text = f"  {line.name:<{width}}  {line.final_roll_deg:10.3f}  {line.final_pitch_deg:11.3f}"
@@ -100,4 +107,12 @@ def print_summary(summary: ReplaySummary, out: TextIO) -> None:
             rmse, worst = line.errors["rmse_deg"], line.errors["max_deg"]
             text += (f"  {rmse:9.3f}  {worst:9.3f}" if math.isfinite(rmse)
                      else f"  {'-':>9}  {'-':>9}")
+            if split:
+                text += "".join(f"  {heading_cell(line.errors[key], line.magnetic):>11}"
+                                for key in ("heading_rmse_deg", "total_rmse_deg"))
         print(text, file=out)
+    if split:
+        print("  RMSE of inclination, heading and total error (earth frame ENU, y toward "
+              "magnetic north)", file=out)
+        if any(not line.magnetic for line in summary.filters):
+            print(f"  {HEADING_NOTE}", file=out)

@@ -15,6 +15,13 @@ simulator (:func:`app.services.simulation.simulator_source`, a layer up: it runs
   (:func:`recording_score_mask`: rows with ``movement == 1``; BROAD's metric, whose rest phase
   before the movement is the convergence time). Rows without a known reference are never
   scored.
+- **heading and total error** (a source with a magnetometer: its reference's earth frame is
+  ENU with y toward magnetic north, as BROAD's and the simulator's): BROAD's split of the error
+  rotation (:mod:`app.core.heading_metrics`), RMSE over the same rows. It is computed for every
+  filter, but only a filter that takes heading from the magnetometer (``uses_magnetometer`` with
+  its switch on: :attr:`FilterScore.magnetic`) has a heading that means anything: a 6-axis
+  filter's heading is the gyroscope's from an arbitrary start. :func:`turned_source` turns a
+  source's sensor frame by a fixed rotation first (BROAD's trap: see that module).
 - **throughput**: samples per second of wall time inside ``filter.process`` only.
 - **flag**: ``ok``; ``NaN`` when an estimate is not finite; ``diverged`` when the error RMS over
   the last 10 % of the scored samples exceeds :data:`~app.core.scoring.DIVERGED_DEG` and
@@ -43,8 +50,9 @@ from typing import Any
 
 import numpy as np
 
-from app.core.calibration import SensorCalibration
+from app.core.calibration import MagnetometerCalibration, SensorCalibration
 from app.core.filters import FILTERS, OrientationFilter
+from app.core.heading_metrics import turn_block
 from app.core.samples import SampleBlock
 from app.core.scoring import (
     DEFAULT_SKIP_S,
@@ -80,6 +88,12 @@ class FilterScore:
     nan_samples: int = 0
     flag: str = "ok"
     message: str = ""
+    heading_rmse_deg: float = math.nan
+    """NaN unless the stream has a magnetometer (see :attr:`magnetic`)."""
+    total_rmse_deg: float = math.nan
+    magnetic: bool = False
+    """True when the filter took its heading from the magnetometer: only then does the heading
+    error measure anything (a 6-axis heading is arbitrary)."""
 
 
 @dataclass(slots=True)
@@ -119,6 +133,8 @@ class SourceResult:
     masked: bool
     """True when a score mask chose the rows (False: the first ``skip_s`` s skipped)."""
     scores: list[FilterScore] = field(default_factory=list)
+    has_field: bool = False
+    """True when the stream has a magnetometer: heading and total errors are scored."""
 
     def score(self, name: str) -> FilterScore | None:
         return next((s for s in self.scores if s.name == name), None)
@@ -126,13 +142,16 @@ class SourceResult:
 
 # -- streams ---------------------------------------------------------------------------------
 def concatenate_blocks(blocks: Iterable[SampleBlock]) -> SampleBlock:
-    """One SampleBlock holding a whole stream (reference kept only if every block has one)."""
+    """One SampleBlock holding a whole stream (reference and field kept only if every block
+    has one)."""
     blocks = [b for b in blocks if len(b)]
     if not blocks:
         empty3 = np.empty((0, 3))
         return SampleBlock(np.empty(0), empty3, empty3.copy(), np.empty(0), np.empty(0, bool))
     references = [b.reference_quat for b in blocks]
     has_reference = all(r is not None for r in references)
+    fields = [b.mag_ut for b in blocks]
+    has_field = all(f is not None for f in fields)
     return SampleBlock(
         t_s=np.concatenate([b.t_s for b in blocks]),
         accel_m_s2=np.concatenate([b.accel_m_s2 for b in blocks]),
@@ -140,19 +159,14 @@ def concatenate_blocks(blocks: Iterable[SampleBlock]) -> SampleBlock:
         temp_degc=np.concatenate([b.temp_degc for b in blocks]),
         gap=np.concatenate([b.gap for b in blocks]),
         reference_quat=np.concatenate(references) if has_reference else None,  # type: ignore[arg-type]
+        mag_ut=np.concatenate(fields) if has_field else None,  # type: ignore[arg-type]
     )
 
 
 def split_block(block: SampleBlock, size: int) -> Iterator[SampleBlock]:
     """Consecutive slices of ``block`` with at most ``size`` samples (views, no copies)."""
-    ref = block.reference_quat
     for start in range(0, len(block), size):
-        stop = start + size
-        yield SampleBlock(
-            block.t_s[start:stop], block.accel_m_s2[start:stop], block.gyro_rad_s[start:stop],
-            block.temp_degc[start:stop], block.gap[start:stop],
-            None if ref is None else ref[start:stop],
-        )
+        yield _rows(block, start, start + size)
 
 
 def with_gap(block: SampleBlock, start_s: float, length_s: float) -> SampleBlock:
@@ -166,10 +180,10 @@ def with_gap(block: SampleBlock, start_s: float, length_s: float) -> SampleBlock
     after = np.flatnonzero(block.t_s >= start_s + length_s)
     if lost.any() and len(after):
         gap[after[0]] = True
-    ref = block.reference_quat
+    ref, field = block.reference_quat, block.mag_ut
     return SampleBlock(
         block.t_s[keep], block.accel_m_s2[keep], block.gyro_rad_s[keep], block.temp_degc[keep],
-        gap[keep], None if ref is None else ref[keep],
+        gap[keep], None if ref is None else ref[keep], None if field is None else field[keep],
     )
 
 
@@ -177,15 +191,22 @@ def calibration_from_unit_errors(unit: Any) -> SensorCalibration:
     """The calibration that undoes a simulated unit's static errors at 25 degC.
 
     ``unit`` is a :class:`drivers.sim.error_model.UnitErrors`: ``measured = M @ true + bias``
-    gives ``A = inv(M)`` and ``b = bias``, for the accelerometer and the gyroscope alike.
-    Temperature terms, random walks and noise stay: no calibration can remove them.
+    gives ``A = inv(M)`` and ``b = bias``, for the accelerometer and the gyroscope alike. A
+    magnetometer (``unit.magnetometer``: ``measured = S R b + h``, soft iron ``S``, the chips'
+    turn ``R``, hard iron ``h``) gets ``hard_iron = h`` and ``soft_iron = inv(S R)``, so its
+    field is in the accelerometer's frame and a 9-axis heading is scored without the board's
+    iron in it. Temperature terms, random walks and noise stay: no calibration removes them.
     """
+    mag = getattr(unit, "magnetometer", None)
     return SensorCalibration(
         accel_bias_m_s2=np.asarray(unit.accel_bias_m_s2, dtype=np.float64),
         accel_matrix=np.linalg.inv(unit.accel_matrix),
         gyro_bias_rad_s=np.asarray(unit.gyro_bias_rad_s, dtype=np.float64),
         gyro_matrix=np.linalg.inv(unit.gyro_matrix),
         name=f"true errors of seed {unit.seed}",
+        magnetometer=None if mag is None else MagnetometerCalibration(
+            hard_iron_ut=np.asarray(mag.hard_iron_ut, dtype=np.float64),
+            soft_iron=np.linalg.inv(np.asarray(mag.soft_iron) @ np.asarray(mag.alignment))),
     )
 
 
@@ -264,6 +285,32 @@ def recording_score_mask(recording: Any) -> np.ndarray | None:
     return np.asarray(values, dtype=np.float64) == 1.0
 
 
+def turned_source(source: StreamSource, turn: np.ndarray, label: str | None = None
+                  ) -> StreamSource:
+    """``source`` with its sensor frame turned by the unit quaternion ``turn``
+    (:func:`app.core.heading_metrics.turn_block`: samples, field and reference alike)."""
+    pieces = source.pieces
+
+    def turned_pieces() -> Iterator[tuple[SampleBlock, np.ndarray | None]]:
+        assert pieces is not None
+        for piece, mask in pieces():
+            yield turn_block(piece, turn), mask
+
+    return StreamSource(
+        label or source.label, lambda: [turn_block(b, turn) for b in source.blocks()],
+        source.description, source.score_mask, source.scoring,
+        None if pieces is None else turned_pieces,
+    )
+
+
+def magnetic_heading(cls: type[OrientationFilter], values: Mapping[str, Any],
+                     stream_has_field: bool) -> bool:
+    """True when filter ``cls`` with parameter ``values`` takes heading from the field."""
+    if not (stream_has_field and cls.uses_magnetometer):
+        return False
+    return bool(cls(**dict(values)).parameter_values().get("magnetometer", False))
+
+
 # -- scoring ---------------------------------------------------------------------------------
 def _resolve(spec: FilterSpec) -> type[OrientationFilter]:
     if isinstance(spec, str):
@@ -319,7 +366,12 @@ def evaluate_filter(
         score.flag = "error"
         score.message = f"{type(exc).__name__}: {exc}"
         return score
-    stats = error_statistics(quat, stream.reference_quat, stream.t_s, skip_s, score_mask)
+    has_field = stream.mag_ut is not None
+    stats = error_statistics(quat, stream.reference_quat, stream.t_s, skip_s, score_mask,
+                             heading=has_field)
+    score.heading_rmse_deg = stats["heading_rmse_deg"]
+    score.total_rmse_deg = stats["total_rmse_deg"]
+    score.magnetic = magnetic_heading(cls, values, has_field)
     score.rmse_deg = stats["rmse_deg"]
     score.max_deg = stats["max_deg"]
     score.scored_samples = stats["scored"]
@@ -411,6 +463,7 @@ def evaluate_source(
     result = SourceResult(
         source.label, source.description, info["duration_s"], info["samples"], info["rate_hz"],  # type: ignore[arg-type]
         info["gaps"], int(np.count_nonzero(rows)), scoring, mask is not None,  # type: ignore[arg-type]
+        has_field=stream.mag_ut is not None,
     )
     result.scores = evaluate(stream, filters, skip_s=skip_s, block=block, repeats=repeats,
                              score_mask=mask, parameters=parameters)
@@ -451,10 +504,12 @@ def _join_pieces(held: list[tuple[SampleBlock, np.ndarray | None]]
 
 
 def _rows(block: SampleBlock, start: int, stop: int) -> SampleBlock:
-    ref = block.reference_quat
+    """Rows ``start:stop`` of every column (views)."""
+    ref, field = block.reference_quat, block.mag_ut
     return SampleBlock(block.t_s[start:stop], block.accel_m_s2[start:stop],
                        block.gyro_rad_s[start:stop], block.temp_degc[start:stop],
-                       block.gap[start:stop], None if ref is None else ref[start:stop])
+                       block.gap[start:stop], None if ref is None else ref[start:stop],
+                       None if field is None else field[start:stop])
 
 
 def _evaluate_pieces(
@@ -485,6 +540,8 @@ def _evaluate_pieces(
                 rows = (mask if mask is not None else piece.t_s >= t0 + skip_s) & np.all(
                     np.isfinite(piece.reference_quat), axis=1)
                 figures.add(piece, rows, mask is not None)
+            if repeat == 0 and piece.mag_ut is not None:
+                figures.has_field = True
             for run in runs:
                 run.process(piece, rows)
         for run in runs:
@@ -497,12 +554,13 @@ def _evaluate_pieces(
                                           repeats=1 if repeats is None else repeats,
                                           score_mask=mask, **dict(chosen.get(cls.name, {}))))
         else:
-            scores.append(next(r for r in runs if r.cls is cls).score(figures.samples))
+            scores.append(next(r for r in runs if r.cls is cls).score(figures.samples,
+                                                                       figures.has_field))
     scoring = ((source.scoring or "rows marked by the score mask") if figures.masked
                else f"after the first {skip_s:g} s")
     result = SourceResult(source.label, source.description, figures.duration_s,
                           figures.samples, figures.rate_hz, figures.gaps, figures.scored,
-                          scoring, figures.masked)
+                          scoring, figures.masked, has_field=figures.has_field)
     result.scores = scores
     return result
 
@@ -514,6 +572,7 @@ class _StreamFigures:
         self.samples = self.gaps = self.scored = 0
         self.first = self.last = self.rate_hz = math.nan
         self.masked = False
+        self.has_field = False
 
     def add(self, piece: SampleBlock, rows: np.ndarray, masked: bool) -> None:
         self.masked = self.masked or masked
@@ -564,18 +623,22 @@ class _OnlineRun:
             return
         self.elapsed += time.perf_counter() - start
         if rows is not None:
+            self.errors.heading = self.errors.heading or piece.mag_ut is not None
             self.errors.add(result.quat, piece.reference_quat, rows)  # type: ignore[arg-type]
 
     def finish(self) -> None:
         if not self.failure:
             self.best = min(self.best, self.elapsed)
 
-    def score(self, samples: int) -> FilterScore:
+    def score(self, samples: int, has_field: bool = False) -> FilterScore:
         score = FilterScore(self.cls.name, self.cls.title or self.cls.name, samples=samples)
         if self.failure:
             score.flag, score.message = "error", self.failure
             return score
         stats = self.errors.result()
+        score.heading_rmse_deg = stats["heading_rmse_deg"]
+        score.total_rmse_deg = stats["total_rmse_deg"]
+        score.magnetic = magnetic_heading(self.cls, self.values, has_field)
         score.rmse_deg, score.max_deg = stats["rmse_deg"], stats["max_deg"]
         score.scored_samples, score.nan_samples = stats["scored"], stats["nan"]
         score.samples_per_s = samples / self.best if self.best > 0.0 else math.inf
@@ -586,10 +649,18 @@ class _OnlineRun:
         return score
 
 
+def _complete_mean(values: Sequence[float]) -> float:
+    """The mean, NaN unless every value is finite (a mean over fewer would not compare)."""
+    return (float(np.mean(values)) if values and all(math.isfinite(v) for v in values)
+            else math.nan)
+
+
 def summarize(results: Sequence[SourceResult]) -> dict[str, dict[str, float | int]]:
     """Per filter over the sources: ``mean_rmse_deg`` (NaN unless every source has an RMSE:
     a mean over fewer sources would not compare), ``worst_rmse_deg`` (the largest per-source
-    RMSE), ``max_deg`` (the largest error anywhere) and ``sources`` (how many have an RMSE)."""
+    RMSE), ``max_deg`` (the largest error anywhere) and ``sources`` (how many have an RMSE);
+    ``mean_heading_rmse_deg`` and ``mean_total_rmse_deg`` (NaN unless every source scored
+    them) and ``magnetic`` (the filter took heading from the field on every source)."""
     names = list(dict.fromkeys(s.name for r in results for s in r.scores))
     summary: dict[str, dict[str, float | int]] = {}
     for name in names:
@@ -598,7 +669,12 @@ def summarize(results: Sequence[SourceResult]) -> dict[str, dict[str, float | in
         finite = [v for v in rmses if math.isfinite(v)]
         maxima = [s.max_deg for s in scores if s is not None and math.isfinite(s.max_deg)]
         complete = len(finite) == len(rmses) and len(rmses) > 0
+        headings = [s.heading_rmse_deg if s is not None else math.nan for s in scores]
+        totals = [s.total_rmse_deg if s is not None else math.nan for s in scores]
         summary[name] = {
+            "mean_heading_rmse_deg": _complete_mean(headings),
+            "mean_total_rmse_deg": _complete_mean(totals),
+            "magnetic": all(s is not None and s.magnetic for s in scores) and len(scores) > 0,
             "mean_rmse_deg": float(np.mean(finite)) if complete else math.nan,
             "worst_rmse_deg": max(finite) if finite else math.nan,
             "max_deg": max(maxima) if maxima else math.nan,
@@ -622,8 +698,9 @@ def results_json(
     ``{"settings": ..., "filters": [{name, title, offline, reference_only, parameters}],
     "sources": [{label, description, duration_s, samples, rate_hz, gaps, scored_samples,
     scoring, masked, filters: {name: {rmse_deg, max_deg, samples_per_s, flag, message,
-    scored_samples, nan_samples}}}], "mean": {name: {rmse_deg, worst_rmse_deg, max_deg,
-    sources}}}``.
+    scored_samples, nan_samples, heading_rmse_deg, total_rmse_deg,
+    heading_from_magnetometer}}, magnetometer}], "mean": {name: {rmse_deg, worst_rmse_deg,
+    max_deg, sources, heading_rmse_deg, total_rmse_deg, heading_from_magnetometer}}}``.
     """
     specs = list(filters) if filters is not None else list(
         dict.fromkeys(s.name for r in results for s in r.scores))
@@ -642,19 +719,25 @@ def results_json(
             "duration_s": _json_number(result.duration_s), "samples": result.samples,
             "rate_hz": _json_number(result.rate_hz), "gaps": result.gaps,
             "scored_samples": result.scored_samples, "scoring": result.scoring,
-            "masked": result.masked,
+            "masked": result.masked, "magnetometer": result.has_field,
             "filters": {
                 s.name: {"rmse_deg": _json_number(s.rmse_deg), "max_deg": _json_number(s.max_deg),
                          "samples_per_s": _json_number(s.samples_per_s), "flag": s.flag,
                          "message": s.message, "scored_samples": s.scored_samples,
-                         "nan_samples": s.nan_samples}
+                         "nan_samples": s.nan_samples,
+                         "heading_rmse_deg": _json_number(s.heading_rmse_deg),
+                         "total_rmse_deg": _json_number(s.total_rmse_deg),
+                         "heading_from_magnetometer": s.magnetic}
                 for s in result.scores
             },
         })
     mean = {
         name: {"rmse_deg": _json_number(float(v["mean_rmse_deg"])),
                "worst_rmse_deg": _json_number(float(v["worst_rmse_deg"])),
-               "max_deg": _json_number(float(v["max_deg"])), "sources": v["sources"]}
+               "max_deg": _json_number(float(v["max_deg"])), "sources": v["sources"],
+               "heading_rmse_deg": _json_number(float(v["mean_heading_rmse_deg"])),
+               "total_rmse_deg": _json_number(float(v["mean_total_rmse_deg"])),
+               "heading_from_magnetometer": bool(v["magnetic"])}
         for name, v in summarize(results).items()
     }
     return {"settings": dict(settings or {}), "filters": described, "sources": sources,

@@ -16,7 +16,7 @@ import numpy as np
 from app.core.calibration import IDENTITY_CALIBRATION, SensorCalibration
 from app.core.calibration_procedures.level_reference import TareReference
 from app.core.field_check import FieldMonitor
-from app.core.filters import DEFAULT_FILTER, FILTERS, OrientationFilter, create_filter
+from app.core.filters import FILTERS, OrientationFilter, create_filter, default_filter_for
 from app.core.orientation import angles_from_quaternion, inclination_error_deg
 from app.core.ring_buffer import RingBuffer
 from app.core.samples import RawBlock, SampleBlock, convert_raw_block
@@ -88,12 +88,15 @@ class Pipeline:
     Parameters
     ----------
     odr_hz : expected sample rate, used to size the ring buffers.
-    filter_name : the initial filter (see :data:`app.core.filters.FILTERS`).
+    filter_name : the initial filter (see :data:`app.core.filters.FILTERS`); None: the default
+        for the source (:func:`app.core.filters.default_filter_for` ``has_magnetometer``).
     """
 
-    def __init__(self, odr_hz: float = 104.0, filter_name: str = DEFAULT_FILTER) -> None:
+    def __init__(self, odr_hz: float = 104.0, filter_name: str | None = None,
+                 has_magnetometer: bool = False) -> None:
         self.calibration: SensorCalibration = IDENTITY_CALIBRATION
         self.level_reference: TareReference | None = None
+        filter_name = filter_name or default_filter_for(has_magnetometer)
         require_online(filter_name)
         self.filter: OrientationFilter = create_filter(filter_name)
         self.counters = PipelineCounters()

@@ -3,8 +3,10 @@ divergence; in one call over a whole stream (:func:`error_statistics`) or piece 
 bounded memory (:class:`ErrorAccumulator`). Numpy only.
 
 The inclination error is the angle between the estimated and the true gravity directions
-(:func:`app.core.orientation.inclination_error_deg`). See :mod:`app.core.evaluation` for how
-``inclinometer evaluate`` uses it.
+(:func:`app.core.orientation.inclination_error_deg`). With ``heading=True`` (a source with a
+magnetometer, whose reference's earth frame is ENU with y toward magnetic north) the heading
+and total errors of BROAD's split (:mod:`app.core.heading_metrics`) are scored over the same
+rows as RMSE too. See :mod:`app.core.evaluation` for how ``inclinometer evaluate`` uses it.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from app.core.heading_metrics import heading_error_deg, total_error_deg
 from app.core.orientation import inclination_error_deg
 
 DEFAULT_SKIP_S = 2.0
@@ -45,9 +48,22 @@ def scoring_rows(
     return (t_s >= t_s[0] + skip_s) & known
 
 
+def _rms(values: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(values**2))) if len(values) else math.nan
+
+
+def heading_figures(quat: np.ndarray, reference: np.ndarray) -> dict[str, float]:
+    """``heading_rmse_deg`` and ``total_rmse_deg`` of rows already chosen (NaN for none)."""
+    return {"heading_rmse_deg": _rms(heading_error_deg(quat, reference)),
+            "total_rmse_deg": _rms(total_error_deg(quat, reference))}
+
+
+NO_HEADING = {"heading_rmse_deg": math.nan, "total_rmse_deg": math.nan}
+
+
 def error_statistics(
     quat: np.ndarray, reference: np.ndarray, t_s: np.ndarray, skip_s: float = DEFAULT_SKIP_S,
-    score_mask: np.ndarray | None = None,
+    score_mask: np.ndarray | None = None, heading: bool = False,
 ) -> dict[str, Any]:
     """RMSE and maximum inclination error (degrees) over the scored rows.
 
@@ -55,19 +71,21 @@ def error_statistics(
     ``skip_s`` seconds (:func:`scoring_rows`); rows without a known reference never count.
 
     Returns ``rmse_deg``, ``max_deg``, ``scored`` (samples scored), ``nan`` (samples whose
-    estimate is not finite, counted over the whole stream) and ``diverged`` (see the module
-    docstring). Non-finite estimates are left out of RMSE and maximum.
+    estimate is not finite, counted over the whole stream), ``diverged`` (see the module
+    docstring), and ``heading_rmse_deg`` and ``total_rmse_deg`` (NaN unless ``heading``).
+    Non-finite estimates are left out of RMSE and maximum.
     """
     finite = np.all(np.isfinite(quat), axis=1)
     nan_count = int(np.count_nonzero(~finite))
     if len(t_s) == 0:
         return {"rmse_deg": math.nan, "max_deg": math.nan, "scored": 0, "nan": 0,
-                "diverged": False}
+                "diverged": False, **NO_HEADING}
     scored = scoring_rows(reference, t_s, skip_s, score_mask) & finite
     errors = inclination_error_deg(quat[scored], reference[scored])
     if len(errors) == 0:
         return {"rmse_deg": math.nan, "max_deg": math.nan, "scored": 0, "nan": nan_count,
-                "diverged": False}
+                "diverged": False, **NO_HEADING}
+    split = heading_figures(quat[scored], reference[scored]) if heading else NO_HEADING
     late_count = max(1, int(len(errors) * LATE_FRACTION))
     late = float(np.sqrt(np.mean(errors[-late_count:] ** 2)))
     early_errors = errors[:-late_count]
@@ -78,6 +96,7 @@ def error_statistics(
         "scored": len(errors),
         "nan": nan_count,
         "diverged": late > DIVERGED_DEG and late > DIVERGED_RATIO * early,
+        **split,
     }
 
 
@@ -93,7 +112,10 @@ class ErrorAccumulator:
 
     BINS = 1024
 
-    def __init__(self) -> None:
+    def __init__(self, heading: bool = False) -> None:
+        self.heading = heading
+        self.heading_sum_sq = 0.0
+        self.total_sum_sq = 0.0
         self.sum_sq = 0.0
         self.count = 0
         self.max_deg = -math.inf
@@ -111,6 +133,9 @@ class ErrorAccumulator:
         if not rows.any():
             return
         squares = inclination_error_deg(quat[rows], reference[rows]) ** 2
+        if self.heading:
+            self.heading_sum_sq += float(np.sum(heading_error_deg(quat[rows], reference[rows])**2))
+            self.total_sum_sq += float(np.sum(total_error_deg(quat[rows], reference[rows]) ** 2))
         self.sum_sq += float(squares.sum())
         self.count += len(squares)
         self.max_deg = max(self.max_deg, float(np.sqrt(squares.max())))
@@ -141,11 +166,11 @@ class ErrorAccumulator:
             self._width *= 2
 
     def result(self) -> dict[str, Any]:
-        """``rmse_deg``, ``max_deg``, ``scored``, ``nan`` and ``diverged``, as
-        :func:`error_statistics` gives them."""
+        """``rmse_deg``, ``max_deg``, ``scored``, ``nan``, ``diverged``, ``heading_rmse_deg``
+        and ``total_rmse_deg``, as :func:`error_statistics` gives them."""
         if self.count == 0:
             return {"rmse_deg": math.nan, "max_deg": math.nan, "scored": 0, "nan": self.nan,
-                    "diverged": False}
+                    "diverged": False, **NO_HEADING}
         late_count = max(1, int(self.count * LATE_FRACTION))
         late_sum, covered = self._open_sum, self._open_count
         for value in reversed(self._bins):
@@ -163,4 +188,8 @@ class ErrorAccumulator:
             "scored": self.count,
             "nan": self.nan,
             "diverged": late > DIVERGED_DEG and late > DIVERGED_RATIO * early,
+            "heading_rmse_deg": (math.sqrt(self.heading_sum_sq / self.count) if self.heading
+                                 else math.nan),
+            "total_rmse_deg": (math.sqrt(self.total_sum_sq / self.count) if self.heading
+                               else math.nan),
         }

@@ -8,7 +8,7 @@ from PySide6.QtCore import QByteArray, QRect
 from PySide6.QtGui import QGuiApplication
 from PySide6.QtWidgets import QComboBox, QMainWindow, QWidget
 
-from app.core.filters import DEFAULT_FILTER, FILTERS, ONLINE_FILTERS
+from app.core.filters import FILTERS, ONLINE_FILTERS, default_filter_for
 from app.core.screen_fit import Rect, first_window_rect
 from app.gui import theme
 from app.gui.user_settings import SettingsSections
@@ -86,11 +86,12 @@ class WindowSettings:
         self.sections.set_value("theme", choice)
 
     # -- filter and device ------------------------------------------------------------------------
-    def filter(self, chosen: str | None = None) -> str:
+    def filter(self, chosen: str | None = None, has_magnetometer: bool = False) -> str:
         """The filter to start with: ``chosen``, else the remembered one; an unknown or
-        offline one (never live) gives the default."""
-        name = chosen or self.sections.text("filter", DEFAULT_FILTER)
-        return name if name in ONLINE_FILTERS else DEFAULT_FILTER
+        offline one (never live) gives the default for the source."""
+        default = default_filter_for(has_magnetometer)
+        name = chosen or self.sections.text("filter", default)
+        return name if name in ONLINE_FILTERS else default
 
     def filter_parameters(self, name: str) -> dict:
         """The remembered parameters of filter ``name`` that it has."""

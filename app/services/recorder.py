@@ -31,7 +31,7 @@ from typing import Any
 from app.core.alarms import AlarmEvent, AlarmMonitor
 from app.core.calibration import SensorCalibration
 from app.core.faults import FaultEvent
-from app.core.filters import DEFAULT_FILTER, create_filter
+from app.core.filters import DEFAULT_FILTER, DEFAULT_FILTER_9AXIS, create_filter
 from app.core.pipeline import Pipeline, require_online
 from app.core.recording.errors import RecordingWriteError
 from app.core.recording.writer import WriterStatus
@@ -92,7 +92,8 @@ def warm_up_filters(filter_name: str | None, comparisons: Sequence[str] = ()) ->
     block would otherwise wait for them (0.3 s from numba's cache, seconds on a cold one or a
     busy machine) while the sensor's FIFO overflows (benchmarks/soak-results: three of four
     losses were this). Loaded once per process: a second call costs nothing."""
-    for name in {filter_name or DEFAULT_FILTER, *(comparisons or ())}:
+    defaults = (DEFAULT_FILTER, DEFAULT_FILTER_9AXIS)  # which one depends on the device
+    for name in {*([filter_name] if filter_name else defaults), *(comparisons or ())}:
         with contextlib.suppress(ValueError):  # unknown or offline: refused further on
             require_online(name)
             create_filter(name).warm_up()
@@ -144,7 +145,8 @@ def record_device(
         except OutputRefused as exc:
             raise RecordingWriteError(str(exc), Path(path)) from None
         if pipeline is None:
-            pipeline = Pipeline(info.odr_hz, filter_name or DEFAULT_FILTER)
+            pipeline = Pipeline(info.odr_hz, filter_name,
+                                has_magnetometer=info.magnetometer is not None)
         elif filter_name is not None and pipeline.filter.name != filter_name:
             pipeline.set_filter(filter_name)
         for key, value in (filter_parameters or {}).items():

@@ -3,7 +3,9 @@
 Online filters run in one streamed pass (memory does not grow with the file); a run with an
 offline smoother, or ``all`` filters, reads the whole recording. Both paths end in the same
 :class:`ReplaySummary`: the rows, the calibration applied, which rows were scored and, per
-filter, the final angles and (with a reference orientation) the inclination error.
+filter, the final angles and (with a reference orientation) the inclination error; with a
+magnetometer too, the heading and total errors (meaningful only for a filter that took its
+heading from the magnetometer: :attr:`FilterLine.magnetic`).
 """
 
 from __future__ import annotations
@@ -15,8 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from app.core.evaluation import recording_score_mask
-from app.core.filters import DEFAULT_FILTER, FILTERS
+from app.core.evaluation import magnetic_heading, recording_score_mask
+from app.core.filters import FILTERS, default_filter_for
 from app.core.recording.errors import RecordingError
 from app.core.recording.export import (
     recorded_filter_parameters,
@@ -25,7 +27,7 @@ from app.core.recording.export import (
     run_filters,
     write_angles_csv,
 )
-from app.core.recording.format import recorded_calibration_problem
+from app.core.recording.format import MAG_COLUMNS, recorded_calibration_problem
 from app.core.recording.reader import Recording, read_recording
 from app.core.recording.stream import RecordingStream
 from app.core.safe_output import OutputRefused, check_output, write_error_message
@@ -47,13 +49,16 @@ class ReplayFailed(RuntimeError):
 
 @dataclass(frozen=True, slots=True)
 class FilterLine:
-    """One filter's result: final angles (degrees); errors: ``rmse_deg``, ``max_deg`` when
-    the recording has a reference orientation, else None."""
+    """One filter's result: final angles (degrees); errors: ``rmse_deg``, ``max_deg`` (and
+    ``heading_rmse_deg``, ``total_rmse_deg``: NaN without a magnetometer) when the recording
+    has a reference orientation, else None. ``magnetic``: the filter took its heading from the
+    magnetometer (its quaternion's earth frame is ENU, y toward magnetic north)."""
 
     name: str
     final_roll_deg: float
     final_pitch_deg: float
     errors: dict[str, Any] | None
+    magnetic: bool = False
 
 
 @dataclass(slots=True)
@@ -121,7 +126,8 @@ def replay_recording(request: ReplayRequest, warn: Say = _quiet, note: Say = _qu
 
 def _chosen_filters(request: ReplayRequest, head: Recording, size: int, note: Say
                     ) -> list[str]:
-    names = request.filters or [head.filter_name or DEFAULT_FILTER]
+    has_field = all(column in head.header for column in MAG_COLUMNS)
+    names = request.filters or [head.filter_name or default_filter_for(has_field)]
     if "all" in names and size >= WHOLE_FILE_OFFLINE_BYTES:
         left_out = [n for n in FILTERS if FILTERS[n].offline]
         names = [n for n in dict.fromkeys([*FILTERS, *names]) if n != "all"
@@ -149,8 +155,10 @@ def _replay_streamed(request: ReplayRequest, stream: RecordingStream, names: lis
     except OSError as exc:  # a full disk: the temporary file is gone, the target untouched
         raise ReplayFailed(write_error_message(exc, request.target, "--out")) from None
     calibration = None if request.raw else head.calibration
+    has_field = all(column in stream.header for column in MAG_COLUMNS)
     lines = [FilterLine(f.name, f.final_roll_deg, f.final_pitch_deg,
-                        f.errors.result() if summary.reference else None)
+                        f.errors.result() if summary.reference else None,
+                        magnetic_heading(FILTERS[f.name], f.parameters, has_field))
              for f in summary.filters]
     return ReplaySummary(request.target, summary.rows, summary.duration_s,
                          None if calibration is None else calibration.name, summary.masked,
@@ -187,9 +195,12 @@ def _replay_whole(request: ReplayRequest, names: list[str], warn: Say) -> Replay
     except OSError as exc:  # OutputRefused (a file that came meanwhile), a full disk
         raise ReplayFailed(write_error_message(exc, request.target, "--out")) from None
     reference = recording.reference_quat
+    has_field = recording.mag_ut is not None
     lines = [FilterLine(output.name, output.roll_deg[-1], output.pitch_deg[-1],
                         None if reference is None else error_statistics(
-                            output.quat, reference, recording.t_s, DEFAULT_SKIP_S, score_mask))
+                            output.quat, reference, recording.t_s, DEFAULT_SKIP_S, score_mask,
+                            heading=has_field),
+                        magnetic_heading(FILTERS[output.name], output.parameters, has_field))
              for output in outputs]
     scored = None if reference is None else int(
         scoring_rows(reference, recording.t_s, DEFAULT_SKIP_S, score_mask).sum())

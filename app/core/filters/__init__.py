@@ -23,8 +23,30 @@ FILTERS: dict[str, type[OrientationFilter]] = {
     )
 }
 DEFAULT_FILTER = QuaternionEKF.name
+"""The default for a source without a magnetometer (the best inclination on real data)."""
+DEFAULT_FILTER_9AXIS = VQFFilter.name
+"""The default for a source with a magnetometer: the 9-axis filter with the best heading on
+the turned BROAD trials (``evaluate --turn``), VQF 9D, whose inclination is that of VQF 6D."""
 ONLINE_FILTERS: tuple[str, ...] = tuple(name for name, cls in FILTERS.items() if not cls.offline)
 """The filters that can run on a live stream (offline smoothers need the whole recording)."""
+
+
+def default_filter_for(has_magnetometer: bool) -> str:
+    """The default filter's name for a source with or without a magnetometer.
+
+    Falls back to :data:`DEFAULT_FILTER` when the 9-axis default cannot be made (its package
+    missing), so a source with a field still gets a working filter."""
+    if has_magnetometer and _available(DEFAULT_FILTER_9AXIS):
+        return DEFAULT_FILTER_9AXIS
+    return DEFAULT_FILTER
+
+
+def _available(name: str) -> bool:
+    try:
+        FILTERS[name]()
+    except (ImportError, ValueError):
+        return False
+    return True
 
 
 def known_parameters(name: str, values: dict[str, Any]) -> tuple[dict[str, Any], list[str]]:
@@ -47,6 +69,7 @@ def create_filter(name: str, **values: Any) -> OrientationFilter:
 
 
 __all__ = [
-    "DEFAULT_FILTER", "FILTERS", "ONLINE_FILTERS", "OrientationBlock", "OrientationFilter",
-    "ParameterSpec", "create_filter", "known_parameters",
+    "DEFAULT_FILTER", "DEFAULT_FILTER_9AXIS", "FILTERS", "ONLINE_FILTERS", "OrientationBlock",
+    "OrientationFilter", "ParameterSpec", "create_filter", "default_filter_for",
+    "known_parameters",
 ]

@@ -12,7 +12,11 @@
   either end of the recording, and after each restart, one of the two is still converging: its
   large covariance gives it no weight there.
 - :class:`OfflineVQF` (``vqf-offline``): ``vqf.offlineVQF`` (Laidig & Seel 2023), VQF's own
-  acausal variant with a non-causal low-pass and bias estimate.
+  acausal variant with a non-causal low-pass and bias estimate; 9D (heading from the
+  magnetometer, ENU with y toward magnetic north) when the recording has a field. offlineVQF
+  runs one sample time for all three sensors and takes every row's field as a measurement, so a
+  magnetometer slower than the accelerometer is held: each row gets the latest field sample
+  (rows before the first get the first).
 
 Both are ``offline``: they are offered for recordings only (``replay``, ``evaluate``, the replay
 window), never for a live stream, and each ``process`` call is taken as a whole recording.
@@ -25,7 +29,12 @@ from typing import Any
 import numpy as np
 
 from app.core import quaternion as quat
-from app.core.filters.base import OrientationFilter, ParameterSpec, restart_flags
+from app.core.filters.base import (
+    MAGNETOMETER_PARAMETER,
+    OrientationFilter,
+    ParameterSpec,
+    restart_flags,
+)
 from app.core.filters.ekf import QuaternionEKF
 from app.core.filters.vqf_filter import MISSING_MESSAGE, VQFUnavailableError, _vqf
 from app.core.orientation import quaternion_from_up, up_in_sensor_frame
@@ -123,6 +132,7 @@ class OfflineVQF(OrientationFilter):
         "estimation). Uses the future: for recordings only."
     )
     offline = True
+    uses_magnetometer = True
     parameters = (
         ParameterSpec(
             "tau_acc_s", "Accelerometer time constant", "s", 3.0, 0.1, 100.0,
@@ -134,6 +144,13 @@ class OfflineVQF(OrientationFilter):
             "Standard deviation of the gyroscope bias at start (VQF biasSigmaInit).",
             log_scale=True,
         ),
+        MAGNETOMETER_PARAMETER,
+        ParameterSpec(
+            "mag_disturbance_rejection", "Magnetic disturbance rejection", "", True, 0, 1,
+            "Where the field's norm or dip leaves the reference learnt undisturbed, the "
+            "gyroscope alone carries the heading (VQF magDistRejectionEnabled).",
+            kind="bool",
+        ),
     )
 
     def __init__(self, **values: Any) -> None:
@@ -143,12 +160,15 @@ class OfflineVQF(OrientationFilter):
 
     def _process(self, block: SampleBlock) -> np.ndarray:
         params = {"tauAcc": float(self._values["tau_acc_s"]),
-                  "biasSigmaInit": float(self._values["bias_sigma_init_dps"])}
+                  "biasSigmaInit": float(self._values["bias_sigma_init_dps"]),
+                  "magDistRejectionEnabled": bool(self._values["mag_disturbance_rejection"])}
         out = np.empty((len(block), 4))
         starts = restarts(block.t_s, block.gap)
+        use_field = block.mag_ut is not None and bool(self._values["magnetometer"])
         for first, stop in zip(starts, [*starts[1:], len(block)], strict=True):
             gyro = np.ascontiguousarray(block.gyro_rad_s[first:stop], dtype=np.float64)
             accel = np.ascontiguousarray(block.accel_m_s2[first:stop], dtype=np.float64)
+            field = held_field(block.mag_ut[first:stop]) if use_field else None  # type: ignore[index]
             if stop - first < 2:
                 norm = np.linalg.norm(accel, axis=1, keepdims=True)
                 out[first:stop] = quaternion_from_up(accel / np.where(norm > 0, norm, 1.0))
@@ -158,7 +178,21 @@ class OfflineVQF(OrientationFilter):
             if bad.any():  # VQF takes no NaN: hold the gyro still, the accelerometer as before
                 gyro[bad] = 0.0
                 accel[bad] = np.where(np.isfinite(accel[bad]), accel[bad], 0.0)
-            result = _vqf.offlineVQF(gyro, accel, None, ts, params)
-            out[first:stop] = quat.normalize(np.asarray(result["quat6D"], dtype=np.float64))
+            result = _vqf.offlineVQF(gyro, accel, field, ts, params)
+            chosen = "quat6D" if field is None else "quat9D"
+            out[first:stop] = quat.normalize(np.asarray(result[chosen], dtype=np.float64))
         return out
+
+
+def held_field(mag_ut: np.ndarray) -> np.ndarray | None:
+    """Each row's latest field sample (rows before the first take the first), contiguous
+    float64; None when no row has one."""
+    field = np.asarray(mag_ut, dtype=np.float64)
+    have = np.all(np.isfinite(field), axis=1)
+    if not have.any():
+        return None
+    index = np.where(have, np.arange(len(field)), -1)
+    index = np.maximum.accumulate(index)
+    index[index < 0] = np.flatnonzero(have)[0]
+    return np.ascontiguousarray(field[index])
 

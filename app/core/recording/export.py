@@ -9,8 +9,15 @@ in a single ``process`` call instead.
 
 :func:`write_angles_csv` writes them: ``t``, then per filter ``NAME.roll``, ``NAME.pitch``,
 ``NAME.tilt``, ``NAME.direction`` (degrees) and ``NAME.qw`` ... ``NAME.qz``; with a reference,
-``reference.roll`` ... ``reference.direction`` and ``NAME.inclination_error`` (degrees). It
-starts with ``# inclinometer-angles 1`` and ``# key: <JSON>`` lines like a recording.
+``reference.roll`` ... ``reference.direction`` and ``NAME.inclination_error`` (degrees); with
+a reference and a magnetometer also ``NAME.heading_error`` and ``NAME.total_error`` (degrees,
+BROAD's split: :mod:`app.core.heading_metrics`). It starts with ``# inclinometer-angles 1``
+and ``# key: <JSON>`` lines like a recording.
+
+The quaternions are sensor-to-earth. A 9-axis filter's (one that took heading from the
+magnetometer: ``earth_frame`` in its entry of the ``filters`` metadata) earth frame is ENU, y
+toward magnetic north, the frame of a recording's reference ``qw..qz``; a 6-axis filter's is
+z up with an arbitrary heading.
 """
 
 from __future__ import annotations
@@ -26,10 +33,12 @@ import numpy as np
 
 from app.core.calibration import SensorCalibration
 from app.core.filters import FILTERS, create_filter, known_parameters
+from app.core.heading_metrics import heading_error_deg, total_error_deg
 from app.core.orientation import angles_from_quaternion, inclination_error_deg
 from app.core.recording.format import (
     KEY_COMPARISONS,
     KEY_FILTER,
+    MAG_COLUMNS,
     REFERENCE_COLUMNS,
     calibration_to_json,
     metadata_line,
@@ -179,6 +188,11 @@ def write_angles_csv(
         for output in outputs:
             names.append(f"{output.name}.inclination_error")
             columns.append(inclination_error_deg(output.quat, reference))
+        if recording.mag_ut is not None:
+            for output in outputs:
+                names += [f"{output.name}.heading_error", f"{output.name}.total_error"]
+                columns += [heading_error_deg(output.quat, reference),
+                            total_error_deg(output.quat, reference)]
     metadata = _angles_metadata(recording, outputs, calibration)
     head = [ANGLES_MAGIC, *(metadata_line(k, v) for k, v in metadata.items()), ",".join(names)]
     n = len(recording)
@@ -246,8 +260,11 @@ def replay_streamed(
     objects = _online_filters(head, filters, parameters)
     results = [StreamedFilter(f.name, f.title or f.name, f.parameter_values()) for f in objects]
     reference = all(name in stream.header for name in REFERENCE_COLUMNS)
+    split = reference and all(name in stream.header for name in MAG_COLUMNS)
+    for result in results:
+        result.errors.heading = split
     masked = SCORE_COLUMN in stream.header
-    names = _angle_columns([r.name for r in results], reference)
+    names = _angle_columns([r.name for r in results], reference, split)
     metadata = _angles_metadata(head, results, calibration=cal if calibration is not None
                                 else None)
     summary = StreamedReplay(0, math.nan, math.nan, reference, masked, 0, results)
@@ -290,6 +307,9 @@ def replay_streamed(
                 columns += [ref_angles.roll_deg, ref_angles.pitch_deg, ref_angles.tilt_deg,
                             ref_angles.direction_deg]
                 columns += [inclination_error_deg(o.quat, ref) for o in outputs]
+                if split:
+                    for o in outputs:
+                        columns += [heading_error_deg(o.quat, ref), total_error_deg(o.quat, ref)]
             pending.append(columns)
             pending_rows += n
             if pending_rows * len(columns) >= EXPORT_CELLS:
@@ -349,7 +369,7 @@ def _write_pending(out: Any, pending: list[list[np.ndarray]]) -> None:
         out.write(format_table_bytes(joined))
 
 
-def _angle_columns(filters: Sequence[str], reference: bool) -> list[str]:
+def _angle_columns(filters: Sequence[str], reference: bool, split: bool = False) -> list[str]:
     names = ["t"]
     for name in filters:
         names += [f"{name}.{a}" for a in ANGLE_NAMES] + [f"{name}.{q}" for q in
@@ -357,7 +377,23 @@ def _angle_columns(filters: Sequence[str], reference: bool) -> list[str]:
     if reference:
         names += [f"reference.{a}" for a in ANGLE_NAMES]
         names += [f"{name}.inclination_error" for name in filters]
+        if split:
+            for name in filters:
+                names += [f"{name}.heading_error", f"{name}.total_error"]
     return names
+
+
+NINE_AXIS_FRAME = "ENU, y toward magnetic north (x east, z up)"
+SIX_AXIS_FRAME = "z up, heading arbitrary (no magnetometer)"
+
+
+def _earth_frame(name: str, parameters: Mapping[str, Any], recording: Recording) -> str:
+    """The earth frame of filter ``name``'s quaternions on this recording."""
+    cls = FILTERS.get(name)
+    has_field = all(c in recording.header for c in MAG_COLUMNS)
+    nine = (cls is not None and cls.uses_magnetometer and has_field
+            and bool(parameters.get("magnetometer", False)))
+    return NINE_AXIS_FRAME if nine else SIX_AXIS_FRAME
 
 
 def _angles_metadata(recording: Recording, outputs: Sequence[Any],
@@ -366,7 +402,8 @@ def _angles_metadata(recording: Recording, outputs: Sequence[Any],
         "source": str(recording.path) if recording.path is not None else None,
         "source_start_time": recording.metadata.get("start_time"),
         "exported": utc_timestamp(),
-        "filters": [{"name": o.name, "title": o.title, "parameters": o.parameters}
+        "filters": [{"name": o.name, "title": o.title, "parameters": o.parameters,
+                     "earth_frame": _earth_frame(o.name, o.parameters, recording)}
                     for o in outputs],
         "calibration": calibration_to_json(calibration) if calibration is not None else None,
         "units": {"t": "s", "angles": "deg", "quaternions": "1 (w, x, y, z), sensor-to-earth"},
