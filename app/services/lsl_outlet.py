@@ -85,6 +85,15 @@ def source_id(info: DeviceInfo, kind: str) -> str:
     return f"inclinometer:{info.unique_id or info.url}:{kind}"
 
 
+def lsl_description(outlet: LslOutlet) -> str:
+    """What an outlet streams, for the user: its streams and source ids."""
+    info = outlet.info
+    if info is None:
+        return "LSL: on (the streams open with the next device)"
+    kinds = ["imu"] + (["orientation"] if outlet.has_orientation else [])
+    return "LSL: " + ", ".join(source_id(info, kind) for kind in kinds)
+
+
 class LslOutlet(Subscriber):
     """Pushes every block of the session to LSL (see the module).
 
@@ -165,6 +174,10 @@ class LslOutlet(Subscriber):
             desc.append_child_value("filter", self._pipeline.filter.name)
         desc.append_child_value(
             "clock", "device time mapped to local_clock() by the session's clock alignment")
+
+    @property
+    def has_orientation(self) -> bool:
+        return self._pipeline is not None
 
     def close(self) -> None:
         """Close the streams (the inlets see them end)."""
