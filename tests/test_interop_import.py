@@ -92,6 +92,10 @@ def test_ximu3_log_becomes_a_recording_in_si_units_with_its_origin(tmp_path, cap
                                                                        "unit": "us"}
     assert rec.metadata["device"]["unique_id"] == XIMU3_SERIAL
     assert rec.metadata["magnetometer"]["ut_per_unit"] == 48.5
+    # Device blocks of ten samples (25 ms at 400 Hz), as a live device delivers them: a replay
+    # hands them on at that pace instead of waiting for the whole file.
+    starts = np.flatnonzero(rec.columns["block_start"] == 1)
+    assert starts[0] == 0 and set(np.diff(starts)) == {10}
 
 
 def test_ximu3_magnetometer_in_arbitrary_units_is_left_out_without_its_scale(tmp_path, capsys):

@@ -41,8 +41,10 @@ KEY_IMPORTED_FROM = "imported_from"
 """The metadata key of an imported recording's origin (docs/recording-format.md)."""
 GAP_PERIODS = 5.0
 """A step in time of more than this many median sample periods is lost data (as the reader)."""
-WRITE_ROWS = 65_536
-"""Rows handed to the recording writer per block."""
+BLOCK_MIN_S, BLOCK_MAX_S, BLOCK_SAMPLES = 0.02, 0.1, 10
+"""The rows are written in blocks as a live device delivers them (ten samples, within 20 to
+100 ms: drivers.base.read_block_s): each block's first row has ``block_start`` 1, and a replay
+hands the rows on block by block at their pace."""
 DEG = math.pi / 180.0
 
 
@@ -233,6 +235,14 @@ def recording_metadata(data: ImportedData, note: str = "") -> dict[str, Any]:
     return metadata
 
 
+def block_rows(rate_hz: float) -> int:
+    """Rows per device block at ``rate_hz`` (see :data:`BLOCK_SAMPLES`)."""
+    if not math.isfinite(rate_hz) or rate_hz <= 0:
+        return 1
+    seconds = min(BLOCK_MAX_S, max(BLOCK_MIN_S, BLOCK_SAMPLES / rate_hz))
+    return max(1, round(seconds * rate_hz))
+
+
 def write_recording(data: ImportedData, out: PathLike, *, inputs: Sequence[PathLike] = (),
                     overwrite: bool = False, note: str = "", option: str = "") -> Path:
     """Write ``data`` as a format v1 recording at ``out`` (gzip when it ends in ``.gz``).
@@ -247,14 +257,15 @@ def write_recording(data: ImportedData, out: PathLike, *, inputs: Sequence[PathL
     temp = np.full(n, np.nan) if data.temp_degc is None else data.temp_degc
     gap = gap_flags(data.t_s)
     scale = ScaleFactors(1.0, 1.0, 1.0, 0.0, 1.0)  # already SI: x * 1.0 keeps every bit
+    rows = block_rows(data.rate_hz)
     with output_path(out, inputs=inputs, overwrite=overwrite, option=option,
                      keep_suffix=True) as temporary:
         writer = RecordingWriter(temporary, metadata, reference=False,
                                  magnetometer=data.mag_ut is not None, overwrite=True,
                                  compress=out.suffix.lower() == ".gz").start()
         try:
-            for start in range(0, n, WRITE_ROWS):
-                part = slice(start, start + WRITE_ROWS)
+            for start in range(0, n, rows):
+                part = slice(start, start + rows)
                 writer.write(RawBlock(
                     t_s=data.t_s[part], accel_raw=data.accel_m_s2[part],
                     gyro_raw=data.gyro_rad_s[part], temp_raw=temp[part], scale=scale,
