@@ -14,7 +14,7 @@ from app.gui.main_window import MainWindow
 from app.services import import_replay
 from app.services.lsl_outlet import source_id
 from app.services.session import DeviceSession
-from tests.test_interop_import import write_euroc
+from tests.test_interop_import import write_euroc, write_ximu3
 from tests.test_lsl_outlet import LOOPBACK_CONFIG
 
 TIMEOUT_MS = 30_000
@@ -87,6 +87,16 @@ def test_open_recording_imports_other_tools_files_once_and_replays_them(qtbot, w
     recording = read_recording(imported_csv)
     assert recording.metadata["imported_from"]["format"] == "csv"
     np.testing.assert_allclose(recording.gyro_rad_s[0], [np.radians(0.5), 0, 0])
+
+    # An x-IMU3 log: the field its magnetometer's a.u. stands for is asked for.
+    monkeypatch.setattr(QInputDialog, "getDouble", lambda *_args: (48.0, True))
+    root = write_ximu3(tmp_path / "log")
+    with qtbot.waitSignal(window.session.connected, timeout=TIMEOUT_MS):
+        window.open_recording(str(next(root.iterdir()) / "Inertial.csv"))
+    imported_x, = (tmp_path / "imported").glob("*-x-imu3-*.csv")
+    recording = read_recording(imported_x)
+    assert recording.metadata["magnetometer"]["ut_per_unit"] == 48.0
+    assert np.nanmax(np.abs(recording.mag_ut)) == pytest.approx(0.8012 * 48.0)
 
 
 def test_file_menu_switches_the_lsl_outlet_and_an_inlet_receives(qtbot, window):

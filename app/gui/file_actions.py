@@ -15,7 +15,7 @@ from PySide6.QtWidgets import QApplication, QInputDialog
 from app.core.interop.imported import ImportInputError
 from app.gui import file_dialogs
 from app.services.devices import knows_truth_url, replay_url
-from app.services.import_replay import NeedsMapping, replay_file
+from app.services.import_replay import NeedsMagScale, NeedsMapping, replay_file
 from app.services.recording_control import recording_cost
 
 MainWindow = Any
@@ -41,7 +41,8 @@ class FileActions:
     def __init__(self, window: MainWindow) -> None:
         self.window = window
 
-    def open_recording(self, path: str | None = None, mapping: str = "") -> None:
+    def open_recording(self, path: str | None = None, mapping: str = "",
+                       mag_au_ut: float | None = None) -> None:
         """Replay a recording through the whole pipeline (it becomes the device). Another
         tool's file (x-IMU3's Inertial.csv, a EuRoC/Kalibr imu0.csv, another CSV through a
         column mapping asked for here) is imported into a recording first."""
@@ -54,7 +55,16 @@ class FileActions:
                 return
         QApplication.setOverrideCursor(Qt.CursorShape.WaitCursor)
         try:
-            opened = replay_file(path, mapping=mapping)
+            opened = replay_file(path, mapping=mapping, mag_au_ut=mag_au_ut)
+        except NeedsMagScale:
+            QApplication.restoreOverrideCursor()
+            field, ok = QInputDialog.getDouble(
+                window, "x-IMU3 magnetometer",
+                "Its magnetometer is in arbitrary units: 1 a.u. is the field where it was "
+                "calibrated.\nThat field in µT (about 50; Cancel: leave the magnetometer out):",
+                50.0, 1.0, 1000.0, 1)
+            self.open_recording(path, mapping, field if ok else 0.0)
+            return
         except NeedsMapping as need:
             QApplication.restoreOverrideCursor()
             spec = self.ask_mapping(Path(path).name, need.header)

@@ -16,7 +16,12 @@ import platformdirs
 
 from app.core.interop.imported import ImportInputError, sha256_file, split_header, write_recording
 from app.core.interop.importing import GENERIC, RECORDING, XIMU3, detect_format, read_any
-from app.core.interop.ximu3 import INERTIAL, find_device
+from app.core.interop.ximu3 import INERTIAL, find_device, magnetometer_needs_scale
+
+
+class NeedsMagScale(ImportInputError):
+    """An x-IMU3 log whose magnetometer is in a.u.: 1 a.u. is the field where it was
+    calibrated, which only the user knows (give ``mag_au_ut``; 0 leaves it out)."""
 
 
 class NeedsMapping(ImportInputError):
@@ -45,12 +50,14 @@ def imported_dir() -> Path:
     return Path(platformdirs.user_data_dir("Inclinometer", appauthor=False)) / "imported"
 
 
-def replay_file(path: str | Path, *, mapping: str = "", folder: Path | None = None
-                ) -> ReplayFile:
+def replay_file(path: str | Path, *, mapping: str = "", folder: Path | None = None,
+                mag_au_ut: float | None = None) -> ReplayFile:
     """The recording to replay for ``path``: itself when it is one, else its import (made
     now, or found from an earlier import of the same content). Raises
     :class:`NeedsMapping` for an unknown CSV without ``mapping``, :class:`ImportInputError`
-    (one line) for a file that cannot be imported, OSError when the folder cannot be written."""
+    (one line) for a file that cannot be imported, :class:`NeedsMagScale` for an x-IMU3 log
+    with an a.u. magnetometer without ``mag_au_ut`` (0: import it without the magnetometer),
+    OSError when the folder cannot be written."""
     path = Path(path)
     fmt = GENERIC if mapping else detect_format(path)
     if fmt == RECORDING:
@@ -59,13 +66,17 @@ def replay_file(path: str | Path, *, mapping: str = "", folder: Path | None = No
         header, _ = split_header(path)
         raise NeedsMapping(path, header)
     source = find_device(path)[1] if fmt == XIMU3 else path
-    digest = hashlib.sha256((sha256_file(source) + "\n" + mapping).encode()).hexdigest()[:16]
+    if fmt == XIMU3 and mag_au_ut is None and magnetometer_needs_scale(path):
+        raise NeedsMagScale(f"{path}: its magnetometer is in x-IMU3's a.u.")
+    scale = mag_au_ut if mag_au_ut else None
+    digest = hashlib.sha256(f"{sha256_file(source)}\n{mapping}\n{scale}".encode()
+                            ).hexdigest()[:16]
     stem = source.parent.name if source.name == INERTIAL else source.stem
     folder = imported_dir() if folder is None else folder
     target = folder / f"{_safe(stem)}-{fmt}-{digest}.csv"
     if target.is_file():
         return ReplayFile(target, fmt)
-    data = read_any(path, fmt, mapping=mapping)
+    data = read_any(path, fmt, mapping=mapping, mag_au_ut=scale)
     folder.mkdir(parents=True, exist_ok=True)
     write_recording(data, target, inputs=[source])
     return ReplayFile(target, fmt, True, list(data.warnings))

@@ -155,6 +155,14 @@ def _values(table: _Table, array: np.ndarray, width: int) -> np.ndarray:
     raise ImportInputError(f"{table.path.name}: ximu3csv could not read it")
 
 
+def magnetometer_needs_scale(path: str | Path, device: str = "") -> bool:
+    """True when the device's ``Magnetometer.csv`` is in a.u. (the caller must give the field
+    that 1 a.u. stands for to import it)."""
+    folder, _ = find_device(path, device)
+    table = _header(folder / MAGNETOMETER, MAGNETOMETER, 4)
+    return table is not None and MAG_UNITS_UT.get(_unit(table.header[1]), 1.0) is None
+
+
 def _check_units(table: _Table, expected: tuple[str, ...]) -> None:
     for column, unit in zip(table.header, expected):
         if _unit(column) != unit:
