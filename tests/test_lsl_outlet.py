@@ -11,9 +11,11 @@ import pytest
 
 from app.cli import main
 from app.core.clock_alignment import MIN_DRIFT_SPAN_S, ClockAligner
+from app.core.devices import DeviceInfo
 from app.core.pipeline import Pipeline
 from app.core.recording.reader import read_recording
-from app.services.acquisition import Acquisition, Subscriber, Until
+from app.core.samples import RawBlock, ScaleFactors, convert_raw_block
+from app.services.acquisition import Acquisition, Block, Subscriber, Until
 from app.services.connection import Connection
 from app.services.lsl_outlet import LslOutlet, source_id
 from app.services.recorder import warm_up_filters
@@ -163,3 +165,29 @@ def test_record_lsl_streams_what_it_records(tmp_path, capsys):
                  "--lsl", "--quiet", str(out)]) == 0
     rows = len(read_recording(out))
     assert f"LSL: {rows} samples and {rows} orientations sent" in capsys.readouterr().out
+
+
+def test_a_jump_in_device_time_starts_the_clock_fit_afresh():
+    """A replay's seek (or an outage) puts the device clock elsewhere: the pairs before it
+    would bend the fit, so the outlet's own alignment starts again from the new block."""
+    info = DeviceInfo("replay:///x.csv", "x", "JUMP-1", "LSM6DSOX", 100.0, 104.0, 4, 250)
+    outlet = LslOutlet(lambda: info)
+
+    def block(t0: float, received: float) -> Block:
+        t = t0 + np.arange(50) / 100.0
+        raw = RawBlock(t, np.zeros((50, 3)), np.zeros((50, 3)), np.zeros(50),
+                       ScaleFactors(1.0, 1.0))
+        samples = convert_raw_block(raw)
+        return Block(raw, samples, samples, received)
+
+    try:
+        outlet.on_block(block(0.0, 100.5))
+        outlet.on_block(block(0.5, 101.0))
+        assert len(outlet.aligner) == 2
+        outlet.on_block(block(30.0, 101.5))  # 29.5 s further on: a seek
+        assert len(outlet.aligner) == 1
+        fit = outlet.aligner.fit()
+        assert fit.to_host(30.49) == pytest.approx(101.5)
+        assert outlet.counts.imu_samples == 150 and outlet.counts.orientation_samples == 0
+    finally:
+        outlet.close()

@@ -52,6 +52,9 @@ ORIENTATION_CHANNELS = (("qw", "1", "Quaternion"), ("qx", "1", "Quaternion"),
                         ("qy", "1", "Quaternion"), ("qz", "1", "Quaternion"))
 MIN_STEP_S = 1e-9
 """A refit of the clock never moves a sample before the previous one: at least this after."""
+JUMP_S = 1.0
+"""A block starting this much after the previous one's end (an outage, a replay's seek), or
+before it, starts the outlet's own clock fit afresh: its old pairs belong to another mapping."""
 
 
 class LslUnavailable(RuntimeError):
@@ -119,6 +122,7 @@ class LslOutlet(Subscriber):
         self._imu: Any = None
         self._orientation: Any = None
         self._last_stamp = -np.inf
+        self._last_device_t: float | None = None
         self.counts = LslCounts()
         # local_clock() - time.monotonic(), bracketed by two reads of the monotonic clock.
         before = time.monotonic()
@@ -195,7 +199,12 @@ class LslOutlet(Subscriber):
         with self._lock:
             self._ensure(info)
             if self._own_aligner:
-                self.aligner.add(float(block.raw.t_s[-1]), block.received_s)
+                first, last = float(block.raw.t_s[0]), float(block.raw.t_s[-1])
+                previous = self._last_device_t
+                if previous is not None and not 0.0 < first - previous <= JUMP_S:
+                    self.aligner = ClockAligner()
+                self._last_device_t = last
+                self.aligner.add(last, block.received_s)
             fit = self.aligner.fit()
             stamps = self.stamps(samples.t_s, fit, block.received_s)
             columns = [samples.accel_m_s2, samples.gyro_rad_s]

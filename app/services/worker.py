@@ -114,7 +114,8 @@ class DeviceWorker(QObject):
     def shutdown(self) -> None:
         """Close the device and stop the timers (before the thread quits)."""
         self._close_device("")
-        self.set_lsl(False)
+        if self._lsl is not None:
+            self.set_lsl(False)
 
     # -- Lab Streaming Layer ----------------------------------------------------------------
     @Slot(bool)
