@@ -242,3 +242,21 @@ def test_detection_by_content(tmp_path):
     assert detect_format(sample_recording("wobble-104hz.csv")) == "recording"
     data = read_any(renamed)
     assert len(data) == 400 and json.dumps(data.origin)
+
+
+@pytest.mark.parametrize(("name", "content", "message"), [
+    ("empty.csv", "", "the file is empty"),
+    ("missing.csv", None, "no such file or folder"),
+    ("Inertial.csv", "Timestamp (us),Gyroscope X (deg/s),Gyroscope Y (deg/s),Gyroscope Z "
+     "(deg/s),Accelerometer X (g),Accelerometer Y (g),Accelerometer Z (g)\n",
+     "Inertial.csv: no data rows below the header (line 1)"),
+])
+def test_hostile_inputs_are_one_line_and_write_nothing(tmp_path, capsys, name, content,
+                                                       message):
+    src = tmp_path / name
+    if content is not None:
+        src.write_text(content)
+    assert cli.main(["import", str(src), str(tmp_path / "out.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(message) and "\n" not in err
+    assert not (tmp_path / "out.csv").exists()

@@ -53,6 +53,10 @@ def read_any(path: str | Path, fmt: str | None = None, *, mapping: str = "",
     """Import ``path`` as ``fmt`` (None: detected; a ``mapping`` alone means the generic CSV).
     :class:`ImportInputError` says, in one line, what is wrong."""
     path = Path(path)
+    if not path.exists():
+        raise ImportInputError(f"{path}: no such file or folder")
+    if path.is_file() and path.stat().st_size == 0:
+        raise ImportInputError(f"{path}: the file is empty")
     if fmt is None:
         fmt = GENERIC if mapping else detect_format(path)
         if fmt is None:

@@ -27,6 +27,7 @@ import io
 import os
 import re
 import tempfile
+import warnings
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -140,7 +141,8 @@ def _read_device(files: dict[str, Path]) -> Any:
         linked.mkdir()
         for name, source in files.items():
             os.symlink(source.resolve(), linked / name)
-        with contextlib.redirect_stdout(printed):
+        with contextlib.redirect_stdout(printed), warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # numpy's "Empty input file": found by _values
             devices = ximu3csv.read(Path(root).resolve(), wanted)
     return devices[0]
 
