@@ -39,6 +39,10 @@ KnownPeers = {127.0.0.1}
 """
 
 
+POLL_S = 0.002
+"""How often the inlet looks for new samples."""
+
+
 class Puller(threading.Thread):
     """Pulls one inlet until stopped and the stream is drained."""
 
@@ -54,16 +58,19 @@ class Puller(threading.Thread):
         import pylsl
 
         idle = 0
-        while not self.stop.is_set() or idle < 3:
-            chunk, times = self.inlet.pull_chunk(timeout=0.2, max_samples=200_000)
+        while not self.stop.is_set() or idle < 100:
+            # timeout 0: what has arrived, at once (a longer timeout waits to fill the chunk,
+            # which would count as latency here)
+            chunk, times = self.inlet.pull_chunk(timeout=0.0, max_samples=200_000)
             now = pylsl.local_clock()
             if times:
                 idle = 0
                 self.data.append(np.asarray(chunk))
                 self.stamps.append(np.asarray(times))
                 self.latency.append(now - np.asarray(times))
-            elif self.stop.is_set():
-                idle += 1
+            else:
+                idle += self.stop.is_set()
+                time.sleep(POLL_S)
 
     def received(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if not self.stamps:
