@@ -260,3 +260,16 @@ def test_hostile_inputs_are_one_line_and_write_nothing(tmp_path, capsys, name, c
     err = capsys.readouterr().err.strip()
     assert err.endswith(message) and "\n" not in err
     assert not (tmp_path / "out.csv").exists()
+
+
+def test_ximu3_older_gui_spelling_of_the_device_is_read(tmp_path):
+    """The x-IMU3 GUI's older logs name the device deviceName/serialNumber (ximu3csv reads
+    name/sn) and the magnetometer columns 'X Axis (a.u.)'."""
+    root = write_ximu3(tmp_path / "log", rows=40)
+    device = next(root.iterdir())
+    (device / "Command.json").write_text(
+        '[\n    {"ping":{"deviceName":"x-IMU3","interface":"USB",'
+        '"serialNumber":"F7E4-5410-EC7B-D7E7"}},\n    {"time":"2022-08-11 12:03:39"}\n]')
+    data = read_any(root, mag_au_ut=50.0)
+    assert data.device["unique_id"] == "F7E4-5410-EC7B-D7E7" and data.device["name"] == "x-IMU3"
+    assert data.mag_ut is not None

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import os
 import re
 import tempfile
@@ -225,8 +226,10 @@ def read_ximu3(path: str | Path, *, device: str = "", mag_au_ut: float | None = 
     if temperature is not None and len(record.temperature.timestamp):
         values = _values(temperature, record.temperature._csv, 2)
         temp = hold_on_rows(t_s, (values[:, 0] - first_us) / 1e6, values[:, 1])
-    name = record.device_name or "x-IMU3"
-    serial = record.serial_number
+    name, serial = record.device_name, record.serial_number
+    if serial is None:  # an older x-IMU3 GUI's ping (deviceName, serialNumber)
+        name, serial = _older_ping(folder / COMMAND)
+    name = name or "x-IMU3"
     return ImportedData(
         t_s=t_s, accel_m_s2=rows[:, 4:7] * STANDARD_GRAVITY_M_S2, gyro_rad_s=rows[:, 1:4] * DEG,
         mag_ut=mag, temp_degc=temp,
@@ -238,6 +241,21 @@ def read_ximu3(path: str | Path, *, device: str = "", mag_au_ut: float | None = 
                 "extra": {"interface": record.interface, "serial_number": serial}},
         magnetometer=mag_meta, warnings=warnings,
     )
+
+
+def _older_ping(path: Path) -> tuple[str | None, str | None]:
+    """Name and serial number from a Command.json in the older GUI's spelling."""
+    try:
+        responses = json.loads(path.read_text(encoding="utf-8"))
+        for response in responses:
+            ping = response.get("ping") if isinstance(response, dict) else None
+            if isinstance(ping, dict):
+                name, serial = ping.get("deviceName"), ping.get("serialNumber")
+                return (name if isinstance(name, str) else None,
+                        serial if isinstance(serial, str) else None)
+    except (OSError, ValueError, AttributeError, TypeError):
+        pass
+    return None, None
 
 
 def _rate(t_s: np.ndarray) -> float | None:
