@@ -1,1 +1,1 @@
-"""Other tools' formats: import (x-IMU3, EuRoC/Kalibr, generic CSV) and export."""
+"""Formats and conventions of other tools: Kalibr, EuRoC CSV, MCAP (ROS 2), ENU/NED."""
