@@ -48,12 +48,21 @@ def write_ximu3(root: Path, *, rows: int = 400, bad_line: str | None = None) -> 
     return root
 
 
-def write_euroc(path: Path, t_ns: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> Path:
+EUROC_HEADER = ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+                "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]")
+"""EuRoC MAV's header."""
+EXPORT_HEADER = ("timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y,w_RS_S_z,a_RS_S_x [m s^-2],"
+                 "a_RS_S_y,a_RS_S_z")
+"""The header `inclinometer export --format euroc` writes (no '#', units on the first of each
+sensor's columns), with timestamps zero-padded to ten digits."""
+
+
+def write_euroc(path: Path, t_ns: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
+                header: str = EUROC_HEADER, digits: int = 0) -> Path:
     """An imu0.csv as EuRoC's datasets and Kalibr's tools have it (floats written with repr)."""
-    lines = ["#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
-             "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]"]
+    lines = [header]
     for stamp, w, a in zip(t_ns.tolist(), gyro.tolist(), accel.tolist()):
-        lines.append(",".join([str(stamp), *map(repr, w), *map(repr, a)]))
+        lines.append(",".join([f"{stamp:0{digits}d}", *map(repr, w), *map(repr, a)]))
     path.write_text("\n".join(lines) + "\n")
     return path
 
@@ -215,13 +224,17 @@ def test_existing_output_is_kept_unless_overwrite(tmp_path, capsys):
 
 
 # -- round trip (item 5) ----------------------------------------------------------------------
-def test_recording_to_euroc_and_back_gives_the_same_samples(tmp_path):
-    """A recording written as EuRoC (integer ns, repr floats) and imported again: the same
-    samples, time to the nanosecond the format holds. (The lead links the export helper's
-    writer here once both are merged.)"""
+@pytest.mark.parametrize(("header", "digits"), [(EUROC_HEADER, 0), (EXPORT_HEADER, 10)])
+def test_recording_to_euroc_and_back_gives_the_same_samples(tmp_path, header, digits):
+    """A recording written as EuRoC (integer ns, repr floats; EuRoC's header, and the one
+    `export --format euroc` writes, zero-padded from t = 0) and imported again: the same
+    samples, time to the nanosecond the format holds. (The lead links the export writer here
+    once both are merged.)"""
     original = read_recording(sample_recording("wobble-104hz.csv"))
     t_ns = np.round(original.t_s * 1e9).astype(np.int64)
-    src = write_euroc(tmp_path / "imu0.csv", t_ns, original.gyro_rad_s, original.accel_m_s2)
+    src = write_euroc(tmp_path / "imu0.csv", t_ns, original.gyro_rad_s, original.accel_m_s2,
+                      header, digits)
+    assert detect_format(src) == "euroc"
     out = tmp_path / "back.csv"
     assert cli.main(["import", str(src), str(out)]) == 0
     back = read_recording(out)
