@@ -47,6 +47,8 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("joint", "joint", "the angle of a hinge between two sensors' recordings"),
     ("record-arm", "record_arm",
      "record a simulated measuring arm: one v1 file per sensor, with the truth"),
+    ("import", "import_data",
+     "import x-IMU3 CSV, EuRoC/Kalibr imu0.csv or any CSV (--map) as a recording"),
 )
 """(sub-command, its module in app.cli, the line ``inclinometer --help`` shows for it)."""
 

@@ -25,6 +25,7 @@ from app.core.recording.errors import RecordingWriteError
 from app.core.recording.sizing import data_rate
 from app.core.safe_output import OutputRefused, check_output
 from app.services.health import fault_line
+from app.services.lsl_outlet import LslUnavailable
 from app.services.recorder import parse_duration, record_device, warm_up_filters
 from drivers.errors import DeviceError
 from drivers.registry import create_device, driver_for
@@ -64,6 +65,11 @@ def add_arguments(record: argparse.ArgumentParser) -> None:
                              "a crash still leaves a file readable up to its last write); "
                              "also chosen by a name ending in .gz")
     record.add_argument("--quiet", action="store_true", help="no progress lines")
+    record.add_argument("--lsl", action="store_true",
+                        help="also stream live over Lab Streaming Layer: the calibrated samples "
+                             "(stream type IMU) and the filtered orientation (type "
+                             "Orientation), source id inclinometer:UNIQUE_ID:imu/orientation, "
+                             "stamped on the device's clock aligned to LSL's")
     record.add_argument(
         "--reconnect-timeout", metavar="S", default=None,
         help="how long to wait for an unplugged board (one with a USB serial number, found "
@@ -146,9 +152,9 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             on_alarms=lambda events: print_crossings(events, out),
             reconnect_timeout_s=settings.reconnect_timeout_s, on_outage=print_outage,
             on_faults=lambda events: print_faults(events, out),
-            on_message=print_warning,
+            on_message=print_warning, lsl=args.lsl,
         )
-    except (DeviceError, RecordingWriteError) as exc:
+    except (DeviceError, RecordingWriteError, LslUnavailable) as exc:
         _error(str(exc))
         return EXIT_FAILED
     except KeyboardInterrupt:  # before the first sample: nothing was recorded
@@ -255,6 +261,9 @@ def _report(outcome: Any, out: TextIO) -> int:
     status = outcome.status
     print(f"{status.path}: {status.rows_written} rows, {status.duration_s:.1f} s of device "
           f"time ({ENDINGS.get(outcome.reason, outcome.reason)})", file=out)
+    if outcome.lsl is not None:
+        print(f"LSL: {outcome.lsl.imu_samples} samples and {outcome.lsl.orientation_samples} "
+              "orientations sent", file=out)
     if outcome.held_signal:
         _error("the signal came while the file was being closed: it was finished first")
     if outcome.message:

@@ -10,8 +10,13 @@ import time
 from pathlib import Path
 from typing import Any
 
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QApplication, QInputDialog
+
+from app.core.interop.imported import ImportInputError
 from app.gui import file_dialogs
 from app.services.devices import knows_truth_url, replay_url
+from app.services.import_replay import NeedsMagScale, NeedsMapping, replay_file
 from app.services.recording_control import recording_cost
 
 MainWindow = Any
@@ -20,6 +25,8 @@ MainWindow = Any
 
 RECORDING_FILTER = "Recordings (*.csv)"
 COMPRESSED_RECORDING_FILTER = "Compressed recordings (*.csv.gz)"
+GENERIC_EXAMPLE = ("t=time:s,ax=acc_x:g,ay=acc_y:g,az=acc_z:g,gx=gyro_x:dps,gy=gyro_y:dps,"
+                   "gz=gyro_z:dps")
 
 
 def recordings_dir() -> Path:
@@ -35,15 +42,58 @@ class FileActions:
     def __init__(self, window: MainWindow) -> None:
         self.window = window
 
-    def open_recording(self, path: str | None = None) -> None:
-        """Replay a recording through the whole pipeline (it becomes the device)."""
+    def open_recording(self, path: str | None = None, mapping: str = "",
+                       mag_au_ut: float | None = None) -> None:
+        """Replay a recording through the whole pipeline (it becomes the device). Another
+        tool's file (x-IMU3's Inertial.csv, a EuRoC/Kalibr imu0.csv, another CSV through a
+        column mapping asked for here) is imported into a recording first."""
+        window = self.window
         if path is None:
             path = file_dialogs.open_file_name(
-                self.window, "Open recording", "Recordings (*.csv *.csv.gz);;All files (*)",
-                recordings_dir())
+                window, "Open recording", "Recordings and IMU logs (*.csv *.csv.gz);;"
+                "All files (*)", recordings_dir())
             if not path:
                 return
-        self.window.connect_device(replay_url(path))
+        QApplication.setOverrideCursor(Qt.CursorShape.WaitCursor)
+        try:
+            opened = replay_file(path, mapping=mapping, mag_au_ut=mag_au_ut)
+        except NeedsMagScale:
+            QApplication.restoreOverrideCursor()
+            field, ok = QInputDialog.getDouble(
+                window, "x-IMU3 magnetometer",
+                "Its magnetometer is in arbitrary units: 1 a.u. is the field where it was "
+                "calibrated.\nThat field in µT (about 50; Cancel: leave the magnetometer out):",
+                50.0, 1.0, 1000.0, 1)
+            self.open_recording(path, mapping, field if ok else 0.0)
+            return
+        except NeedsMapping as need:
+            QApplication.restoreOverrideCursor()
+            spec = self.ask_mapping(Path(path).name, need.header)
+            if spec:
+                self.open_recording(path, spec)
+            return
+        except (ImportInputError, OSError) as exc:
+            QApplication.restoreOverrideCursor()
+            window.show_error(f"Not opened: {exc}")
+            return
+        QApplication.restoreOverrideCursor()
+        for warning in opened.warnings:
+            window.log(f"Import: {warning}")
+        if opened.source_format != "recording":
+            what = "Imported" if opened.imported_now else "Opening the earlier import of"
+            window.log(f"{what} {opened.source_format} {path} as {opened.path}")
+        window.connect_device(replay_url(str(opened.path)))
+
+    def ask_mapping(self, name: str, header: list[str]) -> str:
+        """The column mapping of a CSV this program does not know (empty: cancelled)."""
+        columns = ", ".join(header)
+        spec, ok = QInputDialog.getText(
+            self.window, "Import CSV",
+            f"{name} has the columns:\n{columns[:400]}\n\nMap them as TARGET=COLUMN:UNIT "
+            "(t, ax..az and gx..gz required; units s/ms/us/ns, g or m/s2, dps or rad/s; "
+            "mx..mz in uT, temp in degC optional; a leading - flips an axis):",
+            text=GENERIC_EXAMPLE)
+        return spec.strip() if ok else ""
 
     def export_plots(self, path: str | None = None) -> None:
         """Save the plots as they are shown: PNG (raster) or SVG (vector), by file suffix."""
@@ -115,6 +165,11 @@ class FileActions:
             path += ".gz"
         window.log(f"Recording to {path}: {cost}")
         self.start_recording(path)
+
+    def show_lsl(self, streams: str) -> None:
+        """The worker's LSL outlet: the action's check and a line in the log."""
+        self.window.lsl_action.setChecked(bool(streams))
+        self.window.log(streams or "LSL: off")
 
     def show_recording(self, status) -> None:
         """The worker's recording status: the Record action and the status bar."""

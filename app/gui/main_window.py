@@ -200,6 +200,7 @@ class MainWindow(QMainWindow):
             (session.tareChanged, status.show_tare),
             (session.reconnecting, events.on_reconnecting),
             (session.recordingChanged, self.files.show_recording),
+            (session.lslChanged, self.files.show_lsl),
             (session.connected, events.on_connected),
             (session.disconnected, events.on_disconnected),
             (session.error, self.show_error),

@@ -36,6 +36,10 @@ def menu_table() -> list[Entry]:
                    "ENU or NED"),
         ActionSpec("record_action", "&Record…", FILE, "files.record", "Ctrl+R",
                    checkable=True, passes_checked=True),
+        ActionSpec("lsl_action", "Stream over &LSL", FILE, "session.requestLsl",
+                   checkable=True, passes_checked=True,
+                   tooltip="Lab Streaming Layer: the calibrated samples and the filtered "
+                   "orientation, stamped on the device's aligned clock, for LabRecorder"),
         Separator(FILE),
         ActionSpec("quit_action", "&Quit", FILE, "close", Key.Quit),
 

@@ -38,6 +38,7 @@ from app.core.recording.writer import WriterStatus
 from app.core.safe_output import OutputLock, OutputRefused, interrupts_held
 from app.services.acquisition import Acquisition, Reconnection, RunEnd, Until
 from app.services.connection import Connection
+from app.services.lsl_outlet import LslCounts, LslOutlet
 
 READ_TIMEOUT_S = 0.1
 RECONNECT_POLL_S = 0.1
@@ -85,6 +86,8 @@ class RecordOutcome:
     did, with ``back_after_s`` None)."""
     fault_events: list[FaultEvent] = field(default_factory=list)
     """The fault detector's events (stored in the file's ``fault_events``)."""
+    lsl: LslCounts | None = None
+    """What went out over Lab Streaming Layer (``lsl=True``), else None."""
 
 
 def warm_up_filters(filter_name: str | None, comparisons: Sequence[str] = ()) -> None:
@@ -120,6 +123,7 @@ def record_device(
     on_outage: Callable[[DeviceOutage], None] | None = None,
     on_faults: Callable[[list[FaultEvent]], None] | None = None,
     on_message: Callable[[int, str], None] | None = None,
+    lsl: bool = False,
 ) -> RecordOutcome:
     """Record ``device`` (a :class:`drivers.base.Device`) into ``path``.
 
@@ -135,6 +139,11 @@ def record_device(
 
     ``reconnect_timeout_s`` (None: never) is how long an unplugged board is awaited;
     ``on_outage`` hears of it when it is lost and again when it is back.
+
+    ``lsl``: stream the calibrated samples and the filtered orientation over Lab Streaming
+    Layer while recording (:class:`~app.services.lsl_outlet.LslOutlet`, a subscriber of the
+    same session); :class:`~app.services.lsl_outlet.LslUnavailable` before anything is
+    recorded when pylsl cannot be used.
     """
     warm_up_filters(pipeline.filter.name if pipeline else filter_name, comparisons)
     info = device.open()
@@ -159,6 +168,11 @@ def record_device(
                               on_events=on_faults, alarms=alarms or AlarmMonitor(),
                               on_alarms=on_alarms)
         session.attach(device)
+        outlet = LslOutlet(
+            lambda: None if session.connection.device is None else session.connection.device.info,
+            pipeline) if lsl else None
+        if outlet is not None:
+            session.subscribe(outlet)
         session.start_recording(path, note, extra=extra_metadata, overwrite=overwrite,
                                 lock=lock, on_flush=on_flush)
     except BaseException:
@@ -167,9 +181,14 @@ def record_device(
         raise
     session.reconnection = _Reconnect(reconnect_timeout_s, on_outage, info.odr_hz)
     try:
-        return _record_and_close(session, duration_s, stop)
+        outcome = _record_and_close(session, duration_s, stop)
     finally:
         lock.release()
+        if outlet is not None:
+            outlet.close()
+    if outlet is not None:
+        outcome.lsl = outlet.counts
+    return outcome
 
 
 class _Reconnect(Reconnection):

@@ -25,6 +25,7 @@ from app.services.acquisition import Acquisition
 from app.services.calibration_state import CalibrationState
 from app.services.connection import Connection
 from app.services.health import HealthMonitor, recorded_events_note
+from app.services.lsl_outlet import LslOutlet, LslUnavailable, lsl_description
 from app.services.recording_control import RecordingControl
 from app.services.replay_control import (
     OverviewTracker,
@@ -61,6 +62,7 @@ class DeviceWorker(QObject):
     selfTestFinished = Signal(object, str)  # SelfTestReport or None, and an error message
     faultEvents = Signal(list)  # FaultEvents the detector declared in a block
     alarmEvents = Signal(list)  # AlarmEvents: the alarms' crossings in a block
+    lslChanged = Signal(str)  # what streams over Lab Streaming Layer, "" when off
 
     def __init__(self, pipeline: Pipeline, profile_store: ProfileStore | None = None,
                  connection: Connection | None = None) -> None:
@@ -82,6 +84,7 @@ class DeviceWorker(QObject):
         self._poll_timer: QTimer | None = None
         self._status_timer: QTimer | None = None
         self._reconnect_timer: QTimer | None = None
+        self._lsl: LslOutlet | None = None
 
     @property
     def profile(self) -> CalibrationProfile | None:
@@ -111,6 +114,31 @@ class DeviceWorker(QObject):
     def shutdown(self) -> None:
         """Close the device and stop the timers (before the thread quits)."""
         self._close_device("")
+        if self._lsl is not None:
+            self.set_lsl(False)
+
+    # -- Lab Streaming Layer ----------------------------------------------------------------
+    @Slot(bool)
+    def set_lsl(self, on: bool) -> None:
+        """Stream the session's samples and orientation over LSL (a subscriber of the one
+        acquisition session), or stop; ``lslChanged`` says what is streamed."""
+        if on and self._lsl is None:
+            try:
+                outlet = LslOutlet(
+                    lambda: None if self.connection.device is None else self.connection.device.info,
+                    self.pipeline)
+            except LslUnavailable as exc:
+                self.error.emit(str(exc))
+                self.lslChanged.emit("")
+                return
+            self._lsl = outlet
+            self.acquisition.subscribe(outlet)
+        elif not on and self._lsl is not None:
+            outlet, self._lsl = self._lsl, None
+            if outlet in self.acquisition.subscribers:
+                self.acquisition.subscribers.remove(outlet)
+            outlet.close()
+        self.lslChanged.emit("" if self._lsl is None else lsl_description(self._lsl))
 
     # -- connection -------------------------------------------------------------------------
     @Slot(str)
