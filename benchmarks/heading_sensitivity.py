@@ -159,11 +159,11 @@ def main() -> int:
     six = score(trials, {"magnetometer": False})
     print(f"{len(trials)} trials turned by {args.turn} deg; RMSE over movement, degrees")
     print(f"{'trial':<44} {'heading':>8} {'no rej.':>8} {'VQF 9D':>7} "
-          f"{'incl.':>6} {'no rej.':>8} {'6-axis':>7}")
+          f"{'incl.':>6} {'no rej.':>8} {'6-axis':>7} {'6-axis heading':>15}")
     for i, trial in enumerate(trials):
         bar = VQF_9D_HEADING.get(trial.name[:2], math.nan)
         print(f"{trial.name:<44} {on[i, 0]:8.2f} {off[i, 0]:8.2f} {bar:7.2f} "
-              f"{on[i, 1]:6.2f} {off[i, 1]:8.2f} {six[i, 1]:7.2f}")
+              f"{on[i, 1]:6.2f} {off[i, 1]:8.2f} {six[i, 1]:7.2f} {six[i, 0]:15.2f}")
     halves = {"tuning (even rows)": slice(0, None, 2), "held out (odd rows)": slice(1, None, 2),
               "all": slice(None)}
     for label, part in halves.items():
