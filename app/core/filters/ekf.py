@@ -209,7 +209,7 @@ def _correct(quat, aux, d0, d1):  # pragma: no cover - compiled
         )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _turn(quat, aux, P, angle):  # pragma: no cover - compiled
     """Turn the estimate by ``angle`` (rad) about the earth vertical, and every earth-frame
     state with it (the low-passed specific force, the bias-to-tilt sums, the tilt covariance):
@@ -248,7 +248,7 @@ def _turn(quat, aux, P, angle):  # pragma: no cover - compiled
         P[1, k] = P[k, 1] = ss * x + cc * y
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _heading_update(  # pragma: no cover - compiled
     quat, aux, P, head, mag_state, mag_settings, mag_var_density, timing_var, tilt_coupling,
     yaw_rate, mx, my, mz, at_rest, field_row,

@@ -130,7 +130,7 @@ def new_state() -> np.ndarray:
     return np.zeros(N_STATE)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _inside(norm, dip, ref_norm, ref_dip, norm_th, dip_th):  # pragma: no cover - compiled
     return abs(norm - ref_norm) < norm_th * ref_norm and abs(dip - ref_dip) < dip_th
 
@@ -147,7 +147,7 @@ def track_rate(state, wx, wy, wz, step):  # pragma: no cover - compiled
     state[S_GYRO_LP + 2] += alpha * (wz - state[S_GYRO_LP + 2])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def detector_step(state, settings, norm, dip, step, at_rest):  # pragma: no cover - compiled
     """One field sample (``|m|`` uT, dip rad positive down, ``step`` s since the previous field
     sample, ``at_rest`` the filter's rest detector); returns the status code and leaves the
