@@ -11,7 +11,9 @@ sec. 3.4), with the same time constants:
 - **Current field**: strength and dip low-passed over :attr:`DisturbanceSettings.current_tau`
   (0.05 s) against noise.
 - **Disturbed** when the strength departs from the reference by more than ``norm_threshold``
-  (fraction) or the dip by more than ``dip_threshold_deg``. It clears after
+  (fraction; VQF's 10 % here, the EKF's parameter defaults to 15 %: the band must clear the
+  spread of an undisturbed but imperfectly calibrated sensor as it turns) or the dip by more
+  than ``dip_threshold_deg``. It clears after
   ``min_undisturbed_s`` inside both bands; then the reference follows the field slowly
   (``ref_tau`` 20 s: the earth's field drifts with the place and the calibration's residual).
 - **Rejection**: while disturbed the field is not used and the gyroscope carries the heading,
