@@ -1,4 +1,5 @@
-"""Quaternion EKF: an error-state (multiplicative) Kalman filter for tilt, with gyro-bias states.
+"""Quaternion EKF: an error-state (multiplicative) Kalman filter for tilt, with gyro-bias states,
+and a heading from the magnetic field that never moves the tilt.
 
 State and error state
 ---------------------
@@ -82,8 +83,41 @@ rejection by the low-passed ``|a|`` did not see horizontal acceleration at all.
 Accuracy: ``benchmarks/filter_accuracy.py`` (BROAD's twelve trials, the simulator's scenarios,
 and the sensitivity of the mean to each parameter).
 
-Noted limits: the heading is integrated gyro only (no magnetometer); the tilt is referred to the
-accelerometer, so any uncompensated accelerometer bias tilts it (20 mg = 1.1 degrees).
+Heading from the magnetic field (9-axis)
+---------------------------------------
+With a field (``SampleBlock.mag_ut``, NaN rows: no new sample) and the ``magnetometer`` switch
+on, the output is sensor-to-earth in ENU with y toward magnetic north. The heading is a filter
+of its own, a scalar Kalman filter beside the tilt's, and it never moves the tilt:
+
+- The field sample is projected into the earth frame with the current estimate,
+  ``m_e = R(q) m``; the residual is its horizontal direction's angle east of north,
+  ``psi = atan2(m_e,x, m_e,y)`` (exact for any angle, independent of the tilt's Jacobian).
+- The correction turns the estimate about the earth vertical alone, ``q <- Rz(k psi) q``, and
+  with it every earth-frame state of the tilt filter (the low-passed specific force, the
+  bias-to-tilt sums, the tilt covariance): the tilt filter then runs exactly as it would in the
+  turned earth frame, so the tilt (up in the sensor frame) is the 6-axis filter's to float
+  precision, now and later. The heading has no cross-covariance with the bias states: the field
+  never teaches the gyro bias (that would tilt the inclination through the gyro).
+- Heading variance grows by ``(Ng^2 + (ks |w|)^2 lp_tau) dt`` (gyro noise and scale error, as
+  for the tilt). Measurement variance per sample::
+
+      r = (Nm^2 + (t_m w_v)^2 T + tan^2(dip) P_n lp_tau) / dt_m
+
+  ``Nm`` the field heading's noise density (``mag_noise``: sensor noise and the calibration's
+  residual, which changes as the sensor turns: on BROAD it is large, the gyro holds the heading
+  over tens of seconds), ``t_m`` the field's timing uncertainty against the gyro times the
+  vertical rate ``w_v`` (a late field sample is turned by ``t_m w_v``; ``T`` =
+  :data:`MOTION_WINDOW_S`), ``P_n`` the tilt variance about the field's horizontal direction
+  (a tilt error ``d`` turns the projected field's heading by ``tan(dip) d``), ``dt_m`` the time
+  since the previous field sample. The first field sample after a restart sets the heading
+  (gain 1); later ones average it in, like VQF's ``kMagInit``.
+- Disturbances: :mod:`app.core.magnetometer.disturbance` (strength and dip against a reference
+  learnt here; rejected samples leave the heading to the gyro, whose growing variance gives a
+  fast re-acquisition afterwards). ``field_status`` exposes its output for the window.
+
+Noted limits: the tilt is referred to the accelerometer, so any uncompensated accelerometer
+bias tilts it (20 mg = 1.1 degrees); the heading is only as good as the magnetometer's
+calibration (a residual of a few percent is a few degrees of heading).
 """
 
 from __future__ import annotations
@@ -93,9 +127,22 @@ import math
 import numpy as np
 from numba import njit
 
-from app.core.filters.base import OrientationFilter, ParameterSpec
+from app.core.field_check import FieldReference
+from app.core.filters.base import MAGNETOMETER_PARAMETER, OrientationFilter, ParameterSpec
 from app.core.filters.complementary import gyro_step
 from app.core.filters.gyro_integration import unit_positive
+from app.core.magnetometer import disturbance
+from app.core.magnetometer.disturbance import (
+    NO_SAMPLE,
+    REDUCED,
+    REJECTED,
+    S_REF_DIP,
+    S_REF_NORM,
+    DisturbanceSettings,
+    FieldStatus,
+    detector_step,
+    track_rate,
+)
 from app.core.samples import STANDARD_GRAVITY_M_S2, SampleBlock
 
 N_STATES = 5
@@ -162,11 +209,99 @@ def _correct(quat, aux, d0, d1):  # pragma: no cover - compiled
         )
 
 
+@njit(cache=True, inline="always")
+def _turn(quat, aux, P, angle):  # pragma: no cover - compiled
+    """Turn the estimate by ``angle`` (rad) about the earth vertical, and every earth-frame
+    state with it (the low-passed specific force, the bias-to-tilt sums, the tilt covariance):
+    the filter then runs exactly as it would have in the turned earth frame, so its tilt
+    (sensor frame) is unchanged now and later."""
+    half = 0.5 * angle
+    c = math.cos(half)
+    s = math.sin(half)
+    qw, qx, qy, qz = quat[0], quat[1], quat[2], quat[3]
+    quat[0] = c * qw - s * qz
+    quat[1] = c * qx - s * qy
+    quat[2] = c * qy + s * qx
+    quat[3] = c * qz + s * qw
+    cc = c * c - s * s
+    ss = 2.0 * s * c
+    for j in (_Y, _V):
+        x, y = aux[j], aux[j + 1]
+        aux[j] = cc * x - ss * y
+        aux[j + 1] = ss * x + cc * y
+    for base in (_D, _LD, _LV):
+        for k in range(3):
+            x, y = aux[base + k], aux[base + 3 + k]
+            aux[base + k] = cc * x - ss * y
+            aux[base + 3 + k] = ss * x + cc * y
+    p00, p01, p11 = P[0, 0], P[0, 1], P[1, 1]
+    a00 = cc * p00 - ss * p01
+    a01 = cc * p01 - ss * p11
+    a10 = ss * p00 + cc * p01
+    a11 = ss * p01 + cc * p11
+    P[0, 0] = a00 * cc - a01 * ss
+    P[1, 1] = a10 * ss + a11 * cc
+    P[0, 1] = P[1, 0] = a10 * cc - a11 * ss
+    for k in range(2, 5):
+        x, y = P[0, k], P[1, k]
+        P[0, k] = P[k, 0] = cc * x - ss * y
+        P[1, k] = P[k, 1] = ss * x + cc * y
+
+
+@njit(cache=True, inline="always")
+def _heading_update(  # pragma: no cover - compiled
+    quat, aux, P, head, mag_state, mag_settings, mag_var_density, timing_var, tilt_coupling,
+    yaw_rate, mx, my, mz, at_rest, field_row,
+):
+    """One field sample: disturbance check, then a scalar Kalman update of the heading alone
+    (the field's horizontal direction in the earth frame against north, +y). ``field_row``
+    receives (status, strength deviation, dip deviation in rad)."""
+    qw, qx, qy, qz = quat[0], quat[1], quat[2], quat[3]
+    tx = 2.0 * (qy * mz - qz * my)
+    ty = 2.0 * (qz * mx - qx * mz)
+    tz = 2.0 * (qx * my - qy * mx)
+    ex = mx + qw * tx + qy * tz - qz * ty
+    ey = my + qw * ty + qz * tx - qx * tz
+    ez = mz + qw * tz + qx * ty - qy * tx
+    norm = math.sqrt(ex * ex + ey * ey + ez * ez)
+    dip = math.asin(max(-1.0, min(1.0, -ez / norm)))
+    since = head[1]
+    status = detector_step(mag_state, mag_settings, norm, dip, since, at_rest)
+    field_row[0] = status
+    ref = mag_state[S_REF_NORM]
+    if ref > 0.0:
+        field_row[1] = norm / ref - 1.0
+        field_row[2] = dip - mag_state[S_REF_DIP]
+    else:
+        field_row[1] = math.nan
+        field_row[2] = math.nan
+    head[1] = 0.0
+    if status == REJECTED or ex * ex + ey * ey <= 0.0:
+        return
+    h2 = ex * ex + ey * ey
+    # A tilt error about the field's horizontal direction n turns its heading by tan(dip)
+    # times that error, and the tilt error lasts about the gravity averaging time.
+    tilt_n = (ex * ex * P[0, 0] + ey * ey * P[1, 1] + 2.0 * ex * ey * P[0, 1]) / h2
+    r = (mag_var_density + timing_var * yaw_rate * yaw_rate * MOTION_WINDOW_S
+         + tilt_coupling * ez * ez / h2 * tilt_n) / max(since, 1e-3)
+    if status == REDUCED:
+        factor = mag_settings[disturbance.C_REJECT_FACTOR]
+        r *= factor * factor
+    if head[0] < 0.0:  # no heading yet: take the field's
+        gain = 1.0
+        head[0] = r
+    else:
+        gain = head[0] / (head[0] + r)
+        head[0] *= 1.0 - gain
+    _turn(quat, aux, P, gain * math.atan2(ex, ey))
+
+
 @njit(cache=True)
 def _ekf_kernel(  # noqa: C901 - one compiled pass: a split costs a call per sample
     accel, gyro, dt, quat, bias, cov, aux, gyro_var_density, scale_var, bias_var_density,
     accel_var_density, lp_tau, motion_gain, tilt0_var, estimate_bias, rest_gyro2, rest_accel2,
-    rest_time, rest_clip, gravity, out, out_var,
+    rest_time, rest_clip, gravity, mag, head, mag_state, mag_settings, mag_var_density,
+    timing_var, tilt_time, out_field, out, out_var,
 ):  # pragma: no cover - compiled
     """Run the filter over a block; ``quat``, ``bias``, ``cov`` and ``aux`` are updated.
 
@@ -175,8 +310,16 @@ def _ekf_kernel(  # noqa: C901 - one compiled pass: a split costs a call per sam
     the motion's power (s), ``rest_*2`` squared thresholds (rad^2/s^2, m^2/s^4). When
     ``out_var`` has a row per sample it receives the tilt-error variance (rad^2, the mean of
     the two horizontal axes) after each sample; an empty ``out_var`` skips that.
+
+    Heading: ``mag`` (N, 3) uT with NaN rows, or empty (no heading update at all: the 6-axis
+    filter, bit for bit); ``head`` = (heading variance rad^2, -1 before the first field
+    sample; time since the last field sample), ``mag_state`` / ``mag_settings`` the
+    disturbance detector's, ``mag_var_density`` the field heading's noise density (rad^2 s);
+    ``out_field`` (N, 3) or empty receives the detector's output per row.
     """
     keep_var = out_var.shape[0] == accel.shape[0]
+    use_mag = mag.shape[0] == accel.shape[0]
+    keep_field = use_mag and out_field.shape[0] == accel.shape[0]
     P = cov
     G = np.zeros((2, 3))
     GPbb = np.zeros((2, 3))
@@ -234,6 +377,12 @@ def _ekf_kernel(  # noqa: C901 - one compiled pass: a split costs a call per sam
                 for c in range(3):
                     P[2 + c, r] = P[r, 2 + c]
                     aux[_D + 3 * r + c] -= G[r, c]  # D += R2 dt
+            if use_mag:
+                if head[0] >= 0.0:
+                    head[0] += (gyro_var_density
+                                + scale_var * (wx * wx + wy * wy + wz * wz) * lp_tau) * step
+                head[1] += step
+                track_rate(mag_state, wx - bias[0], wy - bias[1], wz - bias[2], step)
         else:
             # ---- restart: tilt from the accelerometer, bias and its covariance kept -------
             P[0, 0] = P[1, 1] = tilt0_var
@@ -245,6 +394,10 @@ def _ekf_kernel(  # noqa: C901 - one compiled pass: a split costs a call per sam
             aux[_REST] = 0.0
             aux[_GL], aux[_GL + 1], aux[_GL + 2] = wx, wy, wz
             aux[_AL], aux[_AL + 1], aux[_AL + 2] = ax, ay, az
+            if use_mag:  # the heading after a gap is unknown: taken afresh from the field
+                head[0] = -1.0
+                head[1] = 0.0
+                track_rate(mag_state, wx, wy, wz, 0.0)
         aux[_SINCE] += step
         # ---- rest: the gyro measures its own bias -------------------------------------
         if estimate_bias and step > 0.0 and rest_time > 0.0:
@@ -363,6 +516,24 @@ def _ekf_kernel(  # noqa: C901 - one compiled pass: a split costs a call per sam
                         P[a, b] = value
                         P[b, a] = value
                 _correct(quat, aux, K[0, 0] * z0 + K[0, 1] * z1, K[1, 0] * z0 + K[1, 1] * z1)
+        # ---- heading: the field's horizontal direction (tilt untouched) ---------------------
+        if use_mag:
+            mx, my, mz = mag[i, 0], mag[i, 1], mag[i, 2]
+            if mx * mx + my * my + mz * mz > 0.0 and mx * mx + my * my + mz * mz < math.inf:
+                at_rest = rest_time > 0.0 and aux[_REST] >= rest_time
+                qw, qx, qy, qz = quat[0], quat[1], quat[2], quat[3]
+                yaw_rate = (2.0 * (qx * qz - qw * qy) * (wx - bias[0])
+                            + 2.0 * (qy * qz + qw * qx) * (wy - bias[1])
+                            + (1.0 - 2.0 * (qx * qx + qy * qy)) * (wz - bias[2]))
+                _heading_update(quat, aux, P, head, mag_state, mag_settings, mag_var_density,
+                                timing_var, tilt_time, yaw_rate, mx, my, mz,
+                                at_rest, row[:3])
+                if keep_field:
+                    out_field[i, 0], out_field[i, 1], out_field[i, 2] = row[0], row[1], row[2]
+            elif keep_field:
+                out_field[i, 0] = NO_SAMPLE
+                out_field[i, 1] = math.nan
+                out_field[i, 2] = math.nan
         qw, qx, qy, qz = unit_positive(quat[0], quat[1], quat[2], quat[3])
         quat[0], quat[1], quat[2], quat[3] = qw, qx, qy, qz
         out[i, 0] = qw
@@ -392,10 +563,13 @@ class QuaternionEKF(OrientationFilter):
 
     name = "ekf"
     title = "Quaternion EKF"
+    uses_magnetometer = True
     description = (
         "Error-state Kalman filter: gyro propagation with bias estimation (in motion and, "
         "faster, at rest), corrected by gravity averaged over seconds in an almost-inertial "
-        "frame; the accelerometer's weight drops in proportion to how hard the sensor is moved."
+        "frame; the accelerometer's weight drops in proportion to how hard the sensor is moved. "
+        "With a magnetometer, heading from the field (about the vertical only), with magnetic "
+        "disturbance rejection."
     )
     parameters = (
         ParameterSpec(
@@ -466,7 +640,74 @@ class QuaternionEKF(OrientationFilter):
             "Off: no bias states; the bias estimate keeps its value (zero after a reset).",
             kind="bool",
         ),
+        MAGNETOMETER_PARAMETER,
+        ParameterSpec(
+            "mag_noise", "Field heading noise density", "°·√s", 16.0, 0.01, 1000.0,
+            "Noise density of the heading read from the magnetic field (sensor noise and the "
+            "calibration's residual, which changes as the sensor turns). Against the gyro's "
+            "noise and scale error it sets how fast the heading follows the field: slowly at "
+            "rest, faster while the sensor turns fast.",
+            log_scale=True,
+        ),
+        ParameterSpec(
+            "mag_timing", "Field timing uncertainty", "ms", 5.0, 0.0, 1000.0,
+            "How far the field sample may be off in time against the gyroscope (the "
+            "magnetometer's output period, its filter's delay): while the sensor turns about "
+            "the vertical this turns the field's heading by the rate times the lag, so the "
+            "field is trusted less the faster the sensor turns.",
+        ),
+        ParameterSpec(
+            "mag_rejection", "Magnetic disturbance rejection", "", True, False, True,
+            "While the field's strength or dip departs from the reference learnt here, the "
+            "gyroscope carries the heading. Off: every field sample is used.",
+            kind="bool",
+        ),
+        ParameterSpec(
+            "mag_norm_threshold", "Disturbance: field strength band", "%", 15.0, 0.1, 100.0,
+            "The field is disturbed while its strength departs from the reference by more "
+            "than this. It must clear the spread an undisturbed sensor shows while it turns "
+            "(the calibration's residual: up to 10 % on BROAD's sensor, whose 5 % band rejects "
+            "good field; VQF uses 10 %).",
+        ),
+        ParameterSpec(
+            "mag_dip_threshold", "Disturbance: dip band", "deg", 10.0, 0.1, 90.0,
+            "The field is disturbed while its dip departs from the reference by more than "
+            "this.",
+        ),
+        ParameterSpec(
+            "mag_rejection_time", "Disturbance: longest rejection", "s", 60.0, 0.0, 3600.0,
+            "After this long disturbed the field is used again at a reduced weight (a "
+            "gyro-only heading drifts without bound).",
+        ),
+        ParameterSpec(
+            "mag_new_time", "Disturbance: new field after", "s", 20.0, 0.1, 3600.0,
+            "A field that keeps its strength and dip for this long while the sensor turns "
+            "becomes the new reference (a magnet attached for good, another room).",
+        ),
     )
+
+    _field_reference: FieldReference | None = None
+
+    def set_field_reference(self, reference: FieldReference | None) -> None:
+        """The World Magnetic Model's field here (``field_check.wmm_reference``): a first
+        reference learnt at rest must agree with it; None: no such check."""
+        self._field_reference = reference
+
+    def disturbance_settings(self) -> DisturbanceSettings:
+        v = self._values
+        return DisturbanceSettings(
+            norm_threshold=float(v["mag_norm_threshold"]) * 1e-2,
+            dip_threshold_deg=float(v["mag_dip_threshold"]),
+            max_rejection_s=float(v["mag_rejection_time"]),
+            new_time_s=float(v["mag_new_time"]),
+            enabled=bool(v["mag_rejection"]),
+        )
+
+    @property
+    def field_status(self) -> FieldStatus | None:
+        """The disturbance detector's output for the last non-empty block (None when it
+        carried no field or the magnetometer is switched off)."""
+        return self._field_status
 
     def reset(
         self, initial_quat: np.ndarray | None = None, last_time_s: float | None = None
@@ -474,6 +715,10 @@ class QuaternionEKF(OrientationFilter):
         super().reset(initial_quat, last_time_s)
         self._bias = np.zeros(3)
         self._aux = np.zeros(N_AUX)
+        self._head = np.array([-1.0, 0.0])
+        self._heading_tracked = True
+        self._mag_state = disturbance.new_state()
+        self._field_status: FieldStatus | None = None
         tilt_var = math.radians(float(self._values["tilt_initial"])) ** 2
         self._cov = np.diag([tilt_var, tilt_var, 0.0, 0.0, 0.0])
         self._reset_bias_covariance()
@@ -546,18 +791,39 @@ class QuaternionEKF(OrientationFilter):
     def run_with_variance(self, block: SampleBlock, tilt_var: np.ndarray) -> np.ndarray:
         """Quaternions for ``block`` (state carried on); ``tilt_var`` (N,) or empty receives
         the tilt-error variance per sample (rad^2)."""
-        out = np.empty((len(block), 4))
+        n = len(block)
+        out = np.empty((n, 4))
         quat = np.array(self._quat, dtype=np.float64)
         bias = self._bias.copy()
         cov = self._cov.copy()
         aux = self._aux.copy()
+        head = self._head.copy()
+        mag_state = self._mag_state.copy()
+        use_mag = block.mag_ut is not None and bool(self._values["magnetometer"])
+        mag = (np.ascontiguousarray(block.mag_ut, dtype=np.float64) if use_mag
+               else np.empty((0, 3)))
+        field_rows = np.empty((n, 3)) if use_mag else np.empty((0, 3))
+        if use_mag and not self._heading_tracked:
+            # The heading ran on the gyro alone (switch off, no field): its variance was not
+            # kept, so the next field sample sets it afresh.
+            head[0] = -1.0
+        self._heading_tracked = use_mag
+        settings = self.disturbance_settings()
         _ekf_kernel(
             np.ascontiguousarray(block.accel_m_s2, dtype=np.float64),
             np.ascontiguousarray(block.gyro_rad_s, dtype=np.float64),
             self.time_steps(block),
             quat, bias, cov, aux,
             *self.kernel_arguments(),
-            out, tilt_var,
+            mag, head, mag_state, settings.as_array(self._field_reference),
+            math.radians(float(self._values["mag_noise"])) ** 2,
+            (float(self._values["mag_timing"]) * 1e-3) ** 2,
+            float(self._values["lp_tau"]),
+            field_rows, out, tilt_var,
         )
         self._bias, self._cov, self._aux = bias, cov, aux
+        self._head, self._mag_state = head, mag_state
+        self._field_status = (disturbance.field_status(field_rows, mag_state, settings,
+                                                       self._field_reference)
+                              if use_mag else None)
         return out
