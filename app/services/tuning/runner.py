@@ -90,6 +90,7 @@ class ProcessRunner(Runner):
     def __init__(self, jobs: int, filters: Sequence[str] = ()) -> None:
         self.workers = jobs
         self.description = f"{jobs} worker processes"
+        trials.warm_up(tuple(filters))  # a cold numba cache is filled here once, not per worker
         self._pool = ProcessPoolExecutor(max_workers=jobs, mp_context=_pool_context(),
                                          initializer=trials.warm_up,
                                          initargs=(tuple(filters),))
