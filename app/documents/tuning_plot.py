@@ -60,7 +60,10 @@ def plot_png(document: dict[str, Any]) -> bytes:
             ax.axhline(cross, ls="--", color="tab:green", lw=1, label="cross-validated")
         if spec.log_scale and xs and min(xs) > 0:
             ax.set_xscale("log")
-        if len(keys) <= MAX_TICKS:  # the values studied, written as given
+        if spec.kind == "bool":
+            ax.set_xticks([0.0, 1.0], ["false", "true"])
+            ax.set_xlim(-0.5, 1.5)
+        elif len(keys) <= MAX_TICKS:  # the values studied, written as given
             ax.set_xticks(keys, [f"{k:g}" for k in keys])
             ax.minorticks_off()
         unit = f" ({spec.unit})" if spec.unit else ""
