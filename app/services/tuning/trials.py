@@ -110,6 +110,10 @@ def evaluate_recording(spec: SourceSpec, filters: list[str], skip_s: float,
 
 
 def warm_up(filters: tuple[str, ...]) -> None:
-    """Load the filters' compiled kernels (numba's on-disk cache) once, in a new worker."""
+    """Load the filters' compiled kernels (numba's on-disk cache) once, in a new worker. A
+    filter that cannot start is left alone: its runs say why (flag "error"), as in-process."""
     for name in filters:
-        FILTERS[name]().warm_up()
+        try:
+            FILTERS[name]().warm_up()
+        except Exception:  # each run of that filter reports it
+            continue
