@@ -7,6 +7,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -183,8 +184,9 @@ def test_two_processes_give_the_bits_of_one(slices, serial, tmp_path):
     assert studied(parallel) == studied(serial)
 
 
-def test_leave_one_group_out_holds_out_each_broad_group(slices, serial, tmp_path):
+def test_leave_one_group_out_holds_out_each_broad_group(slices, serial, tmp_path, capsys):
     document = tune(slices, tmp_path / "groups.json", "--jobs", "1", "--groups")
+    assert "runs (" not in capsys.readouterr().err  # no progress line off a terminal
     validation = document["cross_validation"]
     assert validation["scheme"] == "leave-one-group-out"
     assert [(f["name"], f["held_out"]) for f in validation["folds"]] == [
@@ -252,6 +254,14 @@ def test_one_filter_per_study_and_two_recordings_at_least(slices, tmp_path, caps
     assert main(["tune", *map(str, slices), "--param", "ekf.lp_tau=1", "--folds", "3",
                  "--json", out]) == 2
     assert "--folds must be from 2 to the number of trials (2)" in capsys.readouterr().err
+
+
+def test_progress_asked_for_goes_to_stderr(slices, tmp_path, capsys):
+    tune(slices, tmp_path / "p.json", "--jobs", "1", "--progress")
+    err = capsys.readouterr().err
+    assert "8/8 runs (100 %)" in err  # the grid's 4 points on 2 recordings
+    done = re.findall(r"(\d+)/(\d+) runs \(100 %\)", err)[-1]  # then the sensitivity's
+    assert done[0] == done[1] and int(done[1]) > 8
 
 
 def test_the_progress_line_tells_the_runs_done_and_the_time_left():
