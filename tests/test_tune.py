@@ -24,7 +24,7 @@ from tests.broad_trials import trial_path
 TRIALS = ("01_undisturbed_slow_rotation_A", "24_disturbed_tapping_A")
 ROWS_BEFORE, ROWS_AFTER = 300, 900
 """A slice of each trial: 1 s of the rest before the movement and about 3 s of it."""
-STUDIED = ["identical", "results", "best", "cross_validation", "cross_validated_rmse_deg",
+STUDIED = ["runs", "results", "best", "cross_validation", "cross_validated_rmse_deg",
            "sensitivity"]
 
 

@@ -290,7 +290,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
                        "wall_s": round(wall, 3)}
     for line in report.summary_lines(document):
         print(line, file=out)
-    print(f"{len(request.points) * len(request.sources)} runs in {wall:.1f} s", file=out)
+    print(f"{document['runs']} runs in {wall:.1f} s on {runner.description}", file=out)
     inputs = [Path(s.path) for s in request.sources]
     _write(args.json, (json.dumps(document, indent=2) + "\n").encode(), args, inputs, "--json")
     if args.png is not None and request.axes:

@@ -144,7 +144,8 @@ def sensitivity_points(axes: list[Axis], points: list[dict[str, Any]],
 
 def _sensitivity(request: StudyRequest, runner: Runner, table: list[list[TrialScore]],
                  best: int, labels: list[str], progress: ProgressSink | None
-                 ) -> list[dict[str, Any]]:
+                 ) -> tuple[list[dict[str, Any]], int]:
+    """The sensitivity rows, and how many points were run for them (those not in the study)."""
     optimum = request.points[best]
     planned = sensitivity_points(request.axes, request.points, optimum)
     extra = [p for _, _, p in planned if p is not None and p not in request.points]
@@ -167,14 +168,15 @@ def _sensitivity(request: StudyRequest, runner: Runner, table: list[list[TrialSc
                        trials={label: _number(s.rmse_deg)
                                for label, s in zip(labels, scores, strict=True)})
         rows.append(row)
-    return rows
+    return rows, len(extra)
 
 
 def run_study(request: StudyRequest, runner: Runner,
               progress: ProgressSink | None = None) -> dict[str, Any]:
     """Run the study and return its JSON-ready document (NaN as null): ``settings``,
     ``sources``, ``results`` (per point: ``params``, mean ``rmse_deg``, ``trials``), ``best``,
-    ``cross_validation``, ``cross_validated_rmse_deg``, ``sensitivity``."""
+    ``cross_validation``, ``cross_validated_rmse_deg``, ``sensitivity``, ``runs`` (filter
+    runs, the sensitivity's included)."""
     labels = [s.label for s in request.sources]
     folds, scheme = _folds(request, labels)
     table = run_points(runner, request.filter, request.sources, request.points, progress)
@@ -207,7 +209,9 @@ def run_study(request: StudyRequest, runner: Runner,
                                    zip(labels, validation.held_out_per_trial, strict=True)},
         },
         "cross_validated_rmse_deg": _number(validation.cross_validated_rmse_deg),
-        "sensitivity": ([] if best < 0 or not request.axes
-                        else _sensitivity(request, runner, table, best, labels, progress)),
     }
+    sensitivity, extra = (([], 0) if best < 0 or not request.axes
+                          else _sensitivity(request, runner, table, best, labels, progress))
+    document["sensitivity"] = sensitivity
+    document["runs"] = (len(request.points) + extra) * len(labels)
     return document
