@@ -366,10 +366,11 @@ def _evaluate_all(args: argparse.Namespace, pending: list[_Pending], filters: li
     computed = evaluate_recordings(args, pending, filters, parameters, skip)
     for index, item in enumerate(pending):
         try:
-            result = (computed[index] if computed is not None and computed[index] is not None
-                      else evaluation.evaluate_source(item.load(), filters, skip_s=skip,
-                                                      repeats=args.repeats,
-                                                      parameters=parameters))
+            if computed is not None and computed[index] is not None:
+                result = computed[index]  # scored by a worker (--jobs, --scheduler)
+            else:
+                result = evaluation.evaluate_source(item.load(), filters, skip_s=skip,
+                                                    repeats=args.repeats, parameters=parameters)
         except (RecordingError, ValueError) as exc:
             raise CommandError(str(exc)) from None
         results.append(result)

@@ -44,6 +44,9 @@ def evaluate_recordings(args: argparse.Namespace, pending: list[Any], filters: l
     check_jobs(args)
     if not args.scheduler and (args.jobs is None or args.jobs <= 1):
         return None
+    if getattr(args, "turn", None) is not None:  # the workers score sources as they are
+        raise CommandError("--turn is applied in this process only: leave out --jobs and "
+                           "--scheduler")
     recordings = [(i, item) for i, item in enumerate(pending) if item.path is not None]
     calls = [(SourceSpec(str(item.path.resolve()), item.label, not args.raw), filters, skip,
               args.repeats, parameters) for _, item in recordings]
