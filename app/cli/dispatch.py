@@ -21,6 +21,9 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("devices", "devices", "list the devices that can be connected"),
     ("evaluate", "evaluate",
      "score the orientation filters on sources with a known true orientation"),
+    ("tune", "tune",
+     "a parameter study of a filter over recordings, cross-validated by trial, on every "
+     "core or a Dask cluster"),
     ("record", "record", "record a device to a CSV file, without the GUI"),
     ("replay", "replay", "run filters over a recording and export their angles to CSV"),
     ("export", "export",

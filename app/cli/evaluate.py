@@ -26,6 +26,7 @@ from app.cli.filter_params import (
     check_parameters_for,
     parse_filter_parameters,
 )
+from app.cli.parallel import add_parallel_arguments, evaluate_recordings
 from app.cli.recordings import check_recorded_calibration
 from app.core import evaluation
 from app.core.evaluation import FilterScore, SourceResult, StreamSource
@@ -120,6 +121,8 @@ def add_arguments(evaluate: argparse.ArgumentParser) -> None:
         help="print each source's full table (RMSE, maximum, throughput, flag); default: "
         "when a single SOURCE that is not a glob is given",
     )
+    add_parallel_arguments(evaluate, "1; with more, recordings are scored side by side and "
+                           "the throughput is measured under that load")
 
 
 def _format_score(score: FilterScore, width: int, heading: bool = False) -> str:
@@ -423,13 +426,17 @@ def _evaluate_all(args: argparse.Namespace, pending: list[_Pending], filters: li
         matrix.header()
     width = max(6, *(len(name) for name in filters))
     results: list[SourceResult] = []
-    for item in pending:
+    computed = evaluate_recordings(args, pending, filters, parameters, skip)
+    for index, item in enumerate(pending):
         try:
-            source = item.load()
-            if getattr(args, "turn", None) is not None:
-                source = evaluation.turned_source(source, args.turn_quat)
-            result = evaluation.evaluate_source(source, filters, skip_s=skip,
-                                                repeats=args.repeats, parameters=parameters)
+            if computed is not None and computed[index] is not None:
+                result = computed[index]  # scored by a worker (--jobs, --scheduler)
+            else:
+                source = item.load()
+                if getattr(args, "turn", None) is not None:
+                    source = evaluation.turned_source(source, args.turn_quat)
+                result = evaluation.evaluate_source(source, filters, skip_s=skip,
+                                                    repeats=args.repeats, parameters=parameters)
         except (RecordingError, ValueError) as exc:
             raise CommandError(str(exc)) from None
         results.append(result)
