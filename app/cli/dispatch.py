@@ -47,6 +47,8 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("calibrate-mag", "calibrate_mag",
      "calibrate the magnetometer from a recorded tour (hard iron, soft iron and its turn "
      "against the accelerometer)"),
+    ("calibrate-gyro-scale", "calibrate_gyro_scale",
+     "gyroscope scale and misalignment from whole turns (the accelerometer as the reference)"),
     ("joint", "joint", "the angle of a hinge between two sensors' recordings"),
     ("record-arm", "record_arm",
      "record a simulated measuring arm: one v1 file per sensor, with the truth"),
