@@ -14,12 +14,14 @@ from app.core.filters.madgwick import MadgwickFilter
 from app.core.filters.mahony import MahonyFilter
 from app.core.filters.offline import EKFSmoother, OfflineVQF
 from app.core.filters.vqf_filter import VQFFilter
+from app.core.filters.vqf_heading import VQFHeadingFilter
 
 FILTERS: dict[str, type[OrientationFilter]] = {
     cls.name: cls
     for cls in (
         QuaternionEKF, VQFFilter, ComplementaryFilter, MadgwickFilter, MahonyFilter,
         ThesisKalman, AccelerometerTilt, GyroIntegration, EKFSmoother, OfflineVQF,
+        VQFHeadingFilter,
     )
 }
 DEFAULT_FILTER = QuaternionEKF.name
