@@ -129,6 +129,12 @@ def test_block_cuts_give_the_result_of_one_block():
         status.append(pieces.field_status.status)
     assert np.array_equal(np.concatenate(parts), expected)
     assert np.array_equal(np.concatenate(status), whole.field_status.status)
+    # Without a field, cut the same way: VQF 6D's one-block output, bit for bit.
+    six = VQFFilter(magnetometer=False).process(without_field(block)).quat
+    pieces = hybrid()
+    parts = [pieces.process(slice_block(without_field(block), a, b)).quat
+             for a, b in itertools.pairwise([0, 2, 17, 800, 801, n - 5, n])]
+    assert np.array_equal(np.concatenate(parts), six)
 
 
 def test_a_gap_restarts_the_heading_which_the_next_field_sample_sets_at_once():

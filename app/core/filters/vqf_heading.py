@@ -310,7 +310,7 @@ class VQFHeadingFilter(OrientationFilter):
 
     def _process(self, block: SampleBlock) -> np.ndarray:
         dt = self.time_steps(block)
-        q6 = self._tilt.process(block).quat
+        q6 = self._tilt_quaternions(block)
         use_mag = block.mag_ut is not None and bool(self._values["magnetometer"])
         if not use_mag:
             # The gyro carries the heading: delta stays (0 from the start: VQF 6D exactly).
@@ -346,6 +346,17 @@ class VQFHeadingFilter(OrientationFilter):
         self._field_status = disturbance.field_status(field_rows, mag_state, settings,
                                                       self._field_reference)
         return out
+
+    def _tilt_quaternions(self, block: SampleBlock) -> np.ndarray:
+        """VQF 6D over ``block``, as ``self._tilt.process(block).quat`` without the angles
+        ``process`` also computes (a quarter of this filter's time, and unused here)."""
+        tilt = self._tilt
+        q6 = tilt._process(block)
+        # OrientationFilter.process's bookkeeping, which VQFFilter reads at its next block.
+        tilt._quat = q6[-1].copy()
+        tilt._has_state = True
+        tilt._last_t = float(block.t_s[-1])
+        return q6
 
     def _turned(self, q6: np.ndarray, dt: np.ndarray) -> np.ndarray:
         """``Rz(delta) (x) q6`` without a field: delta held, restarts set it to 0."""
