@@ -157,3 +157,16 @@ def test_warm_up_leaves_the_state_untouched():
     f.warm_up()
     assert f.last_time_s is None
     assert np.array_equal(f.process(block).quat, hybrid().process(block).quat)
+
+
+def test_switching_the_magnetometer_on_mid_stream_finds_north_at_once_and_off_holds_it():
+    block, truth = stream(6.0, start=pose(0, 0, 60))
+    f = hybrid(magnetometer=False)
+    f.process(slice_block(block, 0, 300))
+    assert abs(angle_diff_deg(heading_deg(f.quaternion), heading_deg(truth[299]))) > 30
+    f.set_parameter("magnetometer", True)
+    out = f.process(slice_block(block, 300, 310)).quat
+    assert np.max(np.abs(angle_diff_deg(heading_deg(out), heading_deg(truth[300:310])))) < 0.5
+    f.set_parameter("magnetometer", False)  # the gyro carries the heading found: no jump
+    out = f.process(slice_block(block, 310, 400)).quat
+    assert np.max(np.abs(angle_diff_deg(heading_deg(out), heading_deg(truth[310:400])))) < 0.5
