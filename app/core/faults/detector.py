@@ -72,6 +72,7 @@ from numba import njit
 
 from app.core.faults.events import CHANNELS, FaultEvent, severity_rank
 from app.core.faults.magnetometer import MagnetometerCheck
+from app.core.faults.motion import BAND, MotionNoiseCheck
 from app.core.faults.spec import SensorSpec
 from app.core.samples import STANDARD_GRAVITY_M_S2, RawBlock, SampleBlock
 
@@ -275,6 +276,7 @@ class FaultDetector:
                                               spec.mag_odr_hz)
         """The magnetometer's tests (its flags: ``magnetometer.flags``, (N, 3))."""
         self._field_seen = False
+        self._motion = MotionNoiseCheck(self.window)
         self.reset()
 
     # -- public --------------------------------------------------------------------------------
@@ -308,6 +310,7 @@ class FaultDetector:
         self._latched: dict[str, str] = {}
         self._last_t = -np.inf
         self.magnetometer.reset()
+        self._motion.reset()
         self._field_seen = False
 
     def update(self, block: SampleBlock, raw: RawBlock | None = None) -> list[FaultEvent]:
@@ -380,6 +383,7 @@ class FaultDetector:
         self._rho_white.clear()
         self._rate.clear()
         self._rest = None
+        self._motion.restart()
         for key in self._counts:
             self._counts[key] = 0
 
@@ -426,6 +430,7 @@ class FaultDetector:
         if self._ints[1] == 0:
             self._window_t = float(t[a])
         chunk_x = x[a:b]
+        self._motion.filter(chunk_x, int(self._ints[1]))
         if b - a > 1:
             steps = np.abs(np.diff(chunk_x, axis=0))
             steps = np.where(steps > 0, steps, np.inf).min(axis=0)
@@ -449,6 +454,7 @@ class FaultDetector:
         self._ints[1:] = 0
         sums[:] = 0.0
         self._quat[:4] = (1.0, 0.0, 0.0, 0.0)
+        self._motion.end_window(int(n))
         if n_d4 < 0.5 * self.window:
             return
         if not np.all(self._floor > 0):
@@ -466,6 +472,7 @@ class FaultDetector:
         self._rate.append(float(np.linalg.norm(mean[3:] - (self._gyro_ref if self._gyro_ref
                                                            is not None else 0.0))))
         self._noise_test(t_end, out)
+        self._motion_noise_test(t_end, out)
         sigma = self._floor / D4_GAIN
         resting = bool(np.all(spread <= REST_SIGMA * sigma + 1e-12))
         self._rest_tests(resting, mean, quat, duration, t_end, out)
@@ -516,6 +523,18 @@ class FaultDetector:
                 self._event(out, t, CHANNELS[c], "noise", "fault",
                             f"{CHANNELS[c]} noise {level[c]:.1f}x its level at rest "
                             f"(other axes {others:.1f}x) for 1 s", held=True)
+
+    def _motion_noise_test(self, t: float, out: list[FaultEvent]) -> None:
+        """Added noise while moving: the high band of one channel far above its own recent
+        level and the other channels' (:mod:`app.core.faults.motion`)."""
+        motion = self._motion
+        low = BAND[0] * self.spec.odr_hz
+        for c in np.flatnonzero(motion.flagged):
+            self._active_bits[c] |= NOISE
+            self._event(out, t, CHANNELS[c], "noise", "fault",
+                        f"{CHANNELS[c]} noise: its band above {low:.0f} Hz is "
+                        f"{motion.level[c]:.1f}x the other channels' (relative to their own "
+                        f"recent levels) for 1.5 s; no motion puts it there", held=True)
 
     def _rest_tests(self, resting: bool, mean: np.ndarray, quat: np.ndarray, duration: float,
                     t: float, out: list[FaultEvent]) -> None:
