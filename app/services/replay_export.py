@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from app.core.evaluation import recording_score_mask
+from app.core.faults import FaultEvent
 from app.core.filters import DEFAULT_FILTER, FILTERS
 from app.core.recording.errors import RecordingError
 from app.core.recording.export import (
@@ -71,6 +72,8 @@ class ReplaySummary:
     """Rows with a reference that were scored; None without a reference."""
     filters: list[FilterLine] = field(default_factory=list)
     streamed: bool = False
+    fault_events: list[FaultEvent] = field(default_factory=list)
+    """The fault detector's events over the recording, as ``diagnose`` finds them."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,6 +105,23 @@ def replay_recording(request: ReplayRequest, warn: Say = _quiet, note: Say = _qu
     for the user (filters ``all`` leaves out). Raises :class:`ReplayRefused` for input it
     cannot use and :class:`ReplayFailed` when the file could not be written.
     """
+    summary = _replay(request, warn, note)
+    summary.fault_events = replay_fault_events(request.source)
+    return summary
+
+
+def replay_fault_events(source: Path) -> list[FaultEvent]:
+    """The fault detector over the recording, as live and ``diagnose`` run it (issue 33:
+    a replay warns of the same faults); none when its samples cannot be checked."""
+    from app.services.diagnosis import diagnose_events
+
+    try:
+        return list(diagnose_events(str(source)))
+    except RecordingError:  # implausible samples: the replay itself has said what it could
+        return []
+
+
+def _replay(request: ReplayRequest, warn: Say, note: Say) -> ReplaySummary:
     if request.block is not None and not 1 <= request.block <= MAX_BLOCK:
         raise ReplayRefused(f"--block must be from 1 to {MAX_BLOCK}")
     try:

@@ -70,6 +70,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from app.core.faults.carry import GravityCarry
 from app.core.faults.events import CHANNELS, FaultEvent, severity_rank
 from app.core.faults.magnetometer import MagnetometerCheck
 from app.core.faults.motion import BAND, MotionNoiseCheck
@@ -135,7 +136,8 @@ def _scan(t, x, gap, hist, ints, run_val, run_len, sums, quat, local, peak, peak
 
     ints: [contiguous samples, window samples, window d4 samples]; sums: (6, 4) window sums
     of clipped |d4|, x, x^2 and, in [:, 3] for the gyro rows, nothing; quat: rotation since the
-    window start (gyro minus gyro_ref), (w, x, y, z), then [4] the previous sample time.
+    window start (gyro minus gyro_ref), (w, x, y, z), then [4] the previous sample time and
+    [5:8] the window's sum of accelerometer samples turned into the window-start frame.
     window_x, d4_abs: (window, 6) the window's samples (row ints[1]) and unclipped |d4| (row
     ints[2]), for the median and the autocorrelation at the window's end.
     """
@@ -200,6 +202,15 @@ def _scan(t, x, gap, hist, ints, run_val, run_len, sums, quat, local, peak, peak
             nz = qz + qw * wz + qx * wy - qy * wx
             norm = math.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
             quat[0], quat[1], quat[2], quat[3] = nw / norm, nx / norm, ny / norm, nz / norm
+        # the accelerometer in the window-start frame: gravity carried by the gyro (issue 33)
+        qw, qx, qy, qz = quat[0], quat[1], quat[2], quat[3]
+        ax, ay, az = x[i, 0], x[i, 1], x[i, 2]
+        tx = 2.0 * (qy * az - qz * ay)
+        ty = 2.0 * (qz * ax - qx * az)
+        tz = 2.0 * (qx * ay - qy * ax)
+        quat[5] += ax + qw * tx + (qy * tz - qz * ty)
+        quat[6] += ay + qw * ty + (qz * tx - qx * tz)
+        quat[7] += az + qw * tz + (qx * ty - qy * tx)
         for k in range(3, 0, -1):
             for c in range(6):
                 hist[k, c] = hist[k - 1, c]
@@ -277,6 +288,7 @@ class FaultDetector:
         """The magnetometer's tests (its flags: ``magnetometer.flags``, (N, 3))."""
         self._field_seen = False
         self._motion = MotionNoiseCheck(self.window)
+        self._carry = GravityCarry()
         self.reset()
 
     # -- public --------------------------------------------------------------------------------
@@ -294,7 +306,7 @@ class FaultDetector:
         self._local = np.zeros(6)
         self._stuck_len = np.full(6, np.iinfo(np.int64).max // 4)
         self._peak = np.zeros(6)
-        self._quat = np.array([1.0, 0.0, 0.0, 0.0, -np.inf])
+        self._quat = np.array([1.0, 0.0, 0.0, 0.0, -np.inf, 0.0, 0.0, 0.0])
         self._window_t = 0.0
         self._rho: deque[np.ndarray] = deque(maxlen=NOISE_SPAN_WINDOWS)
         self._rho_flat: deque[np.ndarray] = deque(maxlen=NOISE_SPAN_WINDOWS)
@@ -311,6 +323,7 @@ class FaultDetector:
         self._last_t = -np.inf
         self.magnetometer.reset()
         self._motion.reset()
+        self._carry.restart()
         self._field_seen = False
 
     def update(self, block: SampleBlock, raw: RawBlock | None = None) -> list[FaultEvent]:
@@ -378,6 +391,8 @@ class FaultDetector:
         self._ints[:] = 0
         self._sums[:] = 0.0
         self._quat[:4] = (1.0, 0.0, 0.0, 0.0)
+        self._quat[5:8] = 0.0
+        self._carry.restart()
         self._rho.clear()
         self._rho_flat.clear()
         self._rho_white.clear()
@@ -450,10 +465,12 @@ class FaultDetector:
         spread = np.sqrt(np.maximum(sums[:, 2] / n - mean**2, 0.0))
         m = sums[:, 0] / max(n_d4, 1.0)
         quat = self._quat[:4].copy()
+        carried = self._quat[5:8] / max(n, 1.0)
         duration = t_end - self._window_t
         self._ints[1:] = 0
         sums[:] = 0.0
         self._quat[:4] = (1.0, 0.0, 0.0, 0.0)
+        self._quat[5:8] = 0.0
         self._motion.end_window(int(n))
         if n_d4 < 0.5 * self.window:
             return
@@ -473,6 +490,7 @@ class FaultDetector:
                                                            is not None else 0.0))))
         self._noise_test(t_end, out)
         self._motion_noise_test(t_end, out)
+        self._carried_bias_test(quat, carried, duration, t_end, out)
         sigma = self._floor / D4_GAIN
         resting = bool(np.all(spread <= REST_SIGMA * sigma + 1e-12))
         self._rest_tests(resting, mean, quat, duration, t_end, out)
@@ -535,6 +553,24 @@ class FaultDetector:
                         f"{CHANNELS[c]} noise: its band above {low:.0f} Hz is "
                         f"{motion.level[c]:.1f}x the other channels' (relative to their own "
                         f"recent levels) for 1.5 s; no motion puts it there", held=True)
+
+    def _carried_bias_test(self, quat: np.ndarray, carried: np.ndarray, duration: float,
+                           t: float, out: list[FaultEvent]) -> None:
+        """A gyro bias step in motion: gravity carried by the gyro drifts from the
+        accelerometer's (:mod:`app.core.faults.carry`)."""
+        if self._gyro_ref is None or self._frozen(t).any():
+            self._carry.restart()
+            return
+        found = self._carry.push(quat, carried, duration)
+        if found is None:
+            return
+        axis, step = found
+        self._event(out, t, CHANNELS[3 + axis], "bias", "fault",
+                    f"gyro bias changed by {_units(3 + axis, step[axis])} on "
+                    f"{CHANNELS[3 + axis]} in motion (gravity carried by the gyro drifts "
+                    f"from the accelerometer's)")
+        self._gyro_ref = self._gyro_ref + step
+        self._carry.restart()
 
     def _rest_tests(self, resting: bool, mean: np.ndarray, quat: np.ndarray, duration: float,
                     t: float, out: list[FaultEvent]) -> None:

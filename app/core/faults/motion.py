@@ -45,6 +45,9 @@ HISTORY_MIN = 16
 SPAN_WINDOWS = 6
 RATIO_ACCEL = 4.5
 RATIO_GYRO = 6.5
+TUNING_TRIALS: tuple[str, ...] = ("01_", "06_", "10_", "15_", "24_", "28_")
+"""The BROAD trials (file-name prefixes) the thresholds were set on; the other six are held
+out (``evaluate-faults --in-motion`` reports both halves)."""
 BAND_SHARE = 2.0 * (BAND[1] - BAND[0])
 """Share of white noise's power (0 .. Nyquist) in the band."""
 
