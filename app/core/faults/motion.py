@@ -112,6 +112,7 @@ class MotionNoiseCheck:
     def reset(self) -> None:
         """Forget the history (a new sensor)."""
         self._history: deque[np.ndarray] = deque(maxlen=HISTORY_WINDOWS + HISTORY_GAP)
+        self._level = np.zeros(6)
         self.restart()
 
     def restart(self) -> None:
@@ -138,6 +139,7 @@ class MotionNoiseCheck:
         if len(self._history) >= HISTORY_MIN + HISTORY_GAP:
             past = np.array(self._history)[:-HISTORY_GAP]
             level = np.maximum(np.median(past, axis=0), 1e-300)
+            self._level = level
             log_r = np.log(np.maximum(power, 1e-300) / level)
             log_s = np.empty(6)
             for c in range(6):
@@ -149,5 +151,5 @@ class MotionNoiseCheck:
                 self.flagged = median > self._thresholds
                 self.level = np.exp(median)
                 self.own = np.exp(log_r)
-        learn = np.where(self.flagged, self._history[-1] if self._history else power, power)
-        self._history.append(learn)
+        # a flagged channel keeps the level it had: its noisy windows teach nothing
+        self._history.append(np.where(self.flagged, self._level, power))
