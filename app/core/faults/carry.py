@@ -12,10 +12,10 @@ integral of C(s) b ds`` (C: sensor to anchor), which adds ``-[g]x N(t) b`` with 
 integral of ``theta``'s kernel: 2 dps over 8 s moves V by 11 m/s, hand motion by 1. Least
 squares over the horizon for g, v(0) and b gives b and its standard error from the scatter.
 
-A step is declared when an axis's ``b`` exceeds ``STEP_RAD_S`` (1.2 dps, 60 % of the 2 dps to
-find: the turn-on bias is learnt at rest and drifts 0.01 dps/K, and a gyro scale error of 1 %
-over a hand's fast turn of 360 deg in 8 s mimics 0.45 dps) and ``SIGNIFICANCE`` (3) standard
-errors, in ``CONFIRM`` windows running. Each axis's scale error is solved for with the bias
+A step is declared when an axis's ``b`` exceeds ``STEP_RAD_S`` (1.4 dps, 70 % of the 2 dps to
+find; slow translation by hand scatters ``b`` by up to 1 dps over 8 s, the turn-on bias is
+learnt at rest and drifts 0.01 dps/K) and ``SIGNIFICANCE`` (3) standard errors, in
+``CONFIRM`` windows running (1 s). Each axis's scale error is solved for with the bias
 (its turn adds ``C diag(angle turned) s``): a hand turning fast back and forth makes a
 scale error of 1 % look like a bias of up to 0.5 dps otherwise, while a bias keeps adding up
 whichever way the hand turns. The component of ``b`` along gravity moves nothing
@@ -33,9 +33,9 @@ import numpy as np
 
 HORIZON_S = 8.0
 MIN_S = 4.0
-STEP_RAD_S = math.radians(1.2)
+STEP_RAD_S = math.radians(1.4)
 SIGNIFICANCE = 3.0
-CONFIRM = 2
+CONFIRM = 4
 RIDGE = 1e-3
 """Relative to the largest eigenvalue of the normal equations' bias block."""
 
