@@ -14,7 +14,8 @@ held still or moved, a tap or a vibration raises the high band of several channe
 (the shock reaches both sensors), a noisy channel alone. The decision is the median of that
 ratio over the last ``SPAN_WINDOWS`` windows (1.5 s) against ``RATIO_ACCEL`` /
 ``RATIO_GYRO``: a sequential test that needs the residual on more than half of 1.5 s, so
-isolated transients never decide it.
+isolated transients never decide it. It must also look white in more than half of them
+(:data:`WHITE_TOLERANCE`): a vibration on one axis is a tone, not noise.
 
 The thresholds are power ratios set on half of the twelve BROAD trials (01, 06, 10, 15, 24,
 28: the largest clean value 3.4 on the accelerometer, 5.2 on the gyro, both on the tapping
@@ -48,6 +49,12 @@ RATIO_GYRO = 6.5
 TUNING_TRIALS: tuple[str, ...] = ("01_", "06_", "10_", "15_", "24_", "28_")
 """The BROAD trials (file-name prefixes) the thresholds were set on; the other six are held
 out (``evaluate-faults --in-motion`` reports both halves)."""
+WHITE_LAGS = 6
+WHITE_TOLERANCE = 0.35
+"""A window's band output is white noise's when its autocorrelation at lags 1-6 is within
+0.35 of band-limited white noise's (the filter's own, :func:`band_autocorrelation`): a tone
+or two (a machine's vibration) keeps ``cos(2 pi f k)`` at every lag, band-limited noise's
+decays to 0 by lag 5."""
 BAND_SHARE = 2.0 * (BAND[1] - BAND[0])
 """Share of white noise's power (0 .. Nyquist) in the band."""
 
@@ -73,6 +80,18 @@ def butterworth_sos(order: int, cutoff: float, kind: str) -> np.ndarray:
         else:
             raise ValueError(f"kind must be 'low' or 'high', not {kind!r}")
     return np.array(rows)
+
+
+def band_autocorrelation(sos: np.ndarray, lags: int = WHITE_LAGS) -> np.ndarray:
+    """Autocorrelation at lags 1..``lags`` of white noise through ``sos`` (from its impulse
+    response)."""
+    impulse = np.zeros((4096, 1))
+    impulse[0, 0] = 1.0
+    response = np.zeros_like(impulse)
+    _band_filter(impulse, sos, np.zeros((sos.shape[0], 1, 2)), response)
+    h = response[:, 0]
+    power = float(h @ h)
+    return np.array([float(h[k:] @ h[:-k]) / power for k in range(1, lags + 1)])
 
 
 @njit(cache=True)
@@ -106,6 +125,7 @@ class MotionNoiseCheck:
         self._sos = np.vstack([butterworth_sos(ORDER, BAND[0], "high"),
                                butterworth_sos(ORDER, BAND[1], "low")])
         self._thresholds = np.log(np.array([RATIO_ACCEL] * 3 + [RATIO_GYRO] * 3))
+        self._white_reference = band_autocorrelation(self._sos)
         self._out = np.zeros((window, 6))
         self.reset()
 
@@ -120,6 +140,7 @@ class MotionNoiseCheck:
         self._state = np.zeros((self._sos.shape[0], 6, 2))
         self._settle = 2
         self._ratios: deque[np.ndarray] = deque(maxlen=SPAN_WINDOWS)
+        self._white: deque[np.ndarray] = deque(maxlen=SPAN_WINDOWS)
         self.flagged = np.zeros(6, dtype=bool)
         self.level = np.ones(6)
         self.own = np.ones(6)
@@ -145,11 +166,23 @@ class MotionNoiseCheck:
             for c in range(6):
                 log_s[c] = log_r[c] - max(0.0, float(np.max(np.delete(log_r, c))))
             self._ratios.append(log_s)
+            self._white.append(self._whiteness(n))
             if len(self._ratios) == SPAN_WINDOWS:
                 ratios = np.array(self._ratios)
                 median = np.median(ratios, axis=0)
-                self.flagged = median > self._thresholds
+                white = 2 * np.sum(np.array(self._white), axis=0) >= SPAN_WINDOWS
+                self.flagged = (median > self._thresholds) & white
                 self.level = np.exp(median)
                 self.own = np.exp(log_r)
         # a flagged channel keeps the level it had: its noisy windows teach nothing
         self._history.append(np.where(self.flagged, self._level, power))
+
+    def _whiteness(self, n: int) -> np.ndarray:
+        """Per channel: the window's band output looks like band-limited white noise."""
+        out = self._out[:n]
+        power = np.einsum("ij,ij->j", out, out)
+        worst = np.zeros(6)
+        for k, reference in enumerate(self._white_reference, start=1):
+            lagged = np.einsum("ij,ij->j", out[k:], out[:-k]) / np.maximum(power, 1e-300)
+            worst = np.maximum(worst, np.abs(lagged - reference))
+        return worst <= WHITE_TOLERANCE
