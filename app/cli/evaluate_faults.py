@@ -355,7 +355,7 @@ def print_motion(results: Sequence[MotionSource], out: TextIO) -> None:
         held = [s for s in members if not s.label.startswith(TUNING_TRIALS)]
         if tuning and held:
             for title, half in (("thresholds set on", tuning), ("held out", held)):
-                print(f"\n  {title}: {', '.join(s.label[:2] for s in half)}", file=out)
+                print(f"\n  {title}: {', '.join(_short(s.label) for s in half)}", file=out)
                 _motion_rows(half, out)
         seconds = sum(s.clean_seconds for s in members)
         alarms = [(s.label, e) for s in members for e in s.clean_events]
@@ -373,8 +373,8 @@ def _motion_rows(members: Sequence[MotionSource], out: TextIO) -> None:
         delays = row.delays()
         med = f"{float(np.median(delays)):.1f}" if delays else "-"
         top = f"{delays[-1]:.1f}" if delays else "-"
-        notes = [f"{r.source[:2]} missed" for r in row.runs if not r.detected]
-        notes += [f"{r.source[:2]} {r.first_channel}" for r in row.runs
+        notes = [f"{_short(r.source)} missed" for r in row.runs if not r.detected]
+        notes += [f"{_short(r.source)} {r.first_channel}" for r in row.runs
                   if r.detected and not r.isolated]
         print(f"  {row.label:<22}{len(row.runs):>4}{row.ndr:7.2f}{row.fdi:7.2f}{med:>11}"
               f"{top:>7}  {', '.join(notes)}", file=out)
@@ -398,3 +398,8 @@ def _write_injected(args: argparse.Namespace) -> int:
         raise CommandError(str(exc), command="evaluate-faults") from None
     print(f"wrote {args.write}: {rows} rows with {', '.join(s.text() for s in specs)}")
     return 0
+
+
+def _short(label: str) -> str:
+    """``01`` for a BROAD trial, ``static`` for ``static?seed=1``."""
+    return label.split("_")[0].split("?")[0]
