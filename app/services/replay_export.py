@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from app.core.evaluation import recording_score_mask
 from app.core.faults import FaultEvent
 from app.core.filters import DEFAULT_FILTER, FILTERS
@@ -111,14 +113,44 @@ def replay_recording(request: ReplayRequest, warn: Say = _quiet, note: Say = _qu
 
 
 def replay_fault_events(source: Path) -> list[FaultEvent]:
-    """The fault detector over the recording, as live and ``diagnose`` run it (issue 33:
-    a replay warns of the same faults); none when its samples cannot be checked."""
-    from app.services.diagnosis import diagnose_events
-
+    """The fault detector over the recording, streamed (memory does not grow with the file),
+    as live and ``diagnose`` run it (issue 33: a replay warns of the same faults)."""
     try:
-        return list(diagnose_events(str(source)))
-    except RecordingError:  # implausible samples: the replay itself has said what it could
+        return _fault_events(source)
+    except RecordingError:  # a row the replay skipped with a warning: no verdict past it
         return []
+
+
+def _fault_events(source: Path) -> list[FaultEvent]:
+    from app.core.faults import FaultDetector, SensorSpec
+    from app.core.recording.format import KEY_MAGNETOMETER
+    from app.core.recording.stream import device_blocks
+    from app.core.sample_checks import implausible_rows
+    from app.core.samples import convert_raw_block
+
+    events: list[FaultEvent] = []
+    detector: FaultDetector | None = None
+    with warnings.catch_warnings(), RecordingStream(source) as stream:
+        warnings.simplefilter("ignore")  # the replay itself has told of damaged rows
+        device = stream.metadata.get("device")
+        device = device if isinstance(device, dict) else {}
+        magnetometer = stream.metadata.get(KEY_MAGNETOMETER)
+        size = None if "block_start" in stream.header else 256
+        for raw in device_blocks(stream.chunks(), size):
+            if detector is None:
+                if len(raw) < 2 or not raw.t_s[-1] > raw.t_s[0]:
+                    continue
+                rate = (len(raw) - 1) / float(raw.t_s[-1] - raw.t_s[0])
+                detector = FaultDetector(SensorSpec.from_device_dict(device, rate)
+                                         .with_magnetometer(magnetometer
+                                                            if isinstance(magnetometer, dict)
+                                                            else None))
+            block = convert_raw_block(raw)
+            if implausible_rows(block.accel_m_s2, block.gyro_rad_s).any():
+                break  # NaN or absurd samples: diagnose names them; no statistics past them
+            counts = np.issubdtype(np.asarray(raw.accel_raw).dtype, np.integer)
+            events += detector.update(block, raw if counts else None)
+    return events
 
 
 def _replay(request: ReplayRequest, warn: Say, note: Say) -> ReplaySummary:
