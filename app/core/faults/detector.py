@@ -295,7 +295,7 @@ class FaultDetector:
                                               spec.mag_odr_hz)
         """The magnetometer's tests (its flags: ``magnetometer.flags``, (N, 3))."""
         self._field_seen = False
-        self._motion = MotionNoiseCheck(self.window)
+        self._motion = MotionNoiseCheck(self.window, spec.odr_hz)
         self._carry = GravityCarry()
         self.reset()
 

@@ -38,6 +38,10 @@ from numba import njit
 
 BAND: tuple[float, float] = (0.25, 0.45)
 """Pass band as fractions of the sample rate."""
+MIN_LOW_HZ = 60.0
+"""The band starts at least this far above hand motion (20 Hz): below 240 Hz of sample rate
+there is no such band, and the test is off (at 104 Hz a stroke's own acceleration filled the
+26-47 Hz band; noise is then found at rest only)."""
 ORDER = 4
 HISTORY_WINDOWS = 40
 HISTORY_GAP = 2
@@ -120,8 +124,9 @@ class MotionNoiseCheck:
     the last window's power over the channel's own recent level.
     """
 
-    def __init__(self, window: int) -> None:
+    def __init__(self, window: int, odr_hz: float) -> None:
         self.window = window
+        self.enabled = BAND[0] * odr_hz >= MIN_LOW_HZ
         self._sos = np.vstack([butterworth_sos(ORDER, BAND[0], "high"),
                                butterworth_sos(ORDER, BAND[1], "low")])
         self._thresholds = np.log(np.array([RATIO_ACCEL] * 3 + [RATIO_GYRO] * 3))
@@ -147,11 +152,13 @@ class MotionNoiseCheck:
 
     def filter(self, x: np.ndarray, position: int) -> None:
         """Band-pass the rows ``x`` (N, 6) into the window's buffer from ``position`` on."""
-        _band_filter(x, self._sos, self._state, self._out[position:position + len(x)])
+        if self.enabled:
+            _band_filter(x, self._sos, self._state,
+                         self._out[position:position + len(x)])
 
     def end_window(self, n: int) -> None:
         """Close a window of ``n`` samples: its power, the ratio, the decision."""
-        if n < self.window // 2:
+        if n < self.window // 2 or not self.enabled:
             return
         power = np.median(self._out[:n] ** 2, axis=0)
         if self._settle > 0:  # the filter's start-up transient
