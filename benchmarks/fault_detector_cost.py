@@ -1,4 +1,4 @@
-"""Cost of the fault detector at the LSM6DSOX's top rate (issue 15: under 5 % of one core).
+"""Cost of the fault detector at the LSM6DSOX's top rate (issue 33: under 3 % of one core).
 
 Streams simulated ``sim://wobble`` at 6667 Hz through :class:`FaultDetector` in blocks of a
 typical live size and prints the CPU time per second of data, as a share of one core.

@@ -19,15 +19,27 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+import numpy as np
+
 from app.cli.errors import EXIT_FAILED, CommandError, finite
-from app.core.faults.evaluation import NOISE_MULTIPLES, THETAS, to_user_units, unit_of
+from app.core.faults.evaluation import (
+    DEADLINES_S,
+    NOISE_MULTIPLES,
+    THETAS,
+    motion_table,
+    to_user_units,
+    unit_of,
+)
 from app.core.faults.events import CHANNELS
+from app.core.faults.motion import TUNING_TRIALS
 from app.core.recording.errors import RecordingError
 from app.core.safe_output import check_output, write_error_message, write_output
 from app.services.fault_evaluation import (
     FaultEvaluationSettings,
+    MotionSource,
     resolve_fault_sources,
     run_fault_evaluation,
+    run_motion_evaluation,
 )
 from drivers.errors import DeviceError
 
@@ -70,9 +82,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seconds", type=float, default=60.0, metavar="S",
                         help="simulator stream the noise is injected into (default %(default)g; "
                              "recordings: whole)")
-    parser.add_argument("--onset", type=float, default=10.0, metavar="S",
+    parser.add_argument("--onset", type=float, default=None, metavar="S",
                         help="noise from S seconds after the start (the detector learns the "
-                             "clean noise first; default %(default)g)")
+                             "clean noise first; default 10, with --in-motion 60: inside "
+                             "BROAD's movement phase)")
+    parser.add_argument("--in-motion", action="store_true",
+                        help="instead of the sigma sweep: inject each fault of the goal of "
+                             "issue 33 alone at --onset (noise of 1 and 2.9 dps on each gyro "
+                             "axis, 0.2 and 0.5 m/s^2 on each accelerometer axis, a 2 dps gyro "
+                             "bias step) and print per fault NDR (found within its deadline: "
+                             "2 s for noise, 10 s for a bias), FDI (found on the injected "
+                             "channel), the delays, and the false alarms on the clean sources")
     parser.add_argument("--clean-seconds", type=float, default=600.0, metavar="S",
                         help="clean simulator stream for the false alarms (default %(default)g; "
                              "3600 for the hour of the goal)")
@@ -96,6 +116,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--png", metavar="DIR",
                         help="save the NDR and FDI curves as ndr_GROUP.png and fdi_GROUP.png")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    parser.add_argument("--inject", action="append", metavar="KIND:CHANNEL[:SIZE]@START[-END]",
+                        help="with --write: the fault(s) to inject (repeatable; START seconds "
+                             "from the first sample; SIZE in g or dps as for sim://...?fault=)")
+    parser.add_argument("--write", metavar="OUT",
+                        help="instead of an evaluation: copy the one recording SOURCE to OUT "
+                             "with the --inject faults (to replay it, e.g. in the window)")
 
 
 MAX_SECONDS = 86400.0
@@ -104,6 +130,12 @@ MAX_SECONDS = 86400.0
 
 def evaluate_faults_command(args: argparse.Namespace) -> int:
     """Run ``evaluate-faults``; returns the exit status."""
+    if args.write is not None or args.inject:
+        return _write_injected(args)
+    if args.onset is None:
+        args.onset = 60.0 if args.in_motion else 10.0
+    if args.in_motion:
+        return _in_motion(args)
     for option, value in (("--seconds", args.seconds), ("--onset", args.onset),
                           ("--clean-seconds", args.clean_seconds)):
         finite(value, option, minimum=0.0, maximum=MAX_SECONDS)
@@ -251,3 +283,123 @@ def _mult(m: float) -> str:
 
 def _mean(values: Sequence[float]) -> float:
     return sum(values) / len(values) if values else math.nan
+
+
+# -- faults while moving (issue 33) ------------------------------------------------------------
+def _in_motion(args: argparse.Namespace) -> int:
+    finite(args.onset, "--onset", minimum=0.0, maximum=MAX_SECONDS)
+    finite(args.clean_seconds, "--clean-seconds", minimum=1.0, maximum=MAX_SECONDS)
+    out: TextIO = sys.stderr if args.json == "-" else sys.stdout
+    try:
+        if args.json not in (None, "-"):
+            check_output(args.json, inputs=_file_sources(args), overwrite=args.overwrite,
+                         option="--json")
+        sources = resolve_fault_sources(args.sources)
+        if not sources:
+            raise ValueError("no sources")
+        results = run_motion_evaluation(
+            sources, args.onset, seed=args.seed, clean_seconds=args.clean_seconds,
+            progress=None if args.quiet else lambda line: print(line, file=sys.stderr,
+                                                                flush=True))
+    except (ValueError, RecordingError, DeviceError, OSError) as exc:
+        raise CommandError(str(exc), command="evaluate-faults") from None
+    print_motion(results, out)
+    if args.json is not None:
+        text = json.dumps(motion_json(results), indent=1) + "\n"
+        if args.json == "-":
+            sys.stdout.write(text)
+        else:
+            try:
+                write_output(args.json, text, inputs=_file_sources(args),
+                             overwrite=args.overwrite, option="--json")
+            except OSError as exc:
+                raise CommandError(write_error_message(exc, args.json, "--json"), EXIT_FAILED,
+                                   command="evaluate-faults") from None
+    return 0
+
+
+def motion_json(results: Sequence[MotionSource]) -> dict:
+    """``--in-motion --json``: every run, the pooled rows per group and the false alarms."""
+    groups: dict[str, list[MotionSource]] = {}
+    for source in results:
+        groups.setdefault(source.group, []).append(source)
+    return {
+        "measure": {"ndr": "share of the injections found (any channel) within the deadline",
+                    "fdi": "share found within the deadline on the injected channel",
+                    "deadline_s": DEADLINES_S},
+        "groups": {name: {
+            "rows": [row.as_dict() for row in motion_table([r for s in members
+                                                            for r in s.runs])],
+            "clean_seconds": sum(s.clean_seconds for s in members),
+            "false_alarms": [dict(e.as_dict(), source=s.label) for s in members
+                             for e in s.clean_events]} for name, members in groups.items()},
+        "runs": [r.as_dict() for s in results for r in s.runs],
+    }
+
+
+def print_motion(results: Sequence[MotionSource], out: TextIO) -> None:
+    """Per group (and, for the BROAD trials, per half: the thresholds' and the held-out one)
+    the NDR / FDI / delay table and the false alarms."""
+    groups: dict[str, list[MotionSource]] = {}
+    for source in results:
+        groups.setdefault(source.group, []).append(source)
+    print("Faults injected one at a time while the sensor moves: NDR = found within the "
+          "deadline (noise 2 s, bias 10 s), FDI = found on the injected channel", file=out)
+    for name, members in groups.items():
+        moving = [s.moving_at_onset for s in members if s.moving_at_onset is not None]
+        where = f", moving at the onset in {sum(moving)} of {len(moving)}" if moving else ""
+        print(f"\n== {name}: {len(members)} source(s), faults at {members[0].onset_s:g} s"
+              f"{where} ==", file=out)
+        _motion_rows(members, out)
+        tuning = [s for s in members if s.label.startswith(TUNING_TRIALS)]
+        held = [s for s in members if not s.label.startswith(TUNING_TRIALS)]
+        if tuning and held:
+            for title, half in (("thresholds set on", tuning), ("held out", held)):
+                print(f"\n  {title}: {', '.join(_short(s.label) for s in half)}", file=out)
+                _motion_rows(half, out)
+        seconds = sum(s.clean_seconds for s in members)
+        alarms = [(s.label, e) for s in members for e in s.clean_events]
+        print(f"\nFalse alarms on the clean sources: {len(alarms)} in {seconds / 3600:.2f} h",
+              file=out)
+        for label, event in alarms:
+            print(f"  {label}: t = {event.t:.1f} s {event.channel} {event.kind}", file=out)
+    out.flush()
+
+
+def _motion_rows(members: Sequence[MotionSource], out: TextIO) -> None:
+    print(f"  {'fault':<22}{'n':>4}{'NDR':>7}{'FDI':>7}{'delay med':>11}{'max':>7}  "
+          "missed / on another channel", file=out)
+    for row in motion_table([r for s in members for r in s.runs]):
+        delays = row.delays()
+        med = f"{float(np.median(delays)):.1f}" if delays else "-"
+        top = f"{delays[-1]:.1f}" if delays else "-"
+        notes = [f"{_short(r.source)} missed" for r in row.runs if not r.detected]
+        notes += [f"{_short(r.source)} {r.first_channel}" for r in row.runs
+                  if r.detected and not r.isolated]
+        print(f"  {row.label:<22}{len(row.runs):>4}{row.ndr:7.2f}{row.fdi:7.2f}{med:>11}"
+              f"{top:>7}  {', '.join(notes)}", file=out)
+
+
+def _write_injected(args: argparse.Namespace) -> int:
+    """``--write OUT --inject SPEC ... SOURCE``: a copy of one recording with faults in it."""
+    from app.core.faults.injection import FAULT_CHANNELS, inject_recording, parse_fault_spec
+
+    if args.write is None or not args.inject:
+        raise CommandError("--inject and --write go together", command="evaluate-faults")
+    if len(args.sources) != 1 or "://" in args.sources[0]:
+        raise CommandError("--write takes exactly one recording as SOURCE",
+                           command="evaluate-faults")
+    try:
+        specs = [parse_fault_spec(text, FAULT_CHANNELS) for text in args.inject]
+        check_output(args.write, inputs=_file_sources(args), overwrite=args.overwrite,
+                     option="--write")
+        rows = inject_recording(args.sources[0], args.write, specs, args.seed)
+    except (ValueError, OSError) as exc:
+        raise CommandError(str(exc), command="evaluate-faults") from None
+    print(f"wrote {args.write}: {rows} rows with {', '.join(s.text() for s in specs)}")
+    return 0
+
+
+def _short(label: str) -> str:
+    """``01`` for a BROAD trial, ``static`` for ``static?seed=1``."""
+    return label.split("_")[0].split("?")[0]

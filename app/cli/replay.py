@@ -76,7 +76,20 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     except ReplayFailed as exc:
         raise CommandError(str(exc), EXIT_FAILED) from None
     print_summary(summary, out)
+    print_fault_events(summary, out)
     return 0
+
+
+def print_fault_events(summary: ReplaySummary, out: TextIO) -> None:
+    """The fault detector's verdict on the recording (``diagnose`` prints every event)."""
+    events = [e for e in summary.fault_events if e.channel != "link"]
+    if not events:
+        print("  fault detector: no sensor fault", file=out)
+        return
+    print(f"  fault detector: {len(events)} event(s) (inclinometer diagnose lists them)",
+          file=out)
+    for event in events[:5]:
+        print(f"    t = {event.t:.2f} s  {event.channel} {event.kind}: {event.message}", file=out)
 
 
 def print_summary(summary: ReplaySummary, out: TextIO) -> None:

@@ -22,17 +22,23 @@ from typing import Any
 import numpy as np
 
 from app.core.faults import SensorSpec
+from app.core.faults.detector import FaultDetector
 from app.core.faults.evaluation import (
+    DEADLINES_S,
+    MOTION_FAULTS,
     NOISE_MULTIPLES,
     THETAS,
     GroupSummary,
+    MotionRun,
     SourceSweep,
+    clean_events,
     evaluation_json,
+    motion_runs,
     sample_rows,
     summarize_group,
     sweep_samples,
 )
-from app.core.faults.events import CHANNELS
+from app.core.faults.events import CHANNELS, FaultEvent
 from app.core.recording.reader import read_recording
 from app.core.samples import SampleBlock
 from app.services.acquisition import Acquisition, Until
@@ -102,6 +108,7 @@ class FaultSource:
     label: str
     group: str
     load: Callable[[FaultEvaluationSettings], CleanStream]
+    path: Path | None = None
 
 
 @dataclass(slots=True)
@@ -148,7 +155,8 @@ def resolve_fault_sources(items: Sequence[str]) -> list[FaultSource]:
         if key not in seen:
             seen.add(key)
             sources.append(FaultSource(path.stem, key.parent.name or "recordings",
-                                       lambda settings, path=path: _recording_stream(path)))  # type: ignore[misc]
+                                       lambda settings, path=path: _recording_stream(path),  # type: ignore[misc]
+                                       path))
 
     for item in items:
         if item == "scenarios":
@@ -258,3 +266,68 @@ def run_fault_evaluation(
         groups.setdefault(sweep.group, []).append(sweep)
     result.groups = [summarize_group(name, members) for name, members in groups.items()]
     return result
+
+
+# -- faults while the sensor moves (issue 33) ------------------------------------------------------
+@dataclass(slots=True)
+class MotionSource:
+    """One source of the in-motion evaluation: its runs and its clean alarms."""
+
+    label: str
+    group: str
+    onset_s: float
+    moving_at_onset: bool | None
+    """The recording's ``movement`` column at the onset (None: the source has none)."""
+    clean_seconds: float
+    clean_events: list[FaultEvent]
+    runs: list[MotionRun]
+
+
+def run_motion_evaluation(
+    sources: Sequence[FaultSource], onset_s: float,
+    faults: Sequence[tuple[str, str, float | None]] = MOTION_FAULTS, seed: int = 0,
+    clean_seconds: float = 600.0, detector: Callable[[SensorSpec], FaultDetector] = FaultDetector,
+    progress: Callable[[str], None] | None = None,
+) -> list[MotionSource]:
+    """Every fault of ``faults`` injected alone at ``onset_s`` into each source (a recording
+    whole, a simulator stream of ``onset_s`` + 14 s), and the clean alarms (a recording
+    whole, ``clean_seconds`` of a simulator).
+
+    Raises
+    ------
+    ValueError, RecordingError, DeviceError
+        When a source cannot be read or ends before the onset.
+    """
+    settings = FaultEvaluationSettings(seconds=onset_s + max(DEADLINES_S.values()) + 4.0,
+                                       onset_s=onset_s, clean_seconds=clean_seconds)
+    results = []
+    for source in sources:
+        started = time.perf_counter()
+        stream = source.load(settings)
+        moving = None
+        if source.group != SIMULATOR_GROUP:
+            moving = _moving_at(source, onset_s)
+        runs = motion_runs(stream.sweep, stream.spec, source=source.label, onset_s=onset_s,
+                           faults=faults, seed=seed, lsb=stream.lsb, detector=detector)
+        clean = clean_events(stream.clean, stream.spec, detector)
+        seconds = float(stream.clean.t_s[-1] - stream.clean.t_s[0]) if len(stream.clean) else 0.0
+        results.append(MotionSource(source.label, source.group, onset_s, moving, seconds, clean,
+                                    runs))
+        if progress is not None:
+            found = sum(r.isolated for r in runs)
+            progress(f"{source.group}/{source.label}: {found} of {len(runs)} faults found on "
+                     f"their channel in time, {len(clean)} false alarm(s), "
+                     f"{time.perf_counter() - started:.1f} s")
+    return results
+
+
+def _moving_at(source: FaultSource, onset_s: float) -> bool | None:
+    path = getattr(source, "path", None)
+    if path is None:
+        return None
+    recording = read_recording(path)
+    column = recording.unknown_columns.get("movement")
+    if column is None or not len(recording):
+        return None
+    index = int(np.searchsorted(recording.t_s, recording.t_s[0] + onset_s))
+    return bool(np.asarray(column)[min(index, len(recording) - 1)] > 0.5)

@@ -17,7 +17,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from app.core.evaluation import magnetic_heading, recording_score_mask
+from app.core.faults import FaultEvent
 from app.core.filters import FILTERS, default_filter_for
 from app.core.recording.errors import RecordingError
 from app.core.recording.export import (
@@ -76,6 +79,8 @@ class ReplaySummary:
     """Rows with a reference that were scored; None without a reference."""
     filters: list[FilterLine] = field(default_factory=list)
     streamed: bool = False
+    fault_events: list[FaultEvent] = field(default_factory=list)
+    """The fault detector's events over the recording, as ``diagnose`` finds them."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,6 +112,53 @@ def replay_recording(request: ReplayRequest, warn: Say = _quiet, note: Say = _qu
     for the user (filters ``all`` leaves out). Raises :class:`ReplayRefused` for input it
     cannot use and :class:`ReplayFailed` when the file could not be written.
     """
+    summary = _replay(request, warn, note)
+    summary.fault_events = replay_fault_events(request.source)
+    return summary
+
+
+def replay_fault_events(source: Path) -> list[FaultEvent]:
+    """The fault detector over the recording, streamed (memory does not grow with the file),
+    as live and ``diagnose`` run it (issue 33: a replay warns of the same faults)."""
+    try:
+        return _fault_events(source)
+    except RecordingError:  # a row the replay skipped with a warning: no verdict past it
+        return []
+
+
+def _fault_events(source: Path) -> list[FaultEvent]:
+    from app.core.faults import FaultDetector, SensorSpec
+    from app.core.recording.format import KEY_MAGNETOMETER
+    from app.core.recording.stream import device_blocks
+    from app.core.sample_checks import implausible_rows
+    from app.core.samples import convert_raw_block
+
+    events: list[FaultEvent] = []
+    detector: FaultDetector | None = None
+    with warnings.catch_warnings(), RecordingStream(source) as stream:
+        warnings.simplefilter("ignore")  # the replay itself has told of damaged rows
+        device = stream.metadata.get("device")
+        device = device if isinstance(device, dict) else {}
+        magnetometer = stream.metadata.get(KEY_MAGNETOMETER)
+        size = None if "block_start" in stream.header else 256
+        for raw in device_blocks(stream.chunks(), size):
+            if detector is None:
+                if len(raw) < 2 or not raw.t_s[-1] > raw.t_s[0]:
+                    continue
+                rate = (len(raw) - 1) / float(raw.t_s[-1] - raw.t_s[0])
+                detector = FaultDetector(SensorSpec.from_device_dict(device, rate)
+                                         .with_magnetometer(magnetometer
+                                                            if isinstance(magnetometer, dict)
+                                                            else None))
+            block = convert_raw_block(raw)
+            if implausible_rows(block.accel_m_s2, block.gyro_rad_s).any():
+                break  # NaN or absurd samples: diagnose names them; no statistics past them
+            counts = np.issubdtype(np.asarray(raw.accel_raw).dtype, np.integer)
+            events += detector.update(block, raw if counts else None)
+    return events
+
+
+def _replay(request: ReplayRequest, warn: Say, note: Say) -> ReplaySummary:
     if request.block is not None and not 1 <= request.block <= MAX_BLOCK:
         raise ReplayRefused(f"--block must be from 1 to {MAX_BLOCK}")
     try:

@@ -429,3 +429,145 @@ def _duration(samples: SampleBlock, odr_hz: float) -> float:
 
 def _finite(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
+
+
+# -- faults injected while the sensor moves (issue 33) -------------------------------------------
+MOTION_FAULTS: tuple[tuple[str, str, float], ...] = (
+    *(("noise", ch, size) for size in (1.0, 2.9) for ch in ("gx", "gy", "gz")),
+    *(("noise", ch, size) for size in (0.2 / STANDARD_GRAVITY_M_S2, 0.5 / STANDARD_GRAVITY_M_S2)
+      for ch in ("ax", "ay", "az")),
+    *(("bias", ch, 2.0) for ch in ("gx", "gy", "gz")),
+)
+"""The default faults of ``evaluate-faults --in-motion``: noise of 1 and 2.9 dps on each gyro
+axis, 0.2 and 0.5 m/s^2 on each accelerometer axis, a 2 dps bias step on each gyro axis
+(FaultSpec units: g and dps)."""
+DEADLINES_S: dict[str, float] = {"noise": 2.0, "bias": 10.0, "stuck": 2.0, "dead": 2.0,
+                                 "spike": 2.0, "scale": 10.0}
+"""Seconds from the onset within which a fault counts as found (issue 33's goal)."""
+MOTION_MARGIN_S = 2.0
+"""Samples read past the deadline (the detector runs only to there: the rest is not needed)."""
+
+
+@dataclass(slots=True)
+class MotionRun:
+    """One fault injected at ``onset_s`` (seconds after the first sample) of one source."""
+
+    source: str
+    spec: FaultSpec
+    deadline_s: float
+    delay_s: float | None
+    """Seconds from the onset to the first event (any channel, link excluded); None: none."""
+    first_channel: str | None
+    first_kind: str | None
+
+    @property
+    def detected(self) -> bool:
+        return self.delay_s is not None and self.delay_s <= self.deadline_s
+
+    @property
+    def isolated(self) -> bool:
+        """Found in time, and the first event names the injected channel."""
+        return self.detected and self.first_channel == self.spec.channel
+
+    def label(self) -> str:
+        return motion_label(self.spec)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"source": self.source, "fault": self.spec.text(), "label": self.label(),
+                "deadline_s": self.deadline_s, "delay_s": self.delay_s,
+                "first_channel": self.first_channel, "first_kind": self.first_kind,
+                "detected": self.detected, "isolated": self.isolated}
+
+
+def motion_label(spec: FaultSpec) -> str:
+    """``"gy noise 1 dps"``, ``"ax noise 0.2 m/s^2"``: the size in the units of the goal."""
+    size = spec.size or 0.0
+    if spec.kind in ("noise", "bias", "spike") and spec.axis < 3:
+        text = f"{size * STANDARD_GRAVITY_M_S2:.2g} m/s^2"
+    elif spec.kind in ("noise", "bias", "spike"):
+        text = f"{size:g} dps"
+    else:
+        text = "" if spec.size is None else f"{size:g}"
+    return f"{spec.channel} {spec.kind} {text}".strip()
+
+
+def motion_runs(samples: SampleBlock, spec: SensorSpec, *, source: str, onset_s: float,
+                faults: Sequence[tuple[str, str, float | None]] = MOTION_FAULTS, seed: int = 0,
+                lsb: np.ndarray | None = None,
+                detector: Callable[[SensorSpec], FaultDetector] = FaultDetector,
+                ) -> list[MotionRun]:
+    """Each fault of ``faults`` (kind, channel, FaultSpec size) injected alone from
+    ``onset_s`` seconds after the first sample to the end; the detector (``detector``: how to
+    make one) runs from the start to the fault's deadline plus :data:`MOTION_MARGIN_S`."""
+    t0 = float(samples.t_s[0])
+    onset = t0 + onset_s
+    if onset >= float(samples.t_s[-1]):
+        raise ValueError(f"{source}: the onset ({onset_s:g} s) is after the end")
+    runs = []
+    for kind, channel, size in faults:
+        fault = FaultSpec(kind, channel, size, onset)
+        deadline = DEADLINES_S.get(kind, 10.0)
+        stop = int(np.searchsorted(samples.t_s, onset + deadline + MOTION_MARGIN_S))
+        part = sample_rows(samples, 0, stop)
+        events = _events_of(inject(part, [fault], seed, lsb), spec, detector)
+        first = next((e for e in counted_events(events) if e.t >= onset), None)
+        runs.append(MotionRun(source, fault, deadline,
+                              None if first is None else round(first.t - onset, 6),
+                              None if first is None else first.channel,
+                              None if first is None else first.kind))
+    return runs
+
+
+def clean_events(samples: SampleBlock, spec: SensorSpec,
+                 detector: Callable[[SensorSpec], FaultDetector] = FaultDetector
+                 ) -> list[FaultEvent]:
+    """The alarms (link events excluded) of a fresh detector over a clean stream."""
+    return counted_events(_events_of(samples, spec, detector))
+
+
+def _events_of(samples: SampleBlock, spec: SensorSpec,
+               detector: Callable[[SensorSpec], FaultDetector]) -> list[FaultEvent]:
+    made = detector(spec)
+    size = max(1, round(BLOCK_S * spec.odr_hz))
+    events: list[FaultEvent] = []
+    for start in range(0, len(samples), size):
+        events += made.update(sample_rows(samples, start, min(len(samples), start + size)))
+    return events
+
+
+@dataclass(slots=True)
+class MotionRow:
+    """One fault (label) pooled over sources: NDR, FDI, delays."""
+
+    label: str
+    runs: list[MotionRun]
+
+    @property
+    def ndr(self) -> float:
+        """Share of the injections found within the deadline (on any channel)."""
+        return sum(r.detected for r in self.runs) / len(self.runs)
+
+    @property
+    def fdi(self) -> float:
+        """Share of the injections found within the deadline on the injected channel."""
+        return sum(r.isolated for r in self.runs) / len(self.runs)
+
+    def delays(self) -> list[float]:
+        return sorted(r.delay_s for r in self.runs if r.detected and r.delay_s is not None)
+
+    def as_dict(self) -> dict[str, Any]:
+        delays = self.delays()
+        return {"fault": self.label, "injections": len(self.runs), "ndr": self.ndr,
+                "fdi": self.fdi, "delay_median_s": float(np.median(delays)) if delays else None,
+                "delay_max_s": delays[-1] if delays else None,
+                "missed": [r.source for r in self.runs if not r.detected],
+                "wrong_channel": [f"{r.source}: {r.first_channel} {r.first_kind}"
+                                  for r in self.runs if r.detected and not r.isolated]}
+
+
+def motion_table(runs: Sequence[MotionRun]) -> list[MotionRow]:
+    """The runs pooled per fault label, in the order first seen."""
+    rows: dict[str, list[MotionRun]] = {}
+    for run in runs:
+        rows.setdefault(run.label(), []).append(run)
+    return [MotionRow(label, members) for label, members in rows.items()]

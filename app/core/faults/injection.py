@@ -19,8 +19,10 @@ seed gives the same faults every time.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -206,3 +208,64 @@ class FaultInjector:
             if k < len(t):
                 while self._next_spike[i] <= t[k]:
                     self._next_spike[i] += 1.0
+
+
+KEY_INJECTED_FAULTS = "injected_faults"
+"""Metadata key of a recording copied with faults injected (:func:`inject_recording`)."""
+_INJECT_BLOCK = 4096
+
+
+def inject_recording(source: str | os.PathLike[str], target: str | os.PathLike[str],
+                     specs: Sequence[FaultSpec], seed: int = 0) -> int:
+    """Copy a plain-text recording with ``specs`` applied to its ax..gz (and mx..mz) columns,
+    START/END seconds from its first sample; every other byte of the header and the rows is
+    kept, and the faults are listed under ``injected_faults`` in its metadata. Returns the
+    rows copied.
+
+    Raises
+    ------
+    ValueError
+        A compressed recording, or one without a column a spec names.
+    """
+    from app.core.recording.edit import rewrite_metadata
+
+    path = Path(source)
+    with open(path, "rb") as probe:
+        if probe.read(2) == b"\x1f\x8b":
+            raise ValueError(f"{path}: a compressed recording; decompress it first")
+    with open(path, encoding="utf-8", newline="") as handle:
+        lines = handle.readlines()
+    head = 0
+    while head < len(lines) and lines[head].startswith("#"):
+        head += 1
+    if head >= len(lines):
+        raise ValueError(f"{path}: no column header")
+    names = [name.strip() for name in lines[head].strip().split(",")]
+    wanted = [c for c in FAULT_CHANNELS if c in names]
+    missing = [s.channel for s in specs if s.channel not in names]
+    if missing or "t" not in names:
+        raise ValueError(f"{path}: no column {(missing or ['t'])[0]!r}")
+    index = [names.index(c) for c in wanted]
+    time_index = names.index("t")
+    rows = [line.rstrip("\r\n").split(",") for line in lines[head + 1:] if line.strip()]
+    t = np.array([float(r[time_index]) for r in rows])
+    t0 = float(t[0]) if len(t) else 0.0
+    shifted = [FaultSpec(s.kind, s.channel, s.size, s.start_s + t0,
+                         None if s.end_s is None else s.end_s + t0) for s in specs]
+    injector = FaultInjector(shifted, seed)
+    values = np.full((len(rows), len(FAULT_CHANNELS)), np.nan)
+    for k, c in zip(index, wanted, strict=True):
+        values[:, FAULT_CHANNELS.index(c)] = [float(r[k]) if r[k] else np.nan for r in rows]
+    out = np.empty_like(values)
+    for start in range(0, len(rows), _INJECT_BLOCK):
+        stop = min(len(rows), start + _INJECT_BLOCK)
+        out[start:stop] = injector.apply(t[start:stop], values[start:stop])
+    with open(target, "w", encoding="utf-8", newline="") as handle:
+        handle.writelines(lines[: head + 1])
+        for i, row in enumerate(rows):
+            for k, c in zip(index, wanted, strict=True):
+                if row[k]:
+                    row[k] = f"{out[i, FAULT_CHANNELS.index(c)]:.9g}"
+            handle.write(",".join(row) + "\n")
+    rewrite_metadata(target, {KEY_INJECTED_FAULTS: [s.as_dict() for s in specs]})
+    return len(rows)
