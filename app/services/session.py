@@ -38,6 +38,7 @@ REQUESTS: dict[str, str] = {
     "requestSelfTest": "run_self_test",
     "requestHealthReset": "reset_health",
     "requestAlarms": "set_alarms",  # AlarmConfig
+    "requestDeclination": "set_declination",  # Declination or None
 }
 """The session's request signals and the worker slots they are queued to (GUI -> worker)."""
 
