@@ -42,7 +42,7 @@ class InstrumentMode:
     def _chrome(self) -> tuple:
         window = self.window
         return (window.menuBar(), window.statusBar(), window.level_view.controls,
-                window.truth_label, window.banner)
+                window.level_view.heading_bar, window.truth_label, window.banner)
 
     def _enter(self) -> None:
         window = self.window

@@ -1,5 +1,5 @@
-"""The window's centre: the banners, the bubble level with the readouts beside it, the
-display controls (units, averaging, range, Hold) and the simulator-truth line."""
+"""The window's centre: the banners, the bubble level with the compass and the readouts beside
+it, the display controls (units, averaging, range, Hold) and the simulator-truth line."""
 
 from __future__ import annotations
 
@@ -16,13 +16,17 @@ from PySide6.QtWidgets import (
 from app.core.readout import SLOPE_UNITS
 from app.gui.banner import MessageBanner
 from app.gui.bubble_level import BubbleLevel
+from app.gui.compass import CompassPanel
 from app.gui.elided_label import ElidedLabel
+from app.gui.heading_controls import HeadingBar
 from app.gui.readouts import TiltReadouts
 
 READOUT_MIN_PX, READOUT_MAX_PX = 28, 96
 """Smallest and largest digits beside the level in the usual layout."""
 INSTRUMENT_MAX_PX = 400
 """Largest digits in the full-screen instrument mode (they fill the half screen)."""
+COMPASS_SHARE = 1
+"""The compass column's share of the width (the bubble has 3, the readouts 2)."""
 AVERAGING_S = (0.05, 0.2, 0.5, 1.0, 2.0, 5.0)
 LEVEL_RANGES_DEG = (0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 90.0)
 
@@ -46,6 +50,12 @@ class LevelView(QWidget):
         self.row = QHBoxLayout()
         self.level.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
         self.row.addWidget(self.level, 3)
+        self.compass = CompassPanel()
+        self.heading_bar = HeadingBar()
+        compass_column = QVBoxLayout()
+        compass_column.addWidget(self.compass, 1)
+        compass_column.addWidget(self.heading_bar)
+        self.row.addLayout(compass_column, COMPASS_SHARE)
         side = QVBoxLayout()
         # The digits grow into the height beside the level (no empty space under them).
         self.readouts.setAutoScale(True, READOUT_MAX_PX, READOUT_MIN_PX, (2, 1))
@@ -78,7 +88,8 @@ class LevelView(QWidget):
             controls.addWidget(widget)
         return self.controls
 
-    def set_level_share(self, level: int, side: int) -> None:
-        """How the width is shared between the bubble and the readouts' column."""
+    def set_level_share(self, level: int, side: int, compass: int = COMPASS_SHARE) -> None:
+        """How the width is shared between the bubble, the compass and the readouts' column."""
         self.row.setStretch(0, level)
-        self.row.setStretch(1, side)
+        self.row.setStretch(1, compass)
+        self.row.setStretch(2, side)
