@@ -85,7 +85,9 @@ def add_arguments(record: argparse.ArgumentParser) -> None:
              "happens (also stored in the file); repeatable. SPEC: QUANTITY>LIMIT, "
              "QUANTITY<LIMIT or |QUANTITY|>LIMIT, both limits as 'roll>2,roll<-1', then "
              "options hyst=DEG (default 0.1) and delay=S (default 0.5). Quantities: tilt, roll, "
-             "pitch, level (out of level: tilt beyond a tolerance). Raised once beyond the "
+             "pitch, level (out of level: tilt beyond a tolerance); the magnetic heading "
+             "with a 9-axis filter: 'heading:350..10' (outside a sector, clockwise), "
+             "'|heading-45|>5' or 'heading-45>5' (off a set heading). Raised once beyond the "
              "limit for the delay; cleared once back inside by the hysteresis for the delay. "
              "E.g. --alarm 'tilt>2.0,hyst=0.2,delay=0.5' --alarm '|roll|>1'")
     north = record.add_mutually_exclusive_group()
@@ -96,7 +98,8 @@ def add_arguments(record: argparse.ArgumentParser) -> None:
     north.add_argument(
         "--place", metavar="LAT,LON[,ALT]", default=None,
         help="take the declination from the World Magnetic Model at this place (degrees, "
-             "metres) today, stored in the file's 'heading' metadata key")
+             "metres) today, stored in the file's 'heading' metadata key (a southern latitude: "
+             "--place=-33.9,151.2)")
 
 
 def _error(message: str) -> None:

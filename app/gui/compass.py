@@ -38,10 +38,14 @@ class CompassRose(QWidget):
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self._reading = HeadingReading("no data")
-        self.setMinimumSize(96, 96)
+        self.setMinimumSize(100, 100)
         self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
         self.setToolTip("Compass: north up, the needle is the sensor's +x axis")
-        theme.notifier().changed.connect(lambda _name: self.update())
+        # A method, not a lambda: Qt drops the connection with the widget.
+        theme.notifier().changed.connect(self._on_theme_changed)
+
+    def _on_theme_changed(self, _name: str) -> None:
+        self.update()
 
     def setReading(self, reading: HeadingReading) -> None:
         """Show a heading (or why there is none); repaints only when what is drawn changes."""
@@ -96,8 +100,8 @@ class CompassRose(QWidget):
 
     @staticmethod
     def _title_room(radius: float) -> QRectF:
-        """Between the W and E letters, below N and above S."""
-        width, height = radius * 1.12, radius * 0.9
+        """Across the card, below N and above S (E and W are not drawn then)."""
+        width, height = radius * 1.6, radius * 0.9
         return QRectF(-width / 2.0, -height / 2.0, width, height)
 
     def _fits(self, font: QFont, room: QRectF) -> bool:
@@ -154,6 +158,8 @@ class CompassRose(QWidget):
         painter.setFont(font)
         metrics = QFontMetricsF(font)
         for letter, degrees in _CARDINAL_LETTERS:
+            if not self._reading.ok and letter in "EW":
+                continue  # the state's words go across the card
             a = math.radians(degrees)
             at = QPointF(math.sin(a), -math.cos(a)) * (radius * 0.68)
             box = QRectF(at.x() - metrics.horizontalAdvance(letter) / 2.0 - 1,
@@ -206,7 +212,10 @@ class FieldLightView(QWidget):
         layout.addWidget(self.dot, 0, Qt.AlignmentFlag.AlignTop)
         layout.addWidget(self.text, 1)
         self._show()
-        theme.notifier().changed.connect(lambda _name: self._show())
+        theme.notifier().changed.connect(self._on_theme_changed)
+
+    def _on_theme_changed(self, _name: str) -> None:
+        self._show()
 
     def setLight(self, light: FieldLight) -> None:
         if light != self._light:

@@ -294,8 +294,12 @@ class MainWindow(QMainWindow):
         self.messages.appendPlainText(f"{stamp}  {'ERROR  ' if error else ''}{message}")
 
     def copy_reading(self) -> str:
-        """Put the reading shown (roll, pitch, tilt in the chosen units) on the clipboard."""
+        """Put the reading shown (roll, pitch, tilt in the chosen units, and the heading when
+        the compass shows one) on the clipboard."""
         text = self.readouts.reading()
+        heading = self.compass.tile.reading().clipboard_text()
+        if text and heading:
+            text = f"{text} {heading}"
         if not text:
             self.statusBar().showMessage("No reading to copy", 3000)
             return ""

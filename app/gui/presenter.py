@@ -18,7 +18,7 @@ import time
 from PySide6.QtCore import QObject, Signal
 from PySide6.QtWidgets import QLabel
 
-from app.core.measurement_log import Measurement
+from app.core.measurement_log import Measurement, with_heading
 from app.core.readout import averaged_angles
 from app.gui.bubble_level import BubbleLevel
 from app.gui.feeds.errors import ErrorTableFeed
@@ -120,8 +120,14 @@ class LivePresenter(QObject):
         self.clock.wake()
 
     def current_reading(self, label: str = "") -> Measurement | None:
-        """The reading the readouts show (see :meth:`ReadoutFeed.current_reading`)."""
-        return self.readout_feed.current_reading(label)
+        """The reading the readouts show (see :meth:`ReadoutFeed.current_reading`), with the
+        compass's heading over the same samples."""
+        reading = self.readout_feed.current_reading(label)
+        if reading is None or self.heading_feed is None:
+            return reading
+        quat = self.readout_feed.reading_quat()
+        return with_heading(reading, quat,
+                            self.heading_feed.reading_for(quat, self.settings.hold))
 
     def range_statistics(self, start_rel_s: float, end_rel_s: float):
         """Statistics of roll, pitch and tilt over a range relative to the newest sample."""

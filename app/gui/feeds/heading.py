@@ -23,14 +23,8 @@ LIGHT_WINDOW_S = 0.5
 
 
 def filter_uses_field(pipeline) -> bool:
-    """Whether the pipeline's filter takes heading from the magnetometer now (a 9-axis filter
-    with its magnetometer switch on)."""
-    running = pipeline.filter
-    if not getattr(type(running), "uses_magnetometer", False):
-        return False
-    if any(spec.name == "magnetometer" for spec in running.parameters):
-        return bool(running.get_parameter("magnetometer"))
-    return True
+    """Whether the pipeline's filter takes heading from the magnetometer now."""
+    return pipeline.takes_heading_from_field()
 
 
 class HeadingFeed:
@@ -49,6 +43,9 @@ class HeadingFeed:
         self.last_light = -np.inf
         self.shown_reading: HeadingReading | None = None
         """The reading on show (Hold keeps it, the log and the clipboard take it)."""
+        self.shown_quat: np.ndarray | None = None
+        self.shown_inputs: tuple[bool, bool] = (False, False)
+        """The quaternions behind it, and whether a field came and the filter took it."""
 
     def set_settings(self, settings: HeadingSettings) -> None:
         self.settings = settings
@@ -62,9 +59,20 @@ class HeadingFeed:
         pipeline = self.session.pipeline
         uses = filter_uses_field(pipeline)
         full_key = (*key, pipeline.has_field, uses, self.settings)
-        if not hold and full_key != self.key:
+        if hold:
+            held = self.shown_reading
+            if held is not None and self.shown_quat is not None and (
+                    held.north, held.unit) != (self.settings.north, self.settings.unit):
+                # The held figure, from the other north or in the other unit.
+                self.show(heading_reading(self.shown_quat, self.shown_inputs[0],
+                                          self.shown_inputs[1], self.settings))
+                frame.drew = True
+        elif full_key != self.key:
             if frame.now - self.last_update >= HEADING_INTERVAL_S:
-                self.show(heading_reading(quat(), pipeline.has_field, uses, self.settings))
+                self.shown_quat = quat()
+                self.shown_inputs = (pipeline.has_field, uses)
+                self.show(heading_reading(self.shown_quat, pipeline.has_field, uses,
+                                          self.settings))
                 self.key, self.last_update = full_key, frame.now
                 frame.drew = True
             else:
@@ -84,6 +92,14 @@ class HeadingFeed:
         self.shown_reading = reading
         self.panel.setReading(reading, text)
 
+    def reading_for(self, quat: np.ndarray, held: bool) -> HeadingReading:
+        """The heading of these quaternions as the compass shows it (held: the one on show)."""
+        if held and self.shown_reading is not None:
+            return self.shown_reading
+        pipeline = self.session.pipeline
+        return heading_reading(quat, pipeline.has_field, filter_uses_field(pipeline),
+                               self.settings)
+
     def light(self) -> FieldLight:
         rows = self.session.pipeline.field.window(LIGHT_WINDOW_S, ["norm", "dip"])
         return field_light(rows["norm"], rows["dip"], self.reference())
@@ -92,5 +108,6 @@ class HeadingFeed:
         """No data: no heading; the light as the field ring says."""
         self.key = None
         self.shown_reading = None
+        self.shown_quat = None
         self.panel.setReading(HeadingReading("no data", north=self.settings.north,
                                              unit=self.settings.unit), "")
