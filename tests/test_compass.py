@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from datetime import date
 
+import numpy as np
 import pytest
 from PySide6.QtCore import QSettings
 from PySide6.QtGui import QGuiApplication
@@ -221,3 +222,30 @@ def test_a_magnet_passing_lights_the_field_red_with_its_reason(qtbot):
     red = [words for words in seen if words.startswith("Field disturbed: ")]
     assert red and any("above normal" in words for words in red), seen
     assert panel.tile.readoutText() == "—"  # no attitude handed to it: no heading
+
+
+def test_the_3d_view_draws_the_earth_axes_when_the_heading_is_real(qtbot):
+    from app.core.orientation import quaternion_from_roll_pitch
+    from app.core.scene3d import Camera, earth_axes_lines, render_list, sensors_scene
+    from app.gui.attitude_view import AttitudeView
+
+    q = quaternion_from_roll_pitch(10.0, 5.0, 30.0)
+    scene = sensors_scene([q], earth_axes=True)
+    lines = earth_axes_lines(scene)
+    assert [label for _key, label, _a, _b in lines] == ["E", "N", "Up"]
+    for (_key, _label, start, tip), direction in zip(lines, np.eye(3)):
+        along = (tip - start) / np.linalg.norm(tip - start)
+        np.testing.assert_allclose(along, direction, atol=1e-12)
+    items = render_list(scene, Camera(), 400, 300)
+    labels = [item.text for item in items if item.kind == "label"]
+    assert labels == ["E", "N", "Up"]
+    assert not any(item.color.startswith("earth")
+                   for item in render_list(sensors_scene([q]), Camera(), 400, 300))
+    view = AttitudeView(backend="painter")
+    qtbot.addWidget(view)
+    view.show()
+    view.set_attitude(q)
+    assert not view.canvas.scene.earth_axes
+    view.set_earth_frame(True)
+    assert view.canvas.scene.earth_axes and view.earth_frame()
+    view.canvas.grab()  # paints the axes and their legend without error

@@ -186,6 +186,9 @@ class MainWindow(QMainWindow):
         self.heading_feed = HeadingFeed(self.compass, session,
                                         lambda: self.field_presenter.reference)
         self.presenter.attach_heading(self.heading_feed)
+        # The 3D view in the earth frame (E, N, Up) while the main device's heading is real.
+        self.heading_feed.on_earth_frame = lambda on: self.attitude_view.set_earth_frame(
+            on and not self.joint_panel.has_sensors)
         self.heading_controls = HeadingControls(self.heading_bar, self)
         self.heading_controls.settingsChanged.connect(self._on_heading_settings)
         self.heading_controls.declinationChanged.connect(session.requestDeclination)

@@ -43,6 +43,9 @@ class HeadingFeed:
         self.last_light = -np.inf
         self.shown_reading: HeadingReading | None = None
         """The reading on show (Hold keeps it, the log and the clipboard take it)."""
+        self.on_earth_frame: Callable[[bool], None] | None = None
+        """Told whether the attitudes' heading is real (a field, and a filter that takes it)."""
+        self._earth_frame: bool | None = None
         self.shown_quat: np.ndarray | None = None
         self.shown_inputs: tuple[bool, bool] = (False, False)
         """The quaternions behind it, and whether a field came and the filter took it."""
@@ -58,6 +61,10 @@ class HeadingFeed:
             return
         pipeline = self.session.pipeline
         uses = filter_uses_field(pipeline)
+        earth = bool(uses and pipeline.has_field)
+        if earth != self._earth_frame and self.on_earth_frame is not None:
+            self._earth_frame = earth
+            self.on_earth_frame(earth)
         full_key = (*key, pipeline.has_field, uses, self.settings)
         if hold:
             held = self.shown_reading
