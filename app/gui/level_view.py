@@ -25,8 +25,10 @@ READOUT_MIN_PX, READOUT_MAX_PX = 28, 96
 """Smallest and largest digits beside the level in the usual layout."""
 INSTRUMENT_MAX_PX = 400
 """Largest digits in the full-screen instrument mode (they fill the half screen)."""
-COMPASS_SHARE = 1
-"""The compass column's share of the width (the bubble has 3, the readouts 2)."""
+LEVEL_SHARE, COMPASS_SHARE, SIDE_SHARE = 2, 1, 2
+"""The width's shares of the bubble, the compass column and the readouts' column: the compass
+takes its room from the bubble (limited by the height, it rarely uses its width), so the
+readouts keep the 40 % they had beside the bubble alone."""
 AVERAGING_S = (0.05, 0.2, 0.5, 1.0, 2.0, 5.0)
 LEVEL_RANGES_DEG = (0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 90.0)
 
@@ -49,7 +51,7 @@ class LevelView(QWidget):
         outer.addWidget(self.alarm_banner)
         self.row = QHBoxLayout()
         self.level.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
-        self.row.addWidget(self.level, 3)
+        self.row.addWidget(self.level, LEVEL_SHARE)
         self.compass = CompassPanel()
         self.heading_bar = HeadingBar()
         compass_column = QVBoxLayout()
@@ -61,7 +63,7 @@ class LevelView(QWidget):
         self.readouts.setAutoScale(True, READOUT_MAX_PX, READOUT_MIN_PX, (2, 1))
         side.addWidget(self.readouts, 1)
         side.addWidget(self._build_controls())
-        self.row.addLayout(side, 2)
+        self.row.addLayout(side, SIDE_SHARE)
         outer.addLayout(self.row, 1)
         outer.addWidget(self.truth_label)
 
