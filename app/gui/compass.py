@@ -273,7 +273,7 @@ class HeadingTile(_ReadoutTile):
 
     def _show(self) -> None:
         reading = self._reading
-        self.setUnit(HEADING_UNITS[reading.unit].suffix)
+        self.setUnit(HEADING_UNITS[reading.unit].suffix if reading.ok else "")
         text = reading.text.replace("-", MINUS) if reading.ok else NO_VALUE
         if self.value.text() != text:
             self.value.setText(text)
