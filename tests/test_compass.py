@@ -116,6 +116,18 @@ def test_window_states_without_a_heading(qtbot, tmp_path, log_path):
                         == "FILTER WITHOUT MAGNETOMETER", timeout=TIMEOUT_MS)
         assert window.compass.tile.readoutText() == "—"
         assert "Heading" not in window.copy_reading()
+        # Too narrow for the compass column: it is left out (the window may be as narrow as
+        # before it came), and it comes back with the room; the instrument mode leaves it out.
+        column = window.level_view.compass_column
+        assert column.isVisible()
+        window.resize(760, 600)
+        qtbot.waitUntil(lambda: not column.isVisible(), timeout=TIMEOUT_MS)
+        window.resize(1366, 740)
+        qtbot.waitUntil(column.isVisible, timeout=TIMEOUT_MS)
+        window.set_instrument_mode(True)
+        qtbot.waitUntil(lambda: not column.isVisible(), timeout=TIMEOUT_MS)
+        window.set_instrument_mode(False)
+        qtbot.waitUntil(column.isVisible, timeout=TIMEOUT_MS)
     finally:
         window.close()
 

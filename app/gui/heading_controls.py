@@ -15,7 +15,7 @@ from PySide6.QtWidgets import (
     QDialogButtonBox,
     QDoubleSpinBox,
     QFormLayout,
-    QHBoxLayout,
+    QGridLayout,
     QLabel,
     QPushButton,
     QRadioButton,
@@ -49,10 +49,13 @@ class HeadingBar(QWidget):
         self.unit_combo.setToolTip("Heading in degrees or NATO mils (6400 to the circle)")
         self.declination_button = QPushButton("Decl…")
         self.declination_button.setToolTip("Set the magnetic declination (WMM or typed)")
-        layout = QHBoxLayout(self)
+        # Two rows: the compass column stays narrow (it must fit beside the bubble at 1366).
+        layout = QGridLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
-        for widget in (self.north_combo, self.unit_combo, self.declination_button):
-            layout.addWidget(widget)
+        layout.setSpacing(4)
+        layout.addWidget(self.north_combo, 0, 0)
+        layout.addWidget(self.unit_combo, 0, 1)
+        layout.addWidget(self.declination_button, 1, 0, 1, 2)
 
     def show_settings(self, settings: HeadingSettings) -> None:
         for combo, value in ((self.north_combo, settings.north), (self.unit_combo, settings.unit)):

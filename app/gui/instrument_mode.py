@@ -48,7 +48,7 @@ class InstrumentMode:
     def _chrome(self) -> tuple:
         window = self.window
         return (window.menuBar(), window.statusBar(), window.level_view.controls,
-                window.level_view.heading_bar, window.truth_label, window.banner)
+                window.truth_label, window.banner)
 
     def _enter(self) -> None:
         window = self.window
@@ -62,7 +62,7 @@ class InstrumentMode:
                        *self._chrome()):
             widget.hide()
         window.readouts.setAutoScale(True, INSTRUMENT_MAX_PX, READOUT_MIN_PX, (1, 2))
-        window.level_view.set_level_share(1, 1, compass=0)  # the compass at its size hint
+        window.level_view.set_level_share(1, 1, compass=0)  # the bubble and the digits only
         window.showFullScreen()
 
     def _leave(self) -> None:

@@ -4,6 +4,7 @@ it, the display controls (units, averaging, range, Hold) and the simulator-truth
 from __future__ import annotations
 
 from PySide6.QtCore import Qt
+from PySide6.QtGui import QResizeEvent
 from PySide6.QtWidgets import (
     QComboBox,
     QHBoxLayout,
@@ -25,10 +26,11 @@ READOUT_MIN_PX, READOUT_MAX_PX = 28, 96
 """Smallest and largest digits beside the level in the usual layout."""
 INSTRUMENT_MAX_PX = 400
 """Largest digits in the full-screen instrument mode (they fill the half screen)."""
-LEVEL_SHARE, COMPASS_SHARE, SIDE_SHARE = 2, 1, 2
+LEVEL_SHARE, COMPASS_SHARE, SIDE_SHARE = 4, 3, 5
 """The width's shares of the bubble, the compass column and the readouts' column: the compass
 takes its room from the bubble (limited by the height, it rarely uses its width), so the
-readouts keep the 40 % they had beside the bubble alone."""
+readouts keep the 40 % they had beside the bubble alone; at 1366x768, with the Filter dock
+open, the compass's quarter holds its heading readout."""
 AVERAGING_S = (0.05, 0.2, 0.5, 1.0, 2.0, 5.0)
 LEVEL_RANGES_DEG = (0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 90.0)
 
@@ -54,10 +56,18 @@ class LevelView(QWidget):
         self.row.addWidget(self.level, LEVEL_SHARE)
         self.compass = CompassPanel()
         self.heading_bar = HeadingBar()
-        compass_column = QVBoxLayout()
+        # The compass column asks for no width of its own: the window may be made as narrow
+        # as before it came; where its share is too narrow for it, it is hidden (never cut).
+        self.compass_column = QWidget()
+        self.compass_column.setSizePolicy(QSizePolicy.Policy.Ignored,
+                                          QSizePolicy.Policy.Preferred)
+        compass_column = QVBoxLayout(self.compass_column)
+        compass_column.setContentsMargins(0, 0, 0, 0)
         compass_column.addWidget(self.compass, 1)
         compass_column.addWidget(self.heading_bar)
-        self.row.addLayout(compass_column, COMPASS_SHARE)
+        self.compass_wanted = True
+        """False in the full-screen instrument (only the bubble and the digits)."""
+        self.row.addWidget(self.compass_column, COMPASS_SHARE)
         side = QVBoxLayout()
         # The digits grow into the height beside the level (no empty space under them).
         self.readouts.setAutoScale(True, READOUT_MAX_PX, READOUT_MIN_PX, (2, 1))
@@ -91,7 +101,24 @@ class LevelView(QWidget):
         return self.controls
 
     def set_level_share(self, level: int, side: int, compass: int = COMPASS_SHARE) -> None:
-        """How the width is shared between the bubble, the compass and the readouts' column."""
+        """How the width is shared between the bubble, the compass (0: none, hidden) and the
+        readouts' column."""
         self.row.setStretch(0, level)
         self.row.setStretch(1, compass)
         self.row.setStretch(2, side)
+        self.compass_wanted = compass > 0
+        self._place_compass()
+
+    def _place_compass(self) -> None:
+        """Show the compass column where its share of the width holds it, else hide it."""
+        shares = sum(self.row.stretch(i) for i in range(3)) or 1
+        margins = self.layout().contentsMargins()
+        room = (self.width() - margins.left() - margins.right()
+                - 2 * self.row.spacing()) * self.row.stretch(1) / shares
+        fits = self.compass_wanted and room >= self.compass_column.minimumSizeHint().width()
+        if fits != self.compass_column.isVisibleTo(self):
+            self.compass_column.setVisible(fits)
+
+    def resizeEvent(self, event: QResizeEvent) -> None:
+        super().resizeEvent(event)
+        self._place_compass()
