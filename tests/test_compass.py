@@ -8,7 +8,7 @@ from datetime import date
 
 import numpy as np
 import pytest
-from PySide6.QtCore import QSettings
+from PySide6.QtCore import QRect, QSettings
 from PySide6.QtGui import QGuiApplication
 
 from app.core.earth_field import Place
@@ -91,9 +91,10 @@ def open_window(qtbot, tmp_path, url: str) -> MainWindow:
     settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
     window = MainWindow(DeviceSession(), settings, url)
     qtbot.addWidget(window)
-    window.resize(1366, 740)
     window.show()
+    window.fit_to_screen(QRect(0, 0, 1366, 768))
     qtbot.waitUntil(lambda: window.session.device_info is not None, timeout=TIMEOUT_MS)
+    qtbot.waitUntil(window.level_view.compass_column.isVisible, timeout=TIMEOUT_MS)
     return window
 
 
@@ -122,7 +123,7 @@ def test_window_states_without_a_heading(qtbot, tmp_path, log_path):
         assert column.isVisible()
         window.resize(760, 600)
         qtbot.waitUntil(lambda: not column.isVisible(), timeout=TIMEOUT_MS)
-        window.resize(1366, 740)
+        window.fit_to_screen(QRect(0, 0, 1366, 768))
         qtbot.waitUntil(column.isVisible, timeout=TIMEOUT_MS)
         window.set_instrument_mode(True)
         qtbot.waitUntil(lambda: not column.isVisible(), timeout=TIMEOUT_MS)

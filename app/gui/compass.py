@@ -19,6 +19,7 @@ from app.core.heading import HEADING_UNITS, OK, HeadingReading, cardinal
 from app.gui import theme
 from app.gui.readouts import MINUS, NO_VALUE, _ReadoutTile
 
+_WIDEST_HEADING = "000.0"
 TILE_VALUE_PX = 30
 """The heading's digits: a little smaller than the tilt readouts' smallest (28 ... 96), so the
 rose above keeps room at 1366x768."""
@@ -254,6 +255,13 @@ class HeadingTile(_ReadoutTile):
         self._declination_text = ""
         self.setUnit("°")
         self._show()
+
+    def setValuePixelSize(self, value_px: int) -> None:
+        """As a tilt tile, with the digits' room for the widest heading, ``000.0`` (mils are
+        4 digits): the tile, and the compass column with it, stays narrow."""
+        super().setValuePixelSize(value_px)
+        widest = QFontMetricsF(self.value.font()).horizontalAdvance(_WIDEST_HEADING)
+        self.value.setFixedWidth(math.ceil(widest) + 2)
 
     def setReading(self, reading: HeadingReading, declination_text: str = "") -> None:
         if (reading, declination_text) != (self._reading, self._declination_text):
