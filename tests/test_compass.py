@@ -92,7 +92,7 @@ def open_window(qtbot, tmp_path, url: str) -> MainWindow:
     window = MainWindow(DeviceSession(), settings, url)
     qtbot.addWidget(window)
     window.show()
-    window.fit_to_screen(QRect(0, 0, 1366, 768))
+    window.fit_to_screen(QRect(0, 0, 1920, 1080))
     qtbot.waitUntil(lambda: window.session.device_info is not None, timeout=TIMEOUT_MS)
     qtbot.waitUntil(window.level_view.compass_column.isVisible, timeout=TIMEOUT_MS)
     return window
@@ -123,7 +123,7 @@ def test_window_states_without_a_heading(qtbot, tmp_path, log_path):
         assert column.isVisible()
         window.resize(760, 600)
         qtbot.waitUntil(lambda: not column.isVisible(), timeout=TIMEOUT_MS)
-        window.fit_to_screen(QRect(0, 0, 1366, 768))
+        window.fit_to_screen(QRect(0, 0, 1920, 1080))
         qtbot.waitUntil(column.isVisible, timeout=TIMEOUT_MS)
         window.set_instrument_mode(True)
         qtbot.waitUntil(lambda: not column.isVisible(), timeout=TIMEOUT_MS)

@@ -218,6 +218,11 @@ class FieldLightView(QWidget):
     def _on_theme_changed(self, _name: str) -> None:
         self._show()
 
+    def _reserve_lines(self) -> None:
+        """Room for two lines of words, so a reason that wraps does not re-lay out the
+        window while the field changes."""
+        self.text.setMinimumHeight(2 * self.text.fontMetrics().lineSpacing() + 2)
+
     def setLight(self, light: FieldLight) -> None:
         if light != self._light:
             self._light = light
@@ -241,6 +246,7 @@ class FieldLightView(QWidget):
             self._light.state, "TEXT_DISABLED")]
         self.dot.setStyleSheet(f"background: {colour}; border-radius: 7px;")
         self.text.setText(self.words())
+        self._reserve_lines()
         self.setToolTip("Magnetic disturbance: the field's strength and dip against "
                         + (self._light.reference or "a reference (Field dock)"))
 

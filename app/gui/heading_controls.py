@@ -56,6 +56,10 @@ class HeadingBar(QWidget):
         layout.addWidget(self.north_combo, 0, 0)
         layout.addWidget(self.unit_combo, 0, 1)
         layout.addWidget(self.declination_button, 1, 0, 1, 2)
+        for combo in (self.north_combo, self.unit_combo):  # never narrower than their words
+            widest = max(combo.fontMetrics().horizontalAdvance(combo.itemText(i))
+                         for i in range(combo.count()))
+            combo.setMinimumWidth(max(combo.sizeHint().width(), widest + 44))
 
     def show_settings(self, settings: HeadingSettings) -> None:
         for combo, value in ((self.north_combo, settings.north), (self.unit_combo, settings.unit)):

@@ -68,7 +68,7 @@ class LevelView(QWidget):
         self.compass_wanted = True
         """False in the full-screen instrument (only the bubble and the digits)."""
         self.row.addWidget(self.compass_column, COMPASS_SHARE)
-        side = QVBoxLayout()
+        side = self.side_layout = QVBoxLayout()
         # The digits grow into the height beside the level (no empty space under them).
         self.readouts.setAutoScale(True, READOUT_MAX_PX, READOUT_MIN_PX, (2, 1))
         side.addWidget(self.readouts, 1)
@@ -113,8 +113,12 @@ class LevelView(QWidget):
         """Show the compass column where its share of the width holds it, else hide it."""
         shares = sum(self.row.stretch(i) for i in range(3)) or 1
         margins = self.layout().contentsMargins()
-        room = (self.width() - margins.left() - margins.right()
-                - 2 * self.row.spacing()) * self.row.stretch(1) / shares
+        inner = self.width() - margins.left() - margins.right() - 2 * self.row.spacing()
+        # Its share, unless the bubble and the readouts need more than theirs (the row
+        # meets every minimum first), and a margin for the row's rounding.
+        others = (max(self.level.minimumSizeHint().width(), self.level.minimumWidth())
+                  + self.side_layout.minimumSize().width())
+        room = min(inner * self.row.stretch(1) / shares, inner - others) - 8
         fits = self.compass_wanted and room >= self.compass_column.minimumSizeHint().width()
         if fits != self.compass_column.isVisibleTo(self):
             self.compass_column.setVisible(fits)
