@@ -93,6 +93,9 @@ def open_window(qtbot, tmp_path, url: str) -> MainWindow:
     qtbot.addWidget(window)
     window.show()
     window.fit_to_screen(QRect(0, 0, 1920, 1080))
+    qtbot.waitUntil(lambda: window.width() == 1920, timeout=TIMEOUT_MS)
+    for dock in window.docks.values():  # the centre gets the width (the offscreen fonts
+        dock.hide()                     # make the docks wider than on a desktop)
     qtbot.waitUntil(lambda: window.session.device_info is not None, timeout=TIMEOUT_MS)
     qtbot.waitUntil(window.level_view.compass_column.isVisible, timeout=TIMEOUT_MS)
     return window
