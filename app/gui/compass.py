@@ -261,6 +261,13 @@ class HeadingTile(_ReadoutTile):
         self._declination_text = ""
         self.setUnit("°")
         self._show()
+        theme.notifier().changed.connect(self._restore_fonts)
+
+    def _restore_fonts(self, _name: str = "") -> None:
+        """A new application stylesheet puts back the labels' first fonts: size them again
+        (as the tilt readouts do), so the digits keep the room measured for them."""
+        self.setValuePixelSize(self._value_px)
+        self._show()
 
     def setValuePixelSize(self, value_px: int) -> None:
         """As a tilt tile, with the digits' room for the widest heading, ``000.0`` (mils are

@@ -35,6 +35,17 @@ AVERAGING_S = (0.05, 0.2, 0.5, 1.0, 2.0, 5.0)
 LEVEL_RANGES_DEG = (0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 90.0)
 
 
+class _CompassColumn(QWidget):
+    """The compass column: it asks for no width, and hides itself when the row gives it less
+    than it needs (never drawn cut or overlapped); the view shows it again on its next resize
+    when its share looks wide enough."""
+
+    def resizeEvent(self, event: QResizeEvent) -> None:
+        super().resizeEvent(event)
+        if self.isVisible() and event.size().width() < self.minimumSizeHint().width():
+            self.hide()
+
+
 class LevelView(QWidget):
     """The central widget; its parts are attributes (the window hands them on)."""
 
@@ -58,7 +69,7 @@ class LevelView(QWidget):
         self.heading_bar = HeadingBar()
         # The compass column asks for no width of its own: the window may be made as narrow
         # as before it came; where its share is too narrow for it, it is hidden (never cut).
-        self.compass_column = QWidget()
+        self.compass_column = _CompassColumn()
         self.compass_column.setSizePolicy(QSizePolicy.Policy.Ignored,
                                           QSizePolicy.Policy.Preferred)
         compass_column = QVBoxLayout(self.compass_column)
