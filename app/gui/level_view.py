@@ -42,7 +42,9 @@ class _CompassColumn(QWidget):
 
     def resizeEvent(self, event: QResizeEvent) -> None:
         super().resizeEvent(event)
-        if self.isVisible() and event.size().width() < self.minimumSizeHint().width():
+        need = self.minimumSizeHint()
+        if self.isVisible() and (event.size().width() < need.width()
+                                 or event.size().height() < need.height()):
             self.hide()
 
 
@@ -71,7 +73,7 @@ class LevelView(QWidget):
         # as before it came; where its share is too narrow for it, it is hidden (never cut).
         self.compass_column = _CompassColumn()
         self.compass_column.setSizePolicy(QSizePolicy.Policy.Ignored,
-                                          QSizePolicy.Policy.Preferred)
+                                          QSizePolicy.Policy.Ignored)
         compass_column = QVBoxLayout(self.compass_column)
         compass_column.setContentsMargins(0, 0, 0, 0)
         compass_column.addWidget(self.compass, 1)
@@ -130,7 +132,9 @@ class LevelView(QWidget):
         others = (max(self.level.minimumSizeHint().width(), self.level.minimumWidth())
                   + self.side_layout.minimumSize().width())
         room = min(inner * self.row.stretch(1) / shares, inner - others) - 8
-        fits = self.compass_wanted and room >= self.compass_column.minimumSizeHint().width()
+        need = self.compass_column.minimumSizeHint()
+        tall = self.row.geometry().height() >= need.height() or not self.row.geometry().isValid()
+        fits = self.compass_wanted and room >= need.width() and tall
         if fits != self.compass_column.isVisibleTo(self):
             self.compass_column.setVisible(fits)
 
