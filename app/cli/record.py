@@ -14,6 +14,7 @@ import signal
 import sys
 import threading
 from dataclasses import dataclass
+from datetime import date
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -21,6 +22,13 @@ from app.cli.errors import one_line
 from app.core.alarms import AlarmMonitor, alarms_from_specs
 from app.core.calibration_procedures.profiles import ProfileError, read_profile_file
 from app.core.filters import FILTERS
+from app.core.heading import (
+    KEY_HEADING,
+    heading_metadata,
+    parse_place,
+    typed_declination,
+    wmm_declination,
+)
 from app.core.recording.errors import RecordingWriteError
 from app.core.recording.sizing import data_rate
 from app.core.safe_output import OutputRefused, check_output
@@ -83,9 +91,21 @@ def add_arguments(record: argparse.ArgumentParser) -> None:
              "happens (also stored in the file); repeatable. SPEC: QUANTITY>LIMIT, "
              "QUANTITY<LIMIT or |QUANTITY|>LIMIT, both limits as 'roll>2,roll<-1', then "
              "options hyst=DEG (default 0.1) and delay=S (default 0.5). Quantities: tilt, roll, "
-             "pitch, level (out of level: tilt beyond a tolerance). Raised once beyond the "
+             "pitch, level (out of level: tilt beyond a tolerance); the magnetic heading "
+             "with a 9-axis filter: 'heading:350..10' (outside a sector, clockwise), "
+             "'|heading-45|>5' or 'heading-45>5' (off a set heading). Raised once beyond the "
              "limit for the delay; cleared once back inside by the hysteresis for the delay. "
              "E.g. --alarm 'tilt>2.0,hyst=0.2,delay=0.5' --alarm '|roll|>1'")
+    north = record.add_mutually_exclusive_group()
+    north.add_argument(
+        "--declination", metavar="DEG", default=None,
+        help="the magnetic declination (degrees, east positive) for true north, stored in the "
+             "file's 'heading' metadata key (docs/recording-format.md)")
+    north.add_argument(
+        "--place", metavar="LAT,LON[,ALT]", default=None,
+        help="take the declination from the World Magnetic Model at this place (degrees, "
+             "metres) today, stored in the file's 'heading' metadata key (a southern latitude: "
+             "--place=-33.9,151.2)")
 
 
 def _error(message: str) -> None:
@@ -106,6 +126,7 @@ class _Settings:
 
     comparisons: list[str]
     alarms: Any
+    heading: dict[str, Any] | None
     duration_s: float | None
     reconnect_timeout_s: float | None
     calibration: Any
@@ -153,6 +174,7 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
             reconnect_timeout_s=settings.reconnect_timeout_s, on_outage=print_outage,
             on_faults=lambda events: print_faults(events, out),
             on_message=print_warning, lsl=args.lsl,
+            extra_metadata=None if settings.heading is None else {KEY_HEADING: settings.heading},
         )
     except (DeviceError, RecordingWriteError, LslUnavailable) as exc:
         _error(str(exc))
@@ -169,7 +191,7 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
 def _settings(args: argparse.Namespace) -> _Settings:
     """``record``'s arguments checked (raises :class:`_Refused` with the reason)."""
     return _Settings(
-        comparisons=_filters(args), alarms=_alarms(args),
+        comparisons=_filters(args), alarms=_alarms(args), heading=_heading(args),
         duration_s=_duration(args.duration, "--duration", "30"),
         reconnect_timeout_s=_reconnect_timeout(args), calibration=_calibration(args),
         target=_target(args),
@@ -191,6 +213,23 @@ def _filters(args: argparse.Namespace) -> list[str]:
             f"run while recording; record with a live filter, then run it with "
             f"'inclinometer replay OUT.csv --filter {offline[0]} --out ANGLES.csv'")
     return comparisons
+
+
+def _heading(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The ``heading`` metadata of ``--declination`` or ``--place`` (None: neither given)."""
+    try:
+        if getattr(args, "declination", None) is not None:
+            try:
+                degrees = float(args.declination)
+            except ValueError:
+                raise ValueError(f"{args.declination!r} is not a number of degrees") from None
+            return heading_metadata(typed_declination(degrees))
+        if getattr(args, "place", None) is not None:
+            return heading_metadata(wmm_declination(parse_place(args.place), date.today()))
+    except ValueError as exc:
+        option = "--declination" if getattr(args, "declination", None) is not None else "--place"
+        raise _Refused(f"{option}: {exc}") from None
+    return None
 
 
 def _alarms(args: argparse.Namespace) -> Any:

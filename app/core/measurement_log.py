@@ -37,6 +37,14 @@ from app.core.bounded_input import (
     loads_json,
     read_bounded,
 )
+from app.core.heading import (
+    HEADING_UNITS,
+    HeadingReading,
+    circular_mean_deg,
+    heading_in_unit,
+    magnetic_heading_deg,
+    signed_difference_deg,
+)
 from app.core.orientation import angles_from_up, up_in_sensor_frame
 from app.core.readout import averaged_angles, slope_from_angle
 
@@ -48,7 +56,7 @@ MAX_LOG_BYTES = 64 << 20
 COLUMNS: tuple[str, ...] = (
     "time", "label", "roll", "roll_std", "pitch", "pitch_std", "tilt", "tilt_std",
     "direction_deg", "unit", "window_s", "samples", "filter", "calibration", "device",
-    "spread_deg", "warning",
+    "spread_deg", "warning", "heading", "heading_std", "heading_unit", "heading_north",
 )
 """The CSV columns, in order (the fields of :class:`Measurement`)."""
 
@@ -85,6 +93,16 @@ class Measurement:
     """RMS angle (degrees) of the samples' up direction about the mean: how steady it was."""
     warning: str = ""
     """Why the reading may be wrong ("" when it is sound), e.g. not steady."""
+    heading: float = math.nan
+    """The heading shown (:mod:`app.core.heading`), in ``heading_unit`` from
+    ``heading_north``; NaN when there was none (no magnetometer, a filter without it, the
+    sensor near vertical)."""
+    heading_std: float = math.nan
+    """Standard deviation of the per-sample headings about it (same unit)."""
+    heading_unit: str = ""
+    """``deg`` or ``mil``; "" without a heading."""
+    heading_north: str = ""
+    """``magnetic`` or ``true``; "" without a heading."""
 
     @property
     def flagged(self) -> bool:
@@ -98,7 +116,7 @@ class Measurement:
         """ValueError (or KeyError/TypeError) for an entry that is not a measurement."""
         values = {}
         for spec in fields(cls):
-            if spec.name not in data and spec.name in ("spread_deg", "warning"):
+            if spec.name not in data and spec.name in _ADDED_LATER:
                 continue  # a log written before these existed: the defaults
             value = data[spec.name]
             if spec.type == "float":
@@ -122,6 +140,30 @@ class Measurement:
             value = getattr(self, name)
             out.append(f"{value:.6g}" if isinstance(value, float) else str(value))
         return out
+
+
+_ADDED_LATER = ("spread_deg", "warning", "heading", "heading_std", "heading_unit",
+                "heading_north")
+"""Fields a log written before them lacks: they take their defaults."""
+
+
+def with_heading(measurement: Measurement, quat: np.ndarray, reading: HeadingReading
+                 ) -> Measurement:
+    """``measurement`` with the heading shown (``reading``, over the same quaternions
+    ``quat``) and the spread of the per-sample headings; unchanged without a heading."""
+    if not reading.ok:
+        return measurement
+    quat = np.asarray(quat, dtype=np.float64).reshape(-1, 4)
+    per_sample = magnetic_heading_deg(quat[np.all(np.isfinite(quat), axis=1)])
+    per_sample = per_sample[np.isfinite(per_sample)]
+    scale = HEADING_UNITS[reading.unit].per_circle / 360.0
+    spread = math.nan
+    if len(per_sample) > 1:
+        centre = circular_mean_deg(per_sample)
+        if centre is not None:
+            spread = float(np.std(signed_difference_deg(per_sample, centre), ddof=1)) * scale
+    return replace(measurement, heading=heading_in_unit(reading.heading_deg, reading.unit),
+                   heading_std=spread, heading_unit=reading.unit, heading_north=reading.north)
 
 
 def measure(quat: np.ndarray, unit: str, window_s: float, *, label: str = "",

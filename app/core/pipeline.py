@@ -17,6 +17,8 @@ from app.core.calibration import IDENTITY_CALIBRATION, SensorCalibration
 from app.core.calibration_procedures.level_reference import TareReference
 from app.core.field_check import FieldMonitor
 from app.core.filters import FILTERS, OrientationFilter, create_filter, default_filter_for
+from app.core.filters.base import MAGNETOMETER_PARAMETER
+from app.core.heading import magnetic_heading_deg
 from app.core.orientation import angles_from_quaternion, inclination_error_deg
 from app.core.ring_buffer import RingBuffer
 from app.core.samples import RawBlock, SampleBlock, convert_raw_block
@@ -31,6 +33,9 @@ SAMPLE_COLUMNS = {
 }
 ORIENTATION_COLUMNS = {
     "t": 1, "quat": 4, "roll": 1, "pitch": 1, "tilt": 1, "direction": 1, "gap": 1,
+    # The magnetic heading of +x (app.core.heading) where the filter takes it from a field in
+    # the block; NaN otherwise (another filter's heading is arbitrary) and near vertical.
+    "heading": 1,
     # From the reference orientation when the source knows it (NaN otherwise):
     "ref_roll": 1, "ref_pitch": 1, "ref_tilt": 1, "incl_error": 1,
 }
@@ -228,7 +233,8 @@ class Pipeline:
             {
                 "t": block.t_s, "quat": shown_quat, "roll": angles.roll_deg,
                 "pitch": angles.pitch_deg, "tilt": angles.tilt_deg,
-                "direction": angles.direction_deg, "gap": block.gap, **ref_columns,
+                "direction": angles.direction_deg, "gap": block.gap,
+                "heading": self._heading(block, shown_quat), **ref_columns,
             }
         )
         if block.mag_ut is not None:
@@ -250,6 +256,22 @@ class Pipeline:
         self.counters.blocks += 1
         self.counters.filter_cpu_s += time.thread_time() - cpu_start
         return block
+
+    def takes_heading_from_field(self) -> bool:
+        """Whether the filter takes heading from the magnetometer now (a 9-axis filter with
+        its magnetometer switch on)."""
+        running = self.filter
+        if not running.uses_magnetometer:
+            return False
+        if any(spec.name == MAGNETOMETER_PARAMETER.name for spec in running.parameters):
+            return bool(running.get_parameter(MAGNETOMETER_PARAMETER.name))
+        return True
+
+    def _heading(self, block: SampleBlock, quat: np.ndarray) -> np.ndarray:
+        """The magnetic heading column of a block: NaN unless its heading comes from a field."""
+        if block.mag_ut is None or not self.takes_heading_from_field():
+            return np.full(len(block), np.nan)
+        return magnetic_heading_deg(quat)
 
     @property
     def has_field(self) -> bool:

@@ -74,6 +74,9 @@ class Scene:
 
     bodies: tuple[Body, ...] = ()
     arm: np.ndarray | None = None
+    earth_axes: bool = False
+    """Draw the earth frame's axes, labelled E, N and Up (ENU, y toward magnetic north): for
+    attitudes whose heading comes from the magnetometer, so the scene's directions are real."""
 
     def points(self) -> np.ndarray:
         parts = [b.corners() for b in self.bodies] + [b.axis_tips() for b in self.bodies]
@@ -90,15 +93,33 @@ class Scene:
         return center, max(radius, 1e-6)
 
 
-def sensors_scene(quaternions: Sequence[np.ndarray], labels: Sequence[str] = ()) -> Scene:
-    """Bodies for sensors side by side along the scene's y axis, each at its own attitude."""
+EARTH_AXES = (("earth_e", "E", (1.0, 0.0, 0.0)), ("earth_n", "N", (0.0, 1.0, 0.0)),
+              ("earth_up", "Up", (0.0, 0.0, 1.0)))
+"""The earth frame's axes (ENU, y toward magnetic north): colour key, label, direction."""
+
+
+def earth_axes_lines(scene: Scene) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
+    """The earth axes of a scene with :attr:`Scene.earth_axes`: (colour key, label, start, tip)
+    each, from the floor's south-west side (inside the framed sphere), 0.6 of its radius
+    long."""
+    center, radius = scene.bounds()
+    floor = float(scene.points()[:, 2].min())
+    origin = np.array([center[0] - 0.65 * radius, center[1] - 0.65 * radius, floor])
+    return [(key, label, origin, origin + 0.6 * radius * np.asarray(direction))
+            for key, label, direction in EARTH_AXES]
+
+
+def sensors_scene(quaternions: Sequence[np.ndarray], labels: Sequence[str] = (),
+                  earth_axes: bool = False) -> Scene:
+    """Bodies for sensors side by side along the scene's y axis, each at its own attitude
+    (with the earth frame's axes drawn when ``earth_axes``)."""
     n = len(quaternions)
     bodies = []
     for i, q in enumerate(quaternions):
         center = np.array([0.0, (i - 0.5 * (n - 1)) * BODY_SPACING, 0.0])
         label = labels[i] if i < len(labels) else ""
         bodies.append(Body(rotation_from_quaternion(q), center, label=label))
-    return Scene(tuple(bodies))
+    return Scene(tuple(bodies), earth_axes=earth_axes)
 
 
 def arm_scene(
@@ -204,8 +225,9 @@ def render_list(
     """The scene as 2D primitives for a ``width`` x ``height`` viewport, sorted far to near.
 
     Colour keys: ``body``, ``body_top`` (the board's +z face), ``axis_x/y/z``, ``arm``,
-    ``joint`` (a one-point line: a dot) and ``grid``; a labelled body's name comes last, a
-    'label' item (text centred under the board).
+    ``joint`` (a one-point line: a dot), ``grid`` and ``earth_e/n/up`` (the earth axes, with
+    'label' items E, N, Up at their tips); a labelled body's name comes last, a 'label' item
+    (text centred under the board).
     """
     center, radius = scene.bounds()
     projection = Projection(camera, center, radius, max(width, 1), max(height, 1))
@@ -245,7 +267,15 @@ def render_list(
         for i in range(len(scene.arm)):
             items.append(DrawItem("line", pixels[i:i + 1], float(depth[i]) + 1e-6,
                                   "end" if i == len(scene.arm) - 1 else "joint", width=12.0))
+    earth_labels = []
+    if scene.earth_axes:
+        for key, label, start, tip in earth_axes_lines(scene):
+            segment, seg_depth = projection.project(np.vstack([start, tip]))
+            items.append(DrawItem("line", segment, float(seg_depth.mean()), key, width=2.0))
+            earth_labels.append(DrawItem("label", segment[1:] + np.array([0.0, -16.0]),
+                                         math.inf, key, text=label))
     items.sort(key=lambda item: item.depth)
+    items.extend(earth_labels)
     for body in scene.bodies:  # each sensor's name under its board, on top of the drawing
         if body.label:
             pixels, _depth = projection.project(body.corners())

@@ -31,7 +31,8 @@ from app.core.alarms import (
 from app.gui import theme
 
 SPIN_MIN_WIDTH_PX = 84
-LIMIT_RANGE_DEG = {"tilt": (0.0, 180.0), "roll": (-180.0, 180.0), "pitch": (-90.0, 90.0),
+LIMIT_RANGE_DEG = {"heading": (-180.0, 180.0),
+                   "tilt": (0.0, 180.0), "roll": (-180.0, 180.0), "pitch": (-90.0, 90.0),
                    "level": (0.0, 90.0)}
 
 
@@ -80,13 +81,29 @@ class _AlarmRow:
             self.below.setVisible(False)
             self.above_on.setChecked(True)
             self.above_on.setEnabled(False)
+        self.centre: QDoubleSpinBox | None = None
+        self.centre_label: QLabel | None = None
+        if quantity == "heading":  # limits on the difference from a set heading
+            self.enabled.setToolTip("Alarm on the magnetic heading's difference from a set "
+                                    "heading (wraps round north)")
+            self.centre = _spin(0.0, 359.9, 1, "°", "The set heading (magnetic, clockwise "
+                                "from north)")
+            self.centre.setWrapping(True)
+            self.centre_label = QLabel("set")
+            self.centre_label.setObjectName("dimLabel")
+            self.below_on.setText("ccw")
+            self.below_on.setToolTip("Alarm when the heading is this far anticlockwise of it "
+                                     "(a negative difference)")
+            self.above_on.setText("cw")
+            self.above_on.setToolTip("Alarm when the heading is this far clockwise of it")
         self.below.setEnabled(False)
         self.below_on.toggled.connect(self.below.setEnabled)
         self.above_on.toggled.connect(self.above.setEnabled)
 
     def widgets(self) -> list[QWidget]:
+        extra = [] if self.centre is None else [self.centre]
         return [self.enabled, self.below_on, self.below, self.above_on, self.above,
-                self.hysteresis, self.delay, self.state]
+                self.hysteresis, self.delay, self.state, *extra]
 
     def place(self, grid: QGridLayout, row: int) -> None:
         """Three grid lines: the name and state, the limits, the hysteresis and delay."""
@@ -100,6 +117,9 @@ class _AlarmRow:
         grid.addWidget(self.hysteresis, row + 2, 1)
         grid.addWidget(self.delay_label, row + 2, 2)
         grid.addWidget(self.delay, row + 2, 3)
+        if self.centre is not None and self.centre_label is not None:
+            grid.addWidget(self.centre_label, row + 3, 0)
+            grid.addWidget(self.centre, row + 3, 1)
 
     def show(self, limit: AlarmLimit) -> None:
         self.enabled.setChecked(limit.enabled)
@@ -113,6 +133,8 @@ class _AlarmRow:
         self.above.setEnabled(self.above_on.isChecked())
         self.hysteresis.setValue(limit.hysteresis)
         self.delay.setValue(limit.delay_s)
+        if self.centre is not None and limit.centre is not None:
+            self.centre.setValue(limit.centre)
 
     def limit(self) -> AlarmLimit:
         """The row as an alarm (ValueError when its limits contradict each other)."""
@@ -122,6 +144,7 @@ class _AlarmRow:
             lower=self.below.value() if self.below_on.isChecked() else None,
             hysteresis=self.hysteresis.value(), delay_s=self.delay.value(),
             enabled=self.enabled.isChecked(),
+            centre=None if self.centre is None else self.centre.value() % 360.0,
         )
 
 
@@ -147,7 +170,8 @@ class AlarmPanel(QWidget):
             row = _AlarmRow(quantity)
             self.rows[quantity] = row
             row.place(grid, 4 * index)
-            grid.setRowMinimumHeight(4 * index + 3, 6)  # a gap between quantities
+            if row.centre is None:
+                grid.setRowMinimumHeight(4 * index + 3, 6)  # a gap between quantities
         grid.setColumnStretch(1, 1)
         grid.setColumnStretch(3, 1)
         layout.addLayout(grid)
@@ -164,7 +188,8 @@ class AlarmPanel(QWidget):
         for row in self.rows.values():
             for box in (row.enabled, row.below_on, row.above_on):
                 box.toggled.connect(self._on_edited)
-            for spin in (row.below, row.above, row.hysteresis, row.delay):
+            for spin in (row.below, row.above, row.hysteresis, row.delay,
+                         *([] if row.centre is None else [row.centre])):
                 spin.valueChanged.connect(self._on_edited)
         self.sound.toggled.connect(self._on_edited)
 

@@ -76,7 +76,8 @@ class AlarmsAndLog:
         window = self.window
         quantities = {quantity for quantity, _spec in alarms}
         window.readouts.setAlarm(READOUT_OF[q] for q in quantities)
-        window.level.setAlarm(bool(alarms))
+        window.compass.tile.setState("alarm", "heading" in quantities)
+        window.level.setAlarm(any(q != "heading" for q in quantities))
         self.alarm_panel.show_active(quantities)
         if alarms:
             listed = " · ".join(parse_alarm(spec).describe() for _q, spec in alarms)

@@ -37,11 +37,14 @@ from app.core.scene3d import (
     arm_scene,
     attitudes_differ,
     box_triangles,
+    earth_axes_lines,
     render_list,
     sensors_scene,
 )
 from app.gui import theme
 
+EARTH_LEGEND = "earth: E, N (magnetic), Up"
+"""The legend of the earth axes, drawn while the heading comes from the magnetometer."""
 REDRAW_THRESHOLD_DEG = 0.1
 """A turn smaller than this does not redraw (it moves nothing by a pixel at usual sizes)."""
 ARM_REDRAW_FRACTION = 1e-3
@@ -57,6 +60,9 @@ COLORS = {
     "joint": QColor(theme.TEXT),
     "end": QColor(theme.ALARM_RED),
     "grid": QColor(theme.PLOT_GRID),
+    "earth_e": QColor(theme.TEXT_DIM),
+    "earth_n": QColor(theme.ALARM_RED),
+    "earth_up": QColor(theme.TEXT_DIM),
 }
 
 
@@ -148,6 +154,9 @@ class PainterCanvas(QWidget):
             painter.setPen(COLORS[key])
             painter.drawText(x, 20, name)
             x += 16
+        if self.scene.earth_axes:
+            painter.setPen(COLORS["earth_e"])
+            painter.drawText(x + 8, 20, EARTH_LEGEND)
 
     # -- mouse: turn and zoom -------------------------------------------------------------------
     def mousePressEvent(self, event: QMouseEvent) -> None:
@@ -212,7 +221,8 @@ def _gl_canvas_class():
 
         def set_scene(self, scene: Scene) -> None:
             """Show a scene: items are updated in place while its make-up stays the same."""
-            shape = (len(scene.bodies), scene.arm is not None and len(scene.arm))
+            shape = (len(scene.bodies), scene.arm is not None and len(scene.arm),
+                     scene.earth_axes)
             if shape != self._shape:
                 for item in self._items:
                     self.removeItem(item)
@@ -231,6 +241,10 @@ def _gl_canvas_class():
             if scene.arm is not None:
                 next(items).setData(pos=scene.arm - center)
                 next(items).setData(pos=scene.arm - center)
+            if scene.earth_axes:
+                for _key, label, start, tip in earth_axes_lines(scene):
+                    next(items).setData(pos=np.vstack([start, tip]) - center)
+                    next(items).setData(pos=tip - center, text=label)
             if radius != self._radius:  # a new size: frame it again
                 self._radius = radius
                 spacing = radius / 4
@@ -258,6 +272,11 @@ def _gl_canvas_class():
                 items.append(gl.GLLinePlotItem(color=COLORS["arm"].getRgbF(), width=6.0,
                                                antialias=True))
                 items.append(gl.GLScatterPlotItem(color=COLORS["joint"].getRgbF(), size=10.0))
+            if scene.earth_axes:
+                for key, _label, _start, _tip in earth_axes_lines(scene):
+                    items.append(gl.GLLinePlotItem(color=COLORS[key].getRgbF(), width=2.0,
+                                                   antialias=True))
+                    items.append(gl.GLTextItem(color=COLORS[key]))
             return items
 
     return GLCanvas
@@ -302,6 +321,7 @@ class AttitudeView(QWidget):
         layout.addLayout(row)
         self._quaternions: list[np.ndarray] | None = None
         self._labels: tuple[str, ...] = ()
+        self._earth_frame = False
         self._arm: tuple[np.ndarray, np.ndarray, tuple[int, ...] | None] | None = None
         self.redraws = 0
         self._redraw_pending = False
@@ -355,6 +375,16 @@ class AttitudeView(QWidget):
         if self.showing_arm or first:
             self._redraw()
 
+    def set_earth_frame(self, on: bool) -> None:
+        """Whether the attitudes' heading is real (a filter taking it from the magnetometer):
+        the earth's E, N and Up axes are drawn then."""
+        if bool(on) != self._earth_frame:
+            self._earth_frame = bool(on)
+            self._redraw()
+
+    def earth_frame(self) -> bool:
+        return self._earth_frame
+
     def clear_arm(self) -> None:
         self._arm = None
         self.arm_box.setEnabled(False)
@@ -378,7 +408,7 @@ class AttitudeView(QWidget):
         if self.showing_arm:
             scene = arm_scene(*self._arm)
         elif self._quaternions:
-            scene = sensors_scene(self._quaternions, self._labels)
+            scene = sensors_scene(self._quaternions, self._labels, self._earth_frame)
         else:
             scene = Scene()
         self.redraws += 1

@@ -10,7 +10,13 @@ from typing import Any
 
 from PySide6.QtCore import Qt
 
-from app.gui.level_view import INSTRUMENT_MAX_PX, READOUT_MAX_PX, READOUT_MIN_PX
+from app.gui.level_view import (
+    INSTRUMENT_MAX_PX,
+    LEVEL_SHARE,
+    READOUT_MAX_PX,
+    READOUT_MIN_PX,
+    SIDE_SHARE,
+)
 
 MainWindow = Any
 """The window this part works for (not imported: the parts sit below
@@ -56,7 +62,7 @@ class InstrumentMode:
                        *self._chrome()):
             widget.hide()
         window.readouts.setAutoScale(True, INSTRUMENT_MAX_PX, READOUT_MIN_PX, (1, 2))
-        window.level_view.set_level_share(1, 1)
+        window.level_view.set_level_share(1, 1, compass=0)  # the bubble and the digits only
         window.showFullScreen()
 
     def _leave(self) -> None:
@@ -64,7 +70,7 @@ class InstrumentMode:
         saved = self.saved or {}
         self.saved = None
         window.readouts.setAutoScale(True, READOUT_MAX_PX, READOUT_MIN_PX, (2, 1))
-        window.level_view.set_level_share(3, 2)
+        window.level_view.set_level_share(LEVEL_SHARE, SIDE_SHARE)
         window_state = saved.get("window_state", Qt.WindowState.WindowNoState)
         if window_state & Qt.WindowState.WindowFullScreen:
             window.showFullScreen()

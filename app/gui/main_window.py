@@ -39,9 +39,11 @@ from app.gui.device_bar import DeviceBar
 from app.gui.device_events import DeviceEvents
 from app.gui.device_panel import DevicePanel
 from app.gui.docks import DockLayout
+from app.gui.feeds.heading import HeadingFeed
 from app.gui.field_view import FieldPresenter, FieldView
 from app.gui.file_actions import FileActions, recordings_dir
 from app.gui.filter_panel import FilterPanel
+from app.gui.heading_controls import HeadingControls
 from app.gui.help_dialogs import HelpWindows
 from app.gui.instrument_mode import InstrumentMode
 from app.gui.joint_panel import JointPanel
@@ -140,6 +142,7 @@ class MainWindow(QMainWindow):
             view.controls
         self.unit_combo, self.averaging_combo = view.unit_combo, view.averaging_combo
         self.range_combo, self.hold_button = view.range_combo, view.hold_button
+        self.compass, self.heading_bar = view.compass, view.heading_bar
         self.plots = LivePlots()
         self.plots_dock = PlotsDock(
             self.plots, lambda start, end: self.presenter.range_statistics(start, end))
@@ -178,6 +181,19 @@ class MainWindow(QMainWindow):
         self.field_presenter.problem.connect(self.show_error)
         self.sections.register("field_reference", self.field_presenter.settings_dict,
                                self.field_presenter.apply_settings)
+        # The compass: its heading shares the readouts' window, its light the Field dock's
+        # reference; its settings are a section, the declination goes with recordings.
+        self.heading_feed = HeadingFeed(self.compass, session,
+                                        lambda: self.field_presenter.reference)
+        self.presenter.attach_heading(self.heading_feed)
+        # The 3D view in the earth frame (E, N, Up) while the main device's heading is real.
+        self.heading_feed.on_earth_frame = lambda on: self.attitude_view.set_earth_frame(
+            on and not self.joint_panel.has_sensors)
+        self.heading_controls = HeadingControls(self.heading_bar, self)
+        self.heading_controls.settingsChanged.connect(self._on_heading_settings)
+        self.heading_controls.declinationChanged.connect(session.requestDeclination)
+        self.sections.register("heading", self.heading_controls.settings_dict,
+                               self.heading_controls.apply_settings)
         self.presenter.framesPerSecond.connect(status.show_fps)
         self.hold_button.toggled.connect(lambda on: self.presenter.set_hold(on))
         self.health_lights.resetRequested.connect(events.reset_health)
@@ -241,6 +257,10 @@ class MainWindow(QMainWindow):
         connection with the window)."""
         self.status_view.restyle()
 
+    def _on_heading_settings(self, settings) -> None:
+        self.heading_feed.set_settings(settings)
+        self.presenter.clock.wake()
+
     def _on_display_changed(self) -> None:
         display = self.presenter.settings
         display.unit = self.unit_combo.currentData()
@@ -278,8 +298,12 @@ class MainWindow(QMainWindow):
         self.messages.appendPlainText(f"{stamp}  {'ERROR  ' if error else ''}{message}")
 
     def copy_reading(self) -> str:
-        """Put the reading shown (roll, pitch, tilt in the chosen units) on the clipboard."""
+        """Put the reading shown (roll, pitch, tilt in the chosen units, and the heading when
+        the compass shows one) on the clipboard."""
         text = self.readouts.reading()
+        heading = self.compass.tile.reading().clipboard_text()
+        if text and heading:
+            text = f"{text} {heading}"
         if not text:
             self.statusBar().showMessage("No reading to copy", 3000)
             return ""

@@ -10,6 +10,7 @@ exported as CSV.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 from PySide6.QtCore import QEvent, Qt, Signal
@@ -33,8 +34,8 @@ from app.gui import theme
 from app.gui.file_dialogs import save_file_name
 
 UNIT_SUFFIX = {"deg": "°", "percent": " %", "mm/m": " mm/m"}
-HEADERS = ("Time", "Label", "Roll", "Pitch", "Tilt", "Direction", "Window", "Filter",
-           "Calibration", "Device")
+HEADERS = ("Time", "Label", "Roll", "Pitch", "Tilt", "Direction", "Heading", "Window",
+           "Filter", "Calibration", "Device")
 LABEL_COLUMN = 1
 LABEL_WIDTH_PX = 200
 
@@ -42,6 +43,15 @@ LABEL_WIDTH_PX = 200
 def _angle(value: float, spread: float, unit: str) -> str:
     suffix = UNIT_SUFFIX.get(unit, f" {unit}")
     return f"{value:+.3f} ± {spread:.3f}{suffix}"
+
+
+def _heading(entry: Measurement) -> str:
+    """``123.4 ± 0.2° true``, ``2187 ± 3 mil magnetic``; a dash without a heading."""
+    if not math.isfinite(entry.heading):
+        return "—"
+    if entry.heading_unit == "mil":
+        return f"{entry.heading:.0f} ± {entry.heading_std:.0f} mil {entry.heading_north}"
+    return f"{entry.heading:.1f} ± {entry.heading_std:.1f}° {entry.heading_north}"
 
 
 class _LogTable(QTableWidget):
@@ -210,7 +220,8 @@ class MeasurementLogPanel(QWidget):
                     _angle(entry.roll, entry.roll_std, entry.unit),
                     _angle(entry.pitch, entry.pitch_std, entry.unit),
                     _angle(entry.tilt, entry.tilt_std, entry.unit),
-                    f"{entry.direction_deg:.1f}°", f"{entry.window_s:g} s · {entry.samples}",
+                    f"{entry.direction_deg:.1f}°", _heading(entry),
+                    f"{entry.window_s:g} s · {entry.samples}",
                     entry.filter, entry.calibration, entry.device.split(" (")[0],
                 )
                 for c, text in enumerate(texts):
@@ -223,7 +234,7 @@ class MeasurementLogPanel(QWidget):
                         item.setForeground(QBrush(QColor(theme.WARN_AMBER)))
                         if c != len(texts) - 1:
                             item.setToolTip(entry.warning)
-                    if 2 <= c <= 6:
+                    if 2 <= c <= 7:
                         item.setTextAlignment(Qt.AlignmentFlag.AlignRight
                                               | Qt.AlignmentFlag.AlignVCenter)
                     self.table.setItem(r, c, item)

@@ -18,11 +18,12 @@ import time
 from PySide6.QtCore import QObject, Signal
 from PySide6.QtWidgets import QLabel
 
-from app.core.measurement_log import Measurement
+from app.core.measurement_log import Measurement, with_heading
 from app.core.readout import averaged_angles
 from app.gui.bubble_level import BubbleLevel
 from app.gui.feeds.errors import ErrorTableFeed
 from app.gui.feeds.frame import Frame
+from app.gui.feeds.heading import HeadingFeed
 from app.gui.feeds.level import LevelFeed
 from app.gui.feeds.plots import PLOT_DATA_INTERVAL_S, SETTLE_REBUILD_S, PlotFeed
 from app.gui.feeds.readouts import DisplaySettings, ReadoutFeed
@@ -74,6 +75,8 @@ class LivePresenter(QObject):
         """The last full frame's key, until when nothing falls due, and whether it had
         something pending."""
         self._averaged_cache: tuple[tuple, object] | None = None
+        self.heading_feed: HeadingFeed | None = None
+        """The compass's feed, once the window attached one (:meth:`attach_heading`)."""
         if isinstance(session, DeviceSession):  # (tests drive a bare pipeline)
             session.disconnected.connect(self.show_stale)
             session.reconnecting.connect(self.show_stale)
@@ -96,6 +99,10 @@ class LivePresenter(QObject):
                             doc="How often new samples were drawn onto the plots.")
     _level_key = property(lambda self: self.level_feed.key)
 
+    def attach_heading(self, feed: HeadingFeed) -> None:
+        """Feed the compass too (its heading shares the readouts' averaging window)."""
+        self.heading_feed = feed
+
     def start(self) -> None:
         self.clock.start()
 
@@ -113,8 +120,14 @@ class LivePresenter(QObject):
         self.clock.wake()
 
     def current_reading(self, label: str = "") -> Measurement | None:
-        """The reading the readouts show (see :meth:`ReadoutFeed.current_reading`)."""
-        return self.readout_feed.current_reading(label)
+        """The reading the readouts show (see :meth:`ReadoutFeed.current_reading`), with the
+        compass's heading over the same samples."""
+        reading = self.readout_feed.current_reading(label)
+        if reading is None or self.heading_feed is None:
+            return reading
+        quat = self.readout_feed.reading_quat()
+        return with_heading(reading, quat,
+                            self.heading_feed.reading_for(quat, self.settings.hold))
 
     def range_statistics(self, start_rel_s: float, end_rel_s: float):
         """Statistics of roll, pitch and tilt over a range relative to the newest sample."""
@@ -146,10 +159,13 @@ class LivePresenter(QObject):
             self._count_frame(drew)
             return drew or self._quiet[2]
         self._no_data_shown = False
+        key = (total, self.settings.unit, self.settings.averaging_s)
         if not self.settings.hold:
-            key = (total, self.settings.unit, self.settings.averaging_s)
             self.level_feed.frame(frame, key, lambda: self._averaged(orientation))
             self.readout_feed.frame(frame, key, lambda: self._averaged(orientation))
+        if self.heading_feed is not None:
+            self.heading_feed.frame(frame, key, lambda: self._averaged_quat(orientation),
+                                    self.settings.hold)
         self.plot_feed.frame(frame, total, self.plots_enabled)
         self.error_feed.frame(frame, total)
         self._count_frame(frame.drew)
@@ -165,9 +181,10 @@ class LivePresenter(QObject):
         settings = self.settings
         # Runs every frame: one Qt call (plots shown or not; a resize is taken care of by
         # the next block's frame, and the plots repaint themselves meanwhile).
+        heading = None if self.heading_feed is None else self.heading_feed.settings
         return (total, settings.unit, settings.averaging_s, settings.hold,
                 self.plots.window_s, self.plots.isVisible(),
-                len(self.session.pipeline.comparison_buffers), self.plots_enabled)
+                len(self.session.pipeline.comparison_buffers), self.plots_enabled, heading)
 
     def _show_no_data(self) -> bool:
         """Dashes and an empty vial, once per stretch without data; True when it drew."""
@@ -176,6 +193,8 @@ class LivePresenter(QObject):
         self._no_data_shown = True
         self.level_feed.clear()
         self.readout_feed.clear()
+        if self.heading_feed is not None:
+            self.heading_feed.clear()
         self.error_feed.key = None
         self.plot_feed.clear()
         return True
@@ -194,6 +213,11 @@ class LivePresenter(QObject):
         result = None if angles is None else (recent, angles)
         self._averaged_cache = (key, result)
         return result
+
+    def _averaged_quat(self, orientation):
+        """The quaternions of the newest averaging window (None: no attitude)."""
+        averaged = self._averaged(orientation)
+        return None if averaged is None else averaged[0]["quat"]
 
     def _count_frame(self, drew: bool) -> None:
         if drew:

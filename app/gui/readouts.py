@@ -292,7 +292,9 @@ class TiltReadouts(QWidget):
             QFontMetricsF(font).height()
             for font in (_readout_font(100), _readout_font(30), _readout_font(28))
         )
-        self._per_px = (width_100 / 100.0, height_100 / 100.0)
+        self._digits_per_px = (width_100 / 100.0, height_100 / 100.0)
+        self._per_px = self._digits_per_px
+        self._measure_notes()
         theme.notifier().changed.connect(self._restore_fonts)
 
         self._hold_badge = QLabel("HOLD", self)
@@ -539,6 +541,23 @@ class TiltReadouts(QWidget):
             stale_badge.setFont(badge_font)
         self._place_hold_badge()
 
+    def _measure_notes(self) -> None:
+        """Room across per pixel of digit size: the digits' and unit's, or a tile's note line
+        (note and raised side, in the font the tiles give it: 0.3 of the digit size) where that
+        is wider. Measured in the widget's font (a theme may change it), so a note is never cut
+        when the digits fill the width."""
+        note_font = QFont(self._tiles["roll"].font())  # the tiles' notes derive from it
+        note_font.setPixelSize(30)
+        side_font = QFont(note_font)
+        side_font.setBold(True)
+        note_metrics, side_metrics = QFontMetricsF(note_font), QFontMetricsF(side_font)
+        side = max(side_metrics.horizontalAdvance(text) for text in (*_SIDES, NO_VALUE))
+        notes = max(note_metrics.horizontalAdvance(_NOTES[name])
+                    + (8 * 100 / 28 + side if name == "direction" else 0.0)
+                    for name in QUANTITIES)
+        # The note row's 8 px gap is fixed, not scaled: counted at the smallest digits (28 px).
+        self._per_px = (max(self._digits_per_px[0], notes / 100.0), self._digits_per_px[1])
+
     def _restore_fonts(self, _theme_name: str = "") -> None:
         """After a theme switch: a new application stylesheet puts back the fonts the labels
         had when they were first styled, so size them again; and the raised side's colour
@@ -547,6 +566,8 @@ class TiltReadouts(QWidget):
             tile.setValuePixelSize(self._value_px)
         self._size_badge()
         self._show_texts()
+        self._measure_notes()
+        self._fit_digits()
 
     def _set_value_px(self, value_px: int) -> None:
         if value_px == self._value_px:

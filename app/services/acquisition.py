@@ -32,6 +32,7 @@ from app.core.calibration import SensorCalibration
 from app.core.devices import BoardStatus, DeviceInfo
 from app.core.faults import FaultEvent
 from app.core.faults.recording import KEY_FAULT_EVENTS
+from app.core.heading import KEY_HEADING, Declination, heading_metadata
 from app.core.lookalike import LookAlikeCheck
 from app.core.pipeline import Pipeline
 from app.core.recording.closing import store_closing_metadata
@@ -212,6 +213,9 @@ class Acquisition:
         self.board = BoardHealth()
         self.lookalike = LookAlikeCheck()
         self.alarms = alarms or AlarmMonitor()
+        self.declination: Declination | None = None
+        """The declination in force (the heading's true north), stored with a recording under
+        the ``heading`` metadata key; None: not set, the key is left out."""
         self.calibration = calibration
         self.detect_faults = detect_faults
         self.check_lookalike = check_lookalike
@@ -459,6 +463,8 @@ class Acquisition:
         alarms = [limit.spec() for limit in self.alarms.config.enabled]
         if alarms:
             extra["alarms"] = alarms
+        if self.declination is not None and KEY_HEADING not in extra:
+            extra[KEY_HEADING] = heading_metadata(self.declination)
         status = self.recording.start(device, self.pipeline, str(path), note, extra=extra,
                                       overwrite=overwrite, lock=lock, on_flush=on_flush,
                                       calibration=self.calibration)

@@ -39,6 +39,7 @@ REQUESTS: dict[str, str] = {
     "requestHealthReset": "reset_health",
     "requestAlarms": "set_alarms",  # AlarmConfig
     "requestLsl": "set_lsl",  # on: stream over Lab Streaming Layer
+    "requestDeclination": "set_declination",  # Declination or None
 }
 """The session's request signals and the worker slots they are queued to (GUI -> worker)."""
 

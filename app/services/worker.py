@@ -19,6 +19,7 @@ from PySide6.QtCore import QObject, QTimer, Signal, Slot
 
 from app.core.alarms import AlarmConfig, AlarmMonitor
 from app.core.calibration_procedures import CalibrationProfile, ProfileStore, TareReference
+from app.core.heading import Declination
 from app.core.pipeline import Pipeline
 from app.core.recording import RecordingError
 from app.services.acquisition import Acquisition
@@ -358,6 +359,11 @@ class DeviceWorker(QObject):
             self.error.emit(str(exc))
             return
         self.tareChanged.emit(reference)
+
+    @Slot(object)
+    def set_declination(self, declination: Declination | None) -> None:
+        """The declination the window's heading uses, stored with the next recordings."""
+        self.acquisition.declination = declination
 
     @Slot(object)
     def set_tare(self, reference: TareReference | None) -> None:

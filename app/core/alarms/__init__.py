@@ -29,6 +29,14 @@ The text form (``record --alarm``)::
     |pitch|>1                       pitch above +1 or below -1 degrees
     roll>2,roll<-1                  both limits on roll
     level>0.5                       out of level: tilt beyond 0.5 degrees
+    heading:350..10                 magnetic heading outside the sector 350 to 10 (clockwise)
+    |heading-45|>5                  magnetic heading more than 5 degrees off 45, either way
+    heading-45>5                    more than 5 degrees clockwise of 45 (<-5: anticlockwise)
+
+A heading alarm watches the pipeline's ``heading`` column (the magnetic heading of +x, NaN
+without a 9-axis filter taking it from a field, or near vertical: no raise, no clear) as its
+difference from the set heading, wrapped into -180 ... 180 degrees, so a sector across north
+works.
 
 Options: ``hyst`` (degrees, default 0.1) and ``delay`` (seconds, default 0.5).
 """

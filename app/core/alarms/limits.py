@@ -9,15 +9,23 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
-QUANTITIES: tuple[str, ...] = ("tilt", "roll", "pitch", "level")
+import numpy as np
+
+QUANTITIES: tuple[str, ...] = ("tilt", "roll", "pitch", "level", "heading")
 """What an alarm can watch, in the order the alarm panel lists them."""
-QUANTITY_TITLES = {"tilt": "Tilt", "roll": "Roll", "pitch": "Pitch", "level": "Out of level"}
-READOUT_OF = {"tilt": "tilt", "roll": "roll", "pitch": "pitch", "level": "tilt"}
+QUANTITY_TITLES = {"tilt": "Tilt", "roll": "Roll", "pitch": "Pitch", "level": "Out of level",
+                   "heading": "Heading"}
+READOUT_OF = {"tilt": "tilt", "roll": "roll", "pitch": "pitch", "level": "tilt",
+              "heading": "heading"}
 """The readout (and pipeline column) each quantity is computed from."""
 DEFAULT_HYSTERESIS_DEG = 0.1
 DEFAULT_DELAY_S = 0.5
 MAX_DELAY_S = 3600.0
 
+_HEADING_SECTOR_RE = re.compile(r"^heading:(?P<start>[-+]?[\d.]+)\.\.(?P<end>[-+]?[\d.]+)$")
+_HEADING_OFF_RE = re.compile(
+    r"^(?P<abs>\|)?heading-(?P<centre>[-+]?[\d.]+)(?(abs)\|)\s*(?P<op>[<>])\s*"
+    r"(?P<value>[-+]?[\d.]+)$")
 _LIMIT_RE = re.compile(
     r"^(?P<abs>\|)?(?P<quantity>[a-z]+)(?(abs)\|)\s*(?P<op>[<>])\s*(?P<value>[-+]?[\d.]+(?:e[-+]?\d+)?)$"
 )
@@ -33,11 +41,19 @@ class AlarmLimit:
     hysteresis: float = DEFAULT_HYSTERESIS_DEG
     delay_s: float = DEFAULT_DELAY_S
     enabled: bool = True
+    centre: float | None = None
+    """A heading alarm's set heading (magnetic, degrees clockwise from north): its limits are
+    on the heading's difference from it, wrapped into -180 ... 180 (positive clockwise)."""
 
     def __post_init__(self) -> None:
         if self.quantity not in QUANTITIES:
             raise ValueError(f"no alarm quantity {self.quantity!r}; choose from "
                              f"{', '.join(QUANTITIES)}")
+        if (self.quantity == "heading") != (self.centre is not None):
+            raise ValueError("a heading alarm, and only it, needs the set heading")
+        if self.centre is not None and not (math.isfinite(self.centre)
+                                            and 0.0 <= self.centre < 360.0):
+            raise ValueError(f"heading: the set heading {self.centre} is outside 0 ... 360°")
         for name in ("upper", "lower"):
             value = getattr(self, name)
             if value is not None and not math.isfinite(value):
@@ -55,6 +71,14 @@ class AlarmLimit:
         if not (math.isfinite(self.delay_s) and 0 <= self.delay_s <= MAX_DELAY_S):
             raise ValueError(f"{self.quantity}: delay must be 0 to {MAX_DELAY_S:g} s")
 
+    def values(self, angles: Mapping[str, Any]) -> Any:
+        """This alarm's quantity per sample from the pipeline's columns (degrees): the column
+        itself, or for a heading its wrapped difference from the set heading."""
+        values = np.asarray(angles[self.readout], dtype=np.float64)
+        if self.centre is None:
+            return values
+        return np.mod(values - self.centre + 180.0, 360.0) - 180.0
+
     @property
     def readout(self) -> str:
         """The readout this alarm turns red (``level`` is a tilt alarm)."""
@@ -65,6 +89,14 @@ class AlarmLimit:
         beyond 0.5°)``."""
         if self.quantity == "level":
             return f"out of level (tilt beyond {self.upper:g}°)"
+        if self.centre is not None:
+            if self.upper is not None and self.lower is not None:
+                start, end = (self.centre + self.lower) % 360.0, (self.centre + self.upper) % 360.0
+                return f"magnetic heading outside {start:g}° to {end:g}° (clockwise)"
+            if self.upper is not None:
+                return f"magnetic heading more than {self.upper:g}° clockwise of {self.centre:g}°"
+            return f"magnetic heading more than {-self.lower:g}° anticlockwise of " \
+                   f"{self.centre:g}°"  # type: ignore[operator]
         if self.upper is not None and self.lower is not None:
             return f"{self.quantity} outside {self.lower:g}° to {self.upper:g}°"
         if self.upper is not None:
@@ -74,13 +106,14 @@ class AlarmLimit:
     def spec(self) -> str:
         """The text form, e.g. ``tilt>2,hyst=0.2,delay=0.5`` (:func:`parse_alarm` reads it)."""
         parts = []
+        name = self.quantity if self.centre is None else f"heading-{self.centre:g}"
         if self.upper is not None and self.lower is not None and self.lower == -self.upper:
-            parts.append(f"|{self.quantity}|>{self.upper:g}")
+            parts.append(f"|{name}|>{self.upper:g}")
         else:
             if self.upper is not None:
-                parts.append(f"{self.quantity}>{self.upper:g}")
+                parts.append(f"{name}>{self.upper:g}")
             if self.lower is not None:
-                parts.append(f"{self.quantity}<{self.lower:g}")
+                parts.append(f"{name}<{self.lower:g}")
         parts.append(f"hyst={self.hysteresis:g}")
         parts.append(f"delay={self.delay_s:g}")
         return ",".join(parts)
@@ -109,7 +142,8 @@ class AlarmLimit:
         delay = number("delay_s", DEFAULT_DELAY_S)
         return cls(str(data.get("quantity", "")), number("upper", None), number("lower", None),
                    DEFAULT_HYSTERESIS_DEG if hysteresis is None else hysteresis,
-                   DEFAULT_DELAY_S if delay is None else delay, enabled)
+                   DEFAULT_DELAY_S if delay is None else delay, enabled,
+                   number("centre", None))
 
 
 def parse_alarm(text: str) -> AlarmLimit:
@@ -118,6 +152,7 @@ def parse_alarm(text: str) -> AlarmLimit:
     quantity: str | None = None
     upper: float | None = None
     lower: float | None = None
+    centre: float | None = None
     options = {"hyst": DEFAULT_HYSTERESIS_DEG, "delay": DEFAULT_DELAY_S}
     for raw_part in text.split(","):
         part = raw_part.strip().lower().replace(" ", "")
@@ -132,11 +167,23 @@ def parse_alarm(text: str) -> AlarmLimit:
             except ValueError:
                 raise ValueError(f"alarm {text!r}: {key}={value!r} is not a number") from None
             continue
+        heading = _heading_limits(text, part)
+        if heading is not None:
+            if quantity is not None and (quantity != "heading" or heading[0] != centre):
+                raise ValueError(f"alarm {text!r}: one quantity (and one set heading) per alarm")
+            quantity = "heading"
+            centre, new_upper, new_lower = heading
+            upper = new_upper if new_upper is not None else upper
+            lower = new_lower if new_lower is not None else lower
+            continue
         match = _LIMIT_RE.match(part)
         if match is None:
             raise ValueError(f"alarm {text!r}: cannot read {raw_part.strip()!r}; write e.g. "
                              "tilt>2, roll<-1.5, |pitch|>1 or level>0.5")
         name = match["quantity"]
+        if name == "heading":
+            raise ValueError(f"alarm {text!r}: a heading alarm is 'heading:FROM..TO' (outside "
+                             "a sector), '|heading-SET|>DEG' or 'heading-SET>DEG'")
         if name not in QUANTITIES:
             raise ValueError(f"alarm {text!r}: no quantity {name!r}; choose from "
                              f"{', '.join(QUANTITIES)}")
@@ -152,7 +199,29 @@ def parse_alarm(text: str) -> AlarmLimit:
             lower = limit
     if quantity is None:
         raise ValueError(f"alarm {text!r}: no limit; write e.g. tilt>2")
-    return AlarmLimit(quantity, upper, lower, options["hyst"], options["delay"])
+    return AlarmLimit(quantity, upper, lower, options["hyst"], options["delay"],
+                      centre=centre)
+
+
+def _heading_limits(text: str, part: str) -> tuple[float, float | None, float | None] | None:
+    """A heading term's (set heading, upper, lower) (None: not a heading term): a sector
+    ``heading:FROM..TO`` (clockwise from FROM to TO; the alarm is outside it), or the difference
+    from a set heading, ``|heading-SET|>DEG``, ``heading-SET>DEG`` (clockwise of it),
+    ``heading-SET<-DEG`` (anticlockwise)."""
+    sector = _HEADING_SECTOR_RE.match(part)
+    if sector is not None:
+        start, end = float(sector["start"]) % 360.0, float(sector["end"]) % 360.0
+        width = (end - start) % 360.0
+        if not 0.0 < width < 360.0:
+            raise ValueError(f"alarm {text!r}: the sector {part!r} is empty")
+        return (start + width / 2.0) % 360.0, width / 2.0, -width / 2.0
+    match = _HEADING_OFF_RE.match(part)
+    if match is None:
+        return None
+    centre, limit = float(match["centre"]) % 360.0, float(match["value"])
+    if match["abs"]:
+        return centre, abs(limit), -abs(limit)
+    return (centre, limit, None) if match["op"] == ">" else (centre, None, limit)
 
 
 @dataclass(frozen=True, slots=True)
@@ -191,6 +260,7 @@ def default_alarm_config() -> AlarmConfig:
         AlarmLimit("roll", upper=2.0, lower=-2.0, enabled=False),
         AlarmLimit("pitch", upper=2.0, lower=-2.0, enabled=False),
         AlarmLimit("level", upper=0.5, enabled=False),
+        AlarmLimit("heading", upper=10.0, lower=-10.0, enabled=False, centre=0.0),
     ))
 
 

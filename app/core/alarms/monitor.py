@@ -138,7 +138,7 @@ class AlarmMonitor:
             self.reset()
         events: list[AlarmEvent] = []
         for state in self._states:
-            values = np.asarray(angles[state.limit.readout], dtype=np.float64)
+            values = state.limit.values(angles)
             events.extend(_run(state, t, values))
         self._last_t = float(t[-1])
         events.sort(key=lambda e: e.t)
@@ -147,10 +147,11 @@ class AlarmMonitor:
 
     def update_from_buffer(self, orientation: Any, count: int) -> list[AlarmEvent]:
         """Run the newest ``count`` rows of the pipeline's orientation ring buffer (what the
-        pipeline just wrote for a block): :meth:`update` on its t, roll, pitch, tilt."""
+        pipeline just wrote for a block): :meth:`update` on its t, roll, pitch, tilt and
+        heading."""
         if not self._states or count <= 0:
             return []
-        rows = orientation.latest(count, ["t", "roll", "pitch", "tilt"])
+        rows = orientation.latest(count, ["t", "roll", "pitch", "tilt", "heading"])
         return self.update(rows["t"], rows)
 
     # -- a recording's events -----------------------------------------------------------------

@@ -116,14 +116,20 @@ class ReadoutFeed:
         self.readouts.setValid(False)
         self.truth_label.setText("")
 
+    def reading_quat(self) -> np.ndarray:
+        """The quaternions behind the reading shown: held, or the averaging time up to now."""
+        quat = self.shown_quat
+        if not self.settings.hold or quat is None:
+            quat = self.session.pipeline.orientation.window(self.settings.averaging_s,
+                                                            ["quat"])["quat"]
+        return quat
+
     def current_reading(self, label: str = "") -> Measurement | None:
         """The reading the readouts show (held, or over the averaging time up to now) with its
         mean and standard deviation, unit, filter, calibration and device; None without data."""
         settings, session = self.settings, self.session
         info = session.device_info
-        quat = self.shown_quat
-        if not settings.hold or quat is None:
-            quat = session.pipeline.orientation.window(settings.averaging_s, ["quat"])["quat"]
+        quat = self.reading_quat()
         if info is None and not settings.hold:
             return None
         pipeline = session.pipeline
