@@ -161,9 +161,8 @@ def averaged_heading(quat: np.ndarray) -> AveragedHeading | None:
     heading, elevation = heading_from_vector(mean)
     lengths = float(np.hypot(pointing[:, 0], pointing[:, 1]).mean())
     concentration = float(np.hypot(mean[0], mean[1])) / lengths if lengths > 0 else 0.0
-    if concentration < MIN_CONCENTRATION:
-        heading = np.nan
-    return AveragedHeading(float(heading), float(elevation), concentration)
+    value = float(heading) if concentration >= MIN_CONCENTRATION else math.nan
+    return AveragedHeading(value, float(elevation), concentration)
 
 
 # -- declination -------------------------------------------------------------------------------

@@ -155,9 +155,10 @@ def _stream_sensor(device: SimulatedDevice, wanted: int) -> _Stream:
         raise session.ended.error
     mag = (None if blocks[0].mag_ut is None
            else np.concatenate([b.mag_ut for b in blocks])[:wanted])  # type: ignore[misc]
-    return _Stream(info, *(np.concatenate([getattr(b, name) for b in blocks])[:wanted]
-                           for name in ("t_s", "accel_m_s2", "gyro_rad_s", "temp_degc",
-                                        "reference_quat")), mag)
+    t, accel, gyro, temp, ref = (np.concatenate([getattr(b, name) for b in blocks])[:wanted]
+                                 for name in ("t_s", "accel_m_s2", "gyro_rad_s", "temp_degc",
+                                              "reference_quat"))
+    return _Stream(info, t, accel, gyro, temp, ref, mag)
 
 
 def _record_sensor(device: SimulatedDevice, sensor: int, seconds: float,

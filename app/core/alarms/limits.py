@@ -95,8 +95,8 @@ class AlarmLimit:
                 return f"magnetic heading outside {start:g}° to {end:g}° (clockwise)"
             if self.upper is not None:
                 return f"magnetic heading more than {self.upper:g}° clockwise of {self.centre:g}°"
-            return f"magnetic heading more than {-self.lower:g}° anticlockwise of " \
-                   f"{self.centre:g}°"  # type: ignore[operator]
+            below = -(self.lower or 0.0)
+            return f"magnetic heading more than {below:g}° anticlockwise of {self.centre:g}°"
         if self.upper is not None and self.lower is not None:
             return f"{self.quantity} outside {self.lower:g}° to {self.upper:g}°"
         if self.upper is not None:

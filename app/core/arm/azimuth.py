@@ -205,7 +205,7 @@ def measure_theta(layout: ArmLayout, captures: Sequence[LinkCapture | None],
     if notes:  # a link moving or in a disturbed field: the whole placement is wrong
         return _refused(n, "; ".join(notes))
     ups = [None if c is None or c.up is None else c.up for c in captures]
-    known = list(known_deg) if known_deg is not None else [None] * n
+    known: list[float | None] = list(known_deg) if known_deg is not None else [None] * n
     known[0] = 0.0
     angles, _observed = joint_angles_from_gravity(layout, ups, known)
     rotations = forward(layout, angles).rotations
@@ -279,7 +279,7 @@ def placement_pose(layout: ArmLayout, captures: Sequence[LinkCapture | None],
     notes = [c.refused for c in captures if c is not None and c.refused]
     if notes:
         return PlacementPose(None, None, "; ".join(notes))
-    known = list(known_deg) if known_deg is not None else [None] * n
+    known: list[float | None] = list(known_deg) if known_deg is not None else [None] * n
     theta = None
     if any(c is not None and c.field_ut is not None for c in captures):
         theta = measure_theta(layout, captures, zero, known)

@@ -88,7 +88,7 @@ def _angles(layout: ArmLayout, joint_angles_deg) -> np.ndarray:
     return angles
 
 
-def forward(layout: ArmLayout, joint_angles_deg: Sequence[float]) -> ArmPose:
+def forward(layout: ArmLayout, joint_angles_deg: Sequence[float] | np.ndarray) -> ArmPose:
     """The pose for the given joint angles (degrees, one per link, offsets added here)."""
     angles = _angles(layout, joint_angles_deg)
     rotations = np.empty((layout.n_joints, 3, 3))

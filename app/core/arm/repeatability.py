@@ -149,9 +149,9 @@ class Placements:
         for what in STATISTICS:
             if stats:
                 values = [getattr(stats[name], what) for name in COORDINATES]
-                azimuth = (repr(float(getattr(stats[COLUMN_AZIMUTH], what)))
-                           if COLUMN_AZIMUTH in stats else "")
-                writer.writerow([what, "", *(repr(float(v)) for v in values), "", azimuth])
+                azimuth_text = (repr(float(getattr(stats[COLUMN_AZIMUTH], what)))
+                                if COLUMN_AZIMUTH in stats else "")
+                writer.writerow([what, "", *(repr(float(v)) for v in values), "", azimuth_text])
         return out.getvalue()
 
     def to_dict(self) -> dict:
