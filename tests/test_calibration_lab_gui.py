@@ -47,7 +47,7 @@ def test_allan_page_plots_and_tabulates_a_static_recording(qtbot, qapp, static_c
     # Three measured curves, three fitted ones and the asymptotes per plot.
     assert len(page.gyro_plot.getPlotItem().listDataItems()) >= 7
     proposed = page.proposed_parameters()
-    assert set(proposed) == {"ekf", "ekf-smoother"}
+    assert set(proposed) == {"ekf", "ekf-smoother", "vqf-heading"}
     assert proposed["ekf"]["gyro_noise"] == pytest.approx(3.8, rel=0.1)  # mdps/rtHz
     assert proposed["ekf"]["accel_noise"] == pytest.approx(70.0, rel=0.1)  # ug/rtHz
     page.grab().save(os.path.join(artifacts_dir, "allan_page.png"))
@@ -58,7 +58,7 @@ def test_the_button_sets_the_running_ekf_and_records_the_source(qtbot, qapp, tmp
     theme.apply_theme(qapp)
     settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
     session = DeviceSession()
-    window = MainWindow(session, settings, "sim://static?odr=52&seed=3")
+    window = MainWindow(session, settings, "sim://static?odr=52&seed=3", "ekf")
     qtbot.addWidget(window)
     window.show()
     qtbot.waitUntil(lambda: session.device_info is not None, timeout=TIMEOUT_MS)

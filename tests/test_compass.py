@@ -115,7 +115,8 @@ def test_window_states_without_a_heading(qtbot, tmp_path, log_path):
                         timeout=TIMEOUT_MS)
         assert window.compass.light.words() == "No magnetometer"
         window.connect_device("sim://static?odr=104&seed=2&mag=lis3mdl")
-        # The EKF has no magnetometer: its heading is arbitrary and not shown.
+        # A filter without the magnetometer: its heading is arbitrary and not shown.
+        window.session.requestFilter.emit("complementary")
         qtbot.waitUntil(lambda: window.compass.rose.stateTitle()
                         == "FILTER WITHOUT MAGNETOMETER", timeout=TIMEOUT_MS)
         assert window.compass.tile.readoutText() == "—"
@@ -142,6 +143,13 @@ def test_heading_shown_copied_logged_and_its_settings_kept(qtbot, tmp_path, log_
     window = open_window(qtbot, tmp_path, "sim://static?odr=104&seed=2&mag=lis3mdl&errors=0")
     try:
         window.session.requestFilter.emit("test-truth")
+        # The default filter shows a heading too (it takes it from the field): wait for the
+        # stand-in, then for a second of its samples so the averaging window holds its alone.
+        pipeline = window.session.pipeline
+        qtbot.waitUntil(lambda: pipeline.filter.name == "test-truth", timeout=TIMEOUT_MS)
+        switched = pipeline.samples.total_written
+        qtbot.waitUntil(lambda: pipeline.samples.total_written > switched + 2 * 104,
+                        timeout=TIMEOUT_MS)
         qtbot.waitUntil(lambda: window.compass.rose.needleAngle() is not None,
                         timeout=TIMEOUT_MS)
         truth = window.session.pipeline.samples.window(0.5, ["ref_quat"])["ref_quat"]

@@ -257,7 +257,7 @@ def test_run_uncalibrated_and_allan_noise_figures_survive_a_reconnect_and_a_rest
 
     def open_window() -> tuple[MainWindow, DeviceSession]:
         session = DeviceSession(profile_store=store)
-        window = MainWindow(session, QSettings(path, QSettings.Format.IniFormat), url)
+        window = MainWindow(session, QSettings(path, QSettings.Format.IniFormat), url, "ekf")
         qtbot.addWidget(window)
         window.show()
         qtbot.waitUntil(lambda: session.device_info is not None, timeout=TIMEOUT_MS)

@@ -94,7 +94,7 @@ def test_the_pipeline_heading_column_only_from_a_field_filter(monkeypatch) -> No
     device = create_device("sim://handheld?realtime=0&block=64&mag=lis3mdl&seed=4")
     info = device.open()
     try:
-        pipeline = Pipeline(info.odr_hz, "ekf")  # a 6-axis filter: arbitrary heading
+        pipeline = Pipeline(info.odr_hz, "complementary")  # 6-axis: arbitrary heading
         pipeline.process(device.read(1.0))
         assert pipeline.has_field and not pipeline.takes_heading_from_field()
         assert np.all(np.isnan(pipeline.orientation.latest(64, ["heading"])["heading"]))

@@ -38,7 +38,10 @@ def test_smoke_test_passes_from_source_and_saves_a_screenshot(artifacts_dir):
     assert result.returncode == 0, result.stderr
     lines = result.stdout.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("inclinometer smoke test passed"), lines
-    for fact in ("through ekf", "frames drawn", "replayed", "found a 10° tilt", "numba:"):
+    from app.core.filters import DEFAULT_FILTER
+
+    for fact in (f"through {DEFAULT_FILTER}", "frames drawn", "replayed", "found a 10° tilt",
+                 "numba:"):
         assert fact in lines[0]
     assert screenshot.stat().st_size > 20_000
 
