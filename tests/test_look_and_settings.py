@@ -418,6 +418,10 @@ def test_screenshots_of_every_theme_and_mode(qtbot, tmp_path, artifacts_dir):
                 window.resize(width, height)
                 shoot(f"window-{name}-{width}x{height}")
         window.set_instrument_mode(True)
+        # Full screen arrives as a geometry change of its own: let it land before the resizes
+        # below, or it overrides the first one (the offscreen screen is 800x800).
+        qtbot.waitUntil(lambda: window.isFullScreen()
+                        and window.geometry() == window.screen().geometry(), timeout=TIMEOUT_MS)
         for name in ("high-contrast", "light", "dark"):
             window.set_theme(name)
             window.hold_button.setChecked(name == "dark")  # the HOLD badge, once
