@@ -127,7 +127,6 @@ import math
 import numpy as np
 from numba import njit
 
-from app.core.field_check import FieldReference
 from app.core.filters.base import MAGNETOMETER_PARAMETER, OrientationFilter, ParameterSpec
 from app.core.filters.complementary import gyro_step
 from app.core.filters.gyro_integration import unit_positive
@@ -138,7 +137,7 @@ from app.core.magnetometer.disturbance import (
     REJECTED,
     S_REF_DIP,
     S_REF_NORM,
-    DisturbanceSettings,
+    DisturbanceOwner,
     FieldStatus,
     detector_step,
     track_rate,
@@ -553,7 +552,7 @@ def butterworth_power_gain(tau_s: float, frequency_hz: float) -> float:
     return 1.0 / (1.0 + ratio**4)
 
 
-class QuaternionEKF(OrientationFilter):
+class QuaternionEKF(DisturbanceOwner, OrientationFilter):
     """Error-state quaternion EKF with gyro-bias estimation, for real hand-held motion.
 
     See the module docstring for the model. The state survives between blocks and across
@@ -686,28 +685,6 @@ class QuaternionEKF(OrientationFilter):
         ),
     )
 
-    _field_reference: FieldReference | None = None
-
-    def set_field_reference(self, reference: FieldReference | None) -> None:
-        """The World Magnetic Model's field here (``field_check.wmm_reference``): a first
-        reference learnt at rest must agree with it; None: no such check."""
-        self._field_reference = reference
-
-    def disturbance_settings(self) -> DisturbanceSettings:
-        v = self._values
-        return DisturbanceSettings(
-            norm_threshold=float(v["mag_norm_threshold"]) * 1e-2,
-            dip_threshold_deg=float(v["mag_dip_threshold"]),
-            max_rejection_s=float(v["mag_rejection_time"]),
-            new_time_s=float(v["mag_new_time"]),
-            enabled=bool(v["mag_rejection"]),
-        )
-
-    @property
-    def field_status(self) -> FieldStatus | None:
-        """The disturbance detector's output for the last non-empty block (None when it
-        carried no field or the magnetometer is switched off)."""
-        return self._field_status
 
     def reset(
         self, initial_quat: np.ndarray | None = None, last_time_s: float | None = None

@@ -50,7 +50,6 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from app.core.field_check import FieldReference
 from app.core.filters.base import MAGNETOMETER_PARAMETER, OrientationFilter, ParameterSpec
 from app.core.filters.ekf import QuaternionEKF
 from app.core.filters.vqf_filter import VQFFilter
@@ -61,7 +60,7 @@ from app.core.magnetometer.disturbance import (
     REJECTED,
     S_REF_DIP,
     S_REF_NORM,
-    DisturbanceSettings,
+    DisturbanceOwner,
     FieldStatus,
     detector_step,
     track_rate,
@@ -228,7 +227,7 @@ def _heading_kernel(
             out[i, 3] = c * pz + s * pw
 
 
-class VQFHeadingFilter(OrientationFilter):
+class VQFHeadingFilter(DisturbanceOwner, OrientationFilter):
     """VQF 6D's tilt, and the EKF's heading filter for the offset to magnetic north."""
 
     name = "vqf-heading"
@@ -246,7 +245,6 @@ class VQFHeadingFilter(OrientationFilter):
         *_specs(QuaternionEKF, _HEADING_PARAMETERS),
     )
 
-    _field_reference: FieldReference | None = None
 
     def __init__(self, **values: Any) -> None:
         self._tilt = VQFFilter(magnetometer=False)
@@ -259,27 +257,6 @@ class VQFHeadingFilter(OrientationFilter):
         for name in _TILT_PARAMETERS:
             if tilt.get_parameter(name) != self._values[name]:
                 tilt.set_parameter(name, self._values[name])
-
-    def set_field_reference(self, reference: FieldReference | None) -> None:
-        """The World Magnetic Model's field here: a first reference learnt at rest must agree
-        with it; None: no such check (as ``QuaternionEKF.set_field_reference``)."""
-        self._field_reference = reference
-
-    def disturbance_settings(self) -> DisturbanceSettings:
-        v = self._values
-        return DisturbanceSettings(
-            norm_threshold=float(v["mag_norm_threshold"]) * 1e-2,
-            dip_threshold_deg=float(v["mag_dip_threshold"]),
-            max_rejection_s=float(v["mag_rejection_time"]),
-            new_time_s=float(v["mag_new_time"]),
-            enabled=bool(v["mag_rejection"]),
-        )
-
-    @property
-    def field_status(self) -> FieldStatus | None:
-        """The disturbance detector's output for the last non-empty block (None when it
-        carried no field or the magnetometer is switched off)."""
-        return self._field_status
 
     @property
     def heading_offset_rad(self) -> float:

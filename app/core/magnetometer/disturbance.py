@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -298,3 +299,34 @@ def field_status(rows: np.ndarray, state: np.ndarray, settings: DisturbanceSetti
                 message = "the learnt reference departs from the model: " + check.message
     return FieldStatus(rows[:, 0].astype(np.int8), rows[:, 1].copy(),
                        np.degrees(rows[:, 2]), reference, message)
+
+
+class DisturbanceOwner:
+    """The magnetic-disturbance side of a 9-axis filter that runs :func:`detector_step`:
+    its settings from the filter's ``mag_*`` parameters, the WMM check and the last status.
+    Mixed into the filters that share the EKF's heading model (``ekf``, ``vqf-heading``)."""
+
+    _values: dict[str, Any]
+    _field_reference: FieldReference | None = None
+    _field_status: FieldStatus | None = None
+
+    def set_field_reference(self, reference: FieldReference | None) -> None:
+        """The World Magnetic Model's field here (``field_check.wmm_reference``): a first
+        reference learnt at rest must agree with it; None: no such check."""
+        self._field_reference = reference
+
+    def disturbance_settings(self) -> DisturbanceSettings:
+        v = self._values
+        return DisturbanceSettings(
+            norm_threshold=float(v["mag_norm_threshold"]) * 1e-2,
+            dip_threshold_deg=float(v["mag_dip_threshold"]),
+            max_rejection_s=float(v["mag_rejection_time"]),
+            new_time_s=float(v["mag_new_time"]),
+            enabled=bool(v["mag_rejection"]),
+        )
+
+    @property
+    def field_status(self) -> FieldStatus | None:
+        """The disturbance detector's output for the last non-empty block (None when it
+        carried no field or the magnetometer is switched off)."""
+        return self._field_status
