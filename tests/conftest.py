@@ -22,13 +22,15 @@ ARTIFACTS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "test-artif
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "firmware", "host"))
 
 
-@pytest.fixture(scope="session", autouse=True)
-def _filter_kernels_compiled():
+def pytest_sessionstart(session):
     """Every live filter's numba kernels compiled (or loaded from the cache) once per test
-    process, before any test waits on a window. From a cold cache (a fresh clone) the EKF alone
-    takes about 15 s to compile, and numba holds the GIL meanwhile: a window test that happened
-    to be a process's first EKF user timed out waiting for its device, and the GUI thread of
-    others stalled mid-test."""
+    process, before any test (a hook, so no test's timeout counts it). From a cold cache (a
+    fresh clone) the EKF alone takes about 15 s to compile, and numba holds the GIL meanwhile:
+    a window test that happened to be a process's first EKF user timed out waiting for its
+    device, and the GUI thread of others stalled mid-test. The xdist controller runs no test."""
+    if os.environ.get("PYTEST_XDIST_WORKER") is None and session.config.getoption(
+            "numprocesses", default=None):
+        return
     from app.core.filters import ONLINE_FILTERS, create_filter
 
     for name in ONLINE_FILTERS:
