@@ -97,7 +97,8 @@ class LinkCounters:
     link_lost_samples: int = 0
     """The samples those gaps held (the rest of ``lost_samples`` was lost on the board)."""
     other_sensor_packets: int = 0
-    """Valid sample packets of the board's other sensors (skipped by this decoder)."""
+    """Valid sample packets of the board's other sensors (skipped by this decoder), counted
+    from START's ACK: those still in flight from an earlier stream are not."""
     mag_samples: int = 0
     """Field samples (MAG_SAMPLES) placed on accelerometer rows."""
     mag_seq_gaps: int = 0
@@ -284,7 +285,9 @@ class LinkDecoder:
                 self._packets += 1
                 if index == self.sensor:
                     self._on_samples(body, count, offset)
-                else:
+                elif self._armed is None:
+                    # Before START's ACK they are left over from an earlier stream, as this
+                    # sensor's own are: not the other sensors' packets of this one.
                     self._other_sensor += 1
                 continue
             try:
