@@ -24,6 +24,7 @@ from PySide6.QtWidgets import (
     QLabel,
     QPushButton,
     QScrollArea,
+    QSpinBox,
     QTabBar,
     QVBoxLayout,
     QWidget,
@@ -418,6 +419,32 @@ def test_the_wheel_scrolls_panels_and_never_changes_an_unfocused_field(qtbot, tm
         assert spin.value() != before
     finally:
         window.close()
+
+
+def test_a_field_made_later_in_another_theme_is_guarded_too(qtbot, qapp):
+    """The guard comes with the style's polish: a dialog's field made after a theme change
+    (a new style sheet) takes no wheel until focused, and scrolls its panel instead."""
+    from app.gui import wheel_guard
+
+    wheel_guard.install(qapp)
+    try:
+        theme.apply_theme(qapp, "light")
+        area = QScrollArea()
+        qtbot.addWidget(area)
+        inner = QWidget()
+        inner.setMinimumHeight(2000)
+        spin = QSpinBox(inner)
+        spin.setRange(0, 100)
+        spin.setValue(50)
+        area.setWidget(inner)
+        area.resize(200, 200)
+        area.show()
+        qtbot.waitExposed(area)
+        assert spin.focusPolicy() == Qt.FocusPolicy.StrongFocus
+        wheel(spin, -3)
+        assert spin.value() == 50 and area.verticalScrollBar().value() > 0
+    finally:
+        theme.apply_theme(qapp)
 
 
 def test_keys_work_from_the_start_focus_is_on_the_instrument(qtbot, tmp_path):
