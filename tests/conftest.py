@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gc
 import os
+import subprocess
 import sys
 import tempfile
 import traceback
@@ -22,19 +23,46 @@ ARTIFACTS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "test-artif
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "firmware", "host"))
 
 
+COMPILE_SHARES = (("ekf", "gyro"), ())
+"""The live filters' kernels in two shares of about equal compile time (the EKF alone is
+half); ``()`` is every other filter."""
+_COMPILE_SCRIPT = (
+    "import sys\n"
+    "from app.core.filters import ONLINE_FILTERS, create_filter\n"
+    "share = sys.argv[1:] or [n for n in ONLINE_FILTERS if n not in {shared}]\n"
+    "for name in share:\n"
+    "    create_filter(name).warm_up()\n"
+)
+
+
 def pytest_sessionstart(session):
     """Every live filter's numba kernels compiled (or loaded from the cache) once per test
     process, before any test (a hook, so no test's timeout counts it). From a cold cache (a
     fresh clone) the EKF alone takes about 15 s to compile, and numba holds the GIL meanwhile:
     a window test that happened to be a process's first EKF user timed out waiting for its
-    device, and the GUI thread of others stalled mid-test. The xdist controller runs no test."""
+    device, and the GUI thread of others stalled mid-test.
+
+    Under xdist the controller, before it starts the workers (xdist's hook runs last), has
+    the kernels compiled into numba's cache by two processes, a share each: each worker then
+    loads them, where before every worker compiled all of them at once on a cold cache."""
     if os.environ.get("PYTEST_XDIST_WORKER") is None and session.config.getoption(
             "numprocesses", default=None):
+        _compile_kernels_in_parallel()
         return
     from app.core.filters import ONLINE_FILTERS, create_filter
 
     for name in ONLINE_FILTERS:
         create_filter(name).warm_up()
+
+
+def _compile_kernels_in_parallel() -> None:
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    script = _COMPILE_SCRIPT.format(shared=sorted(COMPILE_SHARES[0]))
+    processes = [subprocess.Popen([sys.executable, "-c", script, *share], cwd=root)
+                 for share in COMPILE_SHARES]
+    for process in processes:  # a failure shows again, with its test, in the workers
+        process.wait()
 
 
 @pytest.fixture(scope="session")
