@@ -137,6 +137,32 @@ def test_window_states_without_a_heading(qtbot, tmp_path, log_path):
         window.close()
 
 
+def test_a_source_with_a_magnetometer_gets_the_9_axis_default_until_the_user_chooses(
+        qtbot, tmp_path, log_path):
+    from app.core.filters import DEFAULT_FILTER, DEFAULT_FILTER_9AXIS
+
+    window = open_window(qtbot, tmp_path, "sim://static?odr=104&seed=2&mag=lis3mdl")
+    try:
+        qtbot.waitUntil(lambda: window.status_filter.text().endswith(
+            FILTERS[DEFAULT_FILTER_9AXIS].title), timeout=TIMEOUT_MS)
+        window.connect_device("sim://static?odr=104&seed=2")  # no magnetometer
+        qtbot.waitUntil(lambda: window.status_filter.text().endswith(
+            FILTERS[DEFAULT_FILTER].title), timeout=TIMEOUT_MS)
+        window.filter_panel.filterRequested.emit("ekf")  # what picking it in the dock does
+        qtbot.waitUntil(lambda: window.status_filter.text().endswith(FILTERS["ekf"].title),
+                        timeout=TIMEOUT_MS)
+    finally:
+        window.close()
+    # The choice is the user's now: it holds for the next start, on a source of either kind.
+    again = open_window(qtbot, tmp_path, "sim://static?odr=104&seed=2&mag=lis3mdl")
+    try:
+        qtbot.waitUntil(lambda: again.status_filter.text().endswith(FILTERS["ekf"].title),
+                        timeout=TIMEOUT_MS)
+        assert again.session.pipeline.filter.name == "ekf"
+    finally:
+        again.close()
+
+
 def test_heading_shown_copied_logged_and_its_settings_kept(qtbot, tmp_path, log_path,
                                                           monkeypatch):
     monkeypatch.setitem(FILTERS, "test-truth", TruthFilter)

@@ -139,3 +139,22 @@ def test_tare_shows_angles_relative_to_the_tared_attitude_and_keeps_raw_columns(
     np.testing.assert_allclose(
         pipeline.samples.latest(1)["raw_accel"][0], raw.accel_raw[0] * ACCEL_LSB
     )
+
+
+def test_the_filter_follows_the_source_until_one_is_chosen():
+    from app.core.filters import DEFAULT_FILTER, DEFAULT_FILTER_9AXIS
+
+    pipeline = Pipeline(104.0)
+    assert pipeline.follows_source and pipeline.filter.name == DEFAULT_FILTER
+    assert pipeline.adopt_source(has_magnetometer=True)  # a source with a magnetometer
+    assert pipeline.filter.name == DEFAULT_FILTER_9AXIS and pipeline.follows_source
+    assert pipeline.adopt_source(has_magnetometer=False)
+    assert pipeline.filter.name == DEFAULT_FILTER
+    pipeline.set_filter("complementary")  # the user's choice holds for every source
+    assert not pipeline.follows_source
+    assert not pipeline.adopt_source(has_magnetometer=True)
+    assert pipeline.filter.name == "complementary"
+    assert pipeline.follow_source(has_magnetometer=True)  # and back to the source's
+    assert pipeline.filter.name == DEFAULT_FILTER_9AXIS
+    chosen = Pipeline(104.0, "ekf")
+    assert not chosen.follows_source and not chosen.adopt_source(has_magnetometer=True)

@@ -6,7 +6,7 @@ from PySide6.QtCore import QObject, QSettings, Signal
 from PySide6.QtGui import QKeySequence
 from PySide6.QtWidgets import QMainWindow
 
-from app.core.filters import DEFAULT_FILTER, FILTERS, ONLINE_FILTERS
+from app.core.filters import FILTERS, ONLINE_FILTERS
 from app.gui.actions import ActionSpec, Generated, Separator, Submenu, build_menus
 from app.gui.user_settings import SettingsSections
 from app.gui.window_menus import menu_table
@@ -101,8 +101,13 @@ def test_window_settings_use_the_keys_they_always_had(tmp_path) -> None:
     for key in ("filter=", "comparisons=", "unit=percent", "averaging_s=2", "range_deg=10",
                 "plot_window_s=30", "device_url=", "filter_parameters"):
         assert key in text, key
+    # Shown, not chosen: the source's default, whichever the source is (None).
+    assert remembered.filter() is None and remembered.filter(name) == name
+    remembered.save_filter_chosen(True)
+    settings.sync()
+    assert "filter_chosen=true" in (tmp_path / "s.ini").read_text()
     assert remembered.filter() == name
-    assert remembered.filter(None) == name and remembered.filter("no-such") == DEFAULT_FILTER
+    assert remembered.filter(None) == name and remembered.filter("no-such") is None
     assert remembered.filter_parameters(name) == ({known: 2.0} if known else {})
     assert remembered.comparisons() == [ONLINE_FILTERS[0]]
     assert remembered.plot_window_s() == 30

@@ -94,13 +94,17 @@ class Pipeline:
     ----------
     odr_hz : expected sample rate, used to size the ring buffers.
     filter_name : the initial filter (see :data:`app.core.filters.FILTERS`); None: the default
-        for the source (:func:`app.core.filters.default_filter_for` ``has_magnetometer``).
+        for the source (:func:`app.core.filters.default_filter_for` ``has_magnetometer``),
+        which then follows each new source (:meth:`adopt_source`) until a filter is chosen.
     """
 
     def __init__(self, odr_hz: float = 104.0, filter_name: str | None = None,
                  has_magnetometer: bool = False) -> None:
         self.calibration: SensorCalibration = IDENTITY_CALIBRATION
         self.level_reference: TareReference | None = None
+        self.follows_source = filter_name is None
+        """The filter is the source's default (none was chosen): a new source with or without
+        a magnetometer brings its own default (:meth:`adopt_source`)."""
         filter_name = filter_name or default_filter_for(has_magnetometer)
         require_online(filter_name)
         self.filter: OrientationFilter = create_filter(filter_name)
@@ -150,7 +154,26 @@ class Pipeline:
         if self.counters.samples:
             new_filter.reset(self.filter.quaternion, self.filter.last_time_s)
         self.filter = new_filter
+        self.follows_source = False
         return new_filter
+
+    def follow_source(self, has_magnetometer: bool) -> bool:
+        """Let the source choose the filter again: its default from now on, for this
+        source (with or without a magnetometer) and each new one. Returns whether the
+        filter changed."""
+        self.follows_source = True
+        return self.adopt_source(has_magnetometer)
+
+    def adopt_source(self, has_magnetometer: bool) -> bool:
+        """A new source: a filter that follows the source becomes the source's default
+        (:func:`app.core.filters.default_filter_for`); a chosen one stays. Returns whether
+        the filter changed."""
+        name = default_filter_for(has_magnetometer)
+        if not self.follows_source or self.filter.name == name:
+            return False
+        self.set_filter(name)
+        self.follows_source = True
+        return True
 
     def set_filter_parameter(self, name: str, value: Any) -> None:
         self.filter.set_parameter(name, value)

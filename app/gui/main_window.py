@@ -205,7 +205,9 @@ class MainWindow(QMainWindow):
             (self.device_bar.disconnectRequested, session.requestDisconnect),
             (self.device_bar.refreshRequested, self.refresh_devices),
             (self.filter_panel.filterRequested, session.requestFilter),
+            (self.filter_panel.filterRequested, self._on_filter_chosen),
             (self.filter_panel.parameterChanged, session.requestFilterParameter),
+            (self.filter_panel.parameterChanged, self._on_filter_chosen),
             (self.filter_panel.comparisonsRequested, session.requestComparisons),
             (self.replay_bar.control, session.requestReplayControl),
             (self.simulator_panel.deviceRequested, self.connect_device),
@@ -242,15 +244,22 @@ class MainWindow(QMainWindow):
         """The remembered (or given) filter, comparisons and device; the frames start."""
         remembered, session = self.window_settings, self.session
         chosen_filter = remembered.filter(filter_name)
-        session.requestFilter.emit(chosen_filter)
+        if chosen_filter is None:  # none chosen: each source's default (9-axis or not)
+            session.requestSourceFilter.emit()
+        else:
+            session.requestFilter.emit(chosen_filter)
+            for key, value in remembered.filter_parameters(chosen_filter).items():
+                session.requestFilterParameter.emit(key, value)
         compared = remembered.comparisons()
         if compared:
             session.requestComparisons.emit(compared)
         url = remembered.device_url(device_url)
-        for key, value in remembered.filter_parameters(chosen_filter).items():
-            session.requestFilterParameter.emit(key, value)
         self.presenter.start()
         self.connect_device(url)
+
+    def _on_filter_chosen(self, *_args: object) -> None:
+        """The user picked a filter or set a parameter: it is kept for every source."""
+        self.window_settings.save_filter_chosen(True)
 
     def _on_theme_changed(self, _name: str) -> None:
         """Colours set on single widgets follow the theme (a method: Qt drops the

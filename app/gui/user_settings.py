@@ -318,6 +318,15 @@ class SettingsSections:
         except (TypeError, ValueError):
             return default
 
+    def flag(self, key: str, default: bool) -> bool:
+        """``key`` as a yes/no (an INI file keeps ``true``/``false`` as text); ``default``
+        when absent or neither."""
+        value = self.settings.value(key, default)
+        if isinstance(value, bool):
+            return value
+        text = str(value).strip().lower()
+        return True if text in ("true", "1") else False if text in ("false", "0") else default
+
     def json(self, key: str) -> Any:
         """``key`` stored as JSON text (None if absent or not JSON)."""
         return read_json(self.settings, key)

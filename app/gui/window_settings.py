@@ -8,7 +8,7 @@ from PySide6.QtCore import QByteArray, QRect
 from PySide6.QtGui import QGuiApplication
 from PySide6.QtWidgets import QComboBox, QMainWindow, QWidget
 
-from app.core.filters import FILTERS, ONLINE_FILTERS, default_filter_for
+from app.core.filters import FILTERS, ONLINE_FILTERS
 from app.core.screen_fit import Rect, first_window_rect
 from app.gui import theme
 from app.gui.user_settings import SettingsSections
@@ -86,12 +86,17 @@ class WindowSettings:
         self.sections.set_value("theme", choice)
 
     # -- filter and device ------------------------------------------------------------------------
-    def filter(self, chosen: str | None = None, has_magnetometer: bool = False) -> str:
-        """The filter to start with: ``chosen``, else the remembered one; an unknown or
-        offline one (never live) gives the default for the source."""
-        default = default_filter_for(has_magnetometer)
-        name = chosen or self.sections.text("filter", default)
-        return name if name in ONLINE_FILTERS else default
+    def filter(self, chosen: str | None = None) -> str | None:
+        """The filter to start with: ``chosen``, else the one the user chose last time; None
+        when the user never chose one (the source's default, which follows each source:
+        with a magnetometer it differs). An unknown or offline one (never live) is None."""
+        name = chosen or (self.sections.text("filter", "")
+                          if self.sections.flag("filter_chosen", False) else "")
+        return name if name in ONLINE_FILTERS else None
+
+    def save_filter_chosen(self, chosen: bool) -> None:
+        """Whether the user chose the filter (in the Filter dock) rather than the source."""
+        self.sections.set_value("filter_chosen", chosen)
 
     def filter_parameters(self, name: str) -> dict:
         """The remembered parameters of filter ``name`` that it has."""

@@ -251,6 +251,7 @@ class Acquisition:
         self.alarms.reset()
         if self.pipeline is not None:
             self.pipeline.configure(info.odr_hz)
+            self.pipeline.adopt_source(info.magnetometer is not None)
 
     def open(self, url: str) -> DeviceInfo:
         """Open ``url`` as the session's device and :meth:`begin`. Raises DeviceError."""

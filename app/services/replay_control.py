@@ -148,7 +148,9 @@ def restore_recorded_filter(device: Device | None, pipeline: Pipeline) -> Restor
         return RestoredFilter(None)
     try:
         values, dropped = known_parameters(name, recording.filter_parameters)
-        new_filter = pipeline.set_filter(name, **values)
+        follows = pipeline.follows_source  # the recording's filter is the source's choice,
+        new_filter = pipeline.set_filter(name, **values)  # not the user's
+        pipeline.follows_source = follows
     except (KeyError, ValueError) as exc:
         return RestoredFilter(None, error=f"The recording's filter cannot be restored ({exc}); "
                                           f"replaying with {pipeline.filter.title}")

@@ -22,6 +22,7 @@ REQUESTS: dict[str, str] = {
     "requestConnect": "connect_device",  # url
     "requestDisconnect": "disconnect_device",
     "requestFilter": "set_filter",  # name
+    "requestSourceFilter": "follow_source_filter",  # the source's default filter from now on
     "requestFilterParameter": "set_filter_parameter",  # name, value
     "requestSimulatorTarget": "set_simulator_target",  # roll, pitch (degrees)
     "requestComparisons": "set_comparisons",  # filter names

@@ -158,14 +158,15 @@ class DeviceWorker(QObject):
             self.disconnected.emit(str(exc))
             return
         device = self.connection.device
+        before = self.pipeline.filter
+        self.acquisition.begin(info)  # a filter that follows the source takes its default
         restored = restore_recorded_filter(device, self.pipeline)
         if restored.warning:
             self.deviceMessage.emit(2, restored.warning)
         if restored.error:
             self.error.emit(restored.error)
-        if restored.orientation_filter is not None:
+        if self.pipeline.filter is not before:
             self._emit_filter()
-        self.acquisition.begin(info)
         for problem in self.calibration.load_for(info, device):
             self.error.emit(problem)
         for note in self.calibration.notes:
@@ -300,6 +301,14 @@ class DeviceWorker(QObject):
         except (KeyError, ValueError) as exc:
             self.error.emit(str(exc))
             return
+        self._emit_filter()
+
+    @Slot()
+    def follow_source_filter(self) -> None:
+        """The filter is the source's default from now on (none chosen)."""
+        device = self.connection.device
+        info = None if device is None else device.info
+        self.pipeline.follow_source(info is not None and info.magnetometer is not None)
         self._emit_filter()
 
     @Slot(str, object)
