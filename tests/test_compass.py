@@ -158,7 +158,13 @@ def test_a_source_with_a_magnetometer_gets_the_9_axis_default_until_the_user_cho
     try:
         qtbot.waitUntil(lambda: again.status_filter.text().endswith(FILTERS["ekf"].title),
                         timeout=TIMEOUT_MS)
-        assert again.session.pipeline.filter.name == "ekf"
+        box = again.filter_panel.source_default
+        assert not box.isChecked()
+        box.click()  # "The source's default" again
+        qtbot.waitUntil(lambda: again.status_filter.text().endswith(
+            FILTERS[DEFAULT_FILTER_9AXIS].title), timeout=TIMEOUT_MS)
+        assert box.isChecked()
+        assert again.window_settings.filter() is None
     finally:
         again.close()
 

@@ -177,4 +177,9 @@ def test_field_light_says_how_far_off_the_field_is() -> None:
     both = field_light(np.array([30.0, 50.0]), np.array([np.nan, 58.0]), reference)
     assert both.disturbed and both.reason == "field 40 % below normal · dip 9° off"
     assert field_light(np.array([]), np.array([]), reference).state == NO_FIELD
+    # Without a calibration the sensor's own iron may be the cause: the reason says so.
+    uncalibrated = field_light(np.array([50.0]), np.array([13.0]), reference, calibrated=False)
+    assert uncalibrated.reason == "dip 54° off · magnetometer not calibrated"
+    assert field_light(np.array([50.0]), np.array([67.0]), reference, calibrated=False
+                       ).reason == ""  # a field that matches is normal, calibrated or not
     assert field_light(np.array([50.0]), np.array([67.0]), None).state == NO_REFERENCE

@@ -36,11 +36,17 @@ class FieldLight:
         return self.state == DISTURBED
 
 
-def field_light(norm_ut: np.ndarray, dip_deg: np.ndarray, reference: FieldReference | None
-                ) -> FieldLight:
+UNCALIBRATED_NOTE = "magnetometer not calibrated"
+"""Added to the reason when the field has no calibration: a board's own hard iron alone turns
+the dip by tens of degrees, so the cause may be the sensor, not its surroundings."""
+
+
+def field_light(norm_ut: np.ndarray, dip_deg: np.ndarray, reference: FieldReference | None,
+                calibrated: bool = True) -> FieldLight:
     """The light for the newest field samples (``|m|`` in uT and dip in degrees, NaN dip: not
     known): disturbed when any of them departs from ``reference`` by more than its tolerances,
-    with the largest departure of each kind as the reason."""
+    with the largest departure of each kind as the reason (and :data:`UNCALIBRATED_NOTE` when
+    not ``calibrated``)."""
     norm_ut = np.asarray(norm_ut, dtype=float).ravel()
     dip_deg = np.asarray(dip_deg, dtype=float).ravel()
     if not len(norm_ut):
@@ -61,4 +67,6 @@ def field_light(norm_ut: np.ndarray, dip_deg: np.ndarray, reference: FieldRefere
         dip_off = np.abs(dip_deg - reference.dip_deg)
     if np.any(dip_off > reference.dip_tolerance_deg):
         parts.append(f"dip {float(np.nanmax(dip_off)):.0f}° off")
+    if not calibrated:
+        parts.append(UNCALIBRATED_NOTE)
     return FieldLight(DISTURBED, " · ".join(parts), reference.source)

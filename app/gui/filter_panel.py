@@ -114,6 +114,8 @@ class FilterPanel(QWidget):
     filterRequested = Signal(str)
     parameterChanged = Signal(str, object)
     comparisonsRequested = Signal(list)
+    sourceDefaultRequested = Signal()
+    """The user ticked "The source's default": the filter follows each source again."""
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -135,6 +137,13 @@ class FilterPanel(QWidget):
                 item.setEnabled(False)
         self.combo.activated.connect(self._on_activated)
         layout.addWidget(self.combo)
+        self.source_default = QCheckBox("The source's default")
+        self.source_default.setToolTip(
+            "Run the default filter of each source: with a magnetometer the 9-axis one (it "
+            "gives the heading), without one the 6-axis one. Picking a filter or setting a "
+            "parameter keeps that filter for every source instead.")
+        self.source_default.clicked.connect(self._on_source_default)
+        layout.addWidget(self.source_default)
         self.description = QLabel()
         self.description.setWordWrap(True)
         self.description.setObjectName("dimLabel")
@@ -255,6 +264,16 @@ class FilterPanel(QWidget):
 
     def _on_compare_changed(self, _item: QListWidgetItem) -> None:
         self.comparisonsRequested.emit(self.compared_filters())
+
+    def set_follows_source(self, follows: bool) -> None:
+        """Show whether the filter is the source's default or the user's choice."""
+        self.source_default.setChecked(follows)
+
+    def _on_source_default(self, checked: bool) -> None:
+        if checked:
+            self.sourceDefaultRequested.emit()
+        elif self._current:  # unticked: the running filter becomes the user's choice
+            self.filterRequested.emit(self._current)
 
     def _on_activated(self, index: int) -> None:
         name = self.combo.itemData(index)

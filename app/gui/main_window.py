@@ -208,6 +208,8 @@ class MainWindow(QMainWindow):
             (self.filter_panel.filterRequested, self._on_filter_chosen),
             (self.filter_panel.parameterChanged, session.requestFilterParameter),
             (self.filter_panel.parameterChanged, self._on_filter_chosen),
+            (self.filter_panel.sourceDefaultRequested, session.requestSourceFilter),
+            (self.filter_panel.sourceDefaultRequested, self._on_source_filter),
             (self.filter_panel.comparisonsRequested, session.requestComparisons),
             (self.replay_bar.control, session.requestReplayControl),
             (self.simulator_panel.deviceRequested, self.connect_device),
@@ -244,6 +246,7 @@ class MainWindow(QMainWindow):
         """The remembered (or given) filter, comparisons and device; the frames start."""
         remembered, session = self.window_settings, self.session
         chosen_filter = remembered.filter(filter_name)
+        self.filter_panel.set_follows_source(chosen_filter is None)
         if chosen_filter is None:  # none chosen: each source's default (9-axis or not)
             session.requestSourceFilter.emit()
         else:
@@ -260,6 +263,12 @@ class MainWindow(QMainWindow):
     def _on_filter_chosen(self, *_args: object) -> None:
         """The user picked a filter or set a parameter: it is kept for every source."""
         self.window_settings.save_filter_chosen(True)
+        self.filter_panel.set_follows_source(False)
+
+    def _on_source_filter(self) -> None:
+        """The user asked for each source's default filter again."""
+        self.window_settings.save_filter_chosen(False)
+        self.filter_panel.set_follows_source(True)
 
     def _on_theme_changed(self, _name: str) -> None:
         """Colours set on single widgets follow the theme (a method: Qt drops the

@@ -108,8 +108,11 @@ class HeadingFeed:
                                self.settings)
 
     def light(self) -> FieldLight:
-        rows = self.session.pipeline.field.window(LIGHT_WINDOW_S, ["norm", "dip"])
-        return field_light(rows["norm"], rows["dip"], self.reference())
+        pipeline = self.session.pipeline
+        rows = pipeline.field.window(LIGHT_WINDOW_S, ["norm", "dip"])
+        calibration = pipeline.calibration.magnetometer
+        return field_light(rows["norm"], rows["dip"], self.reference(),
+                           calibrated=calibration is not None)
 
     def clear(self) -> None:
         """No data: no heading; the light as the field ring says."""
