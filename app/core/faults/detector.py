@@ -524,13 +524,17 @@ class FaultDetector:
         if n_d4 < 8:
             return flat, sigma
         sigma = np.maximum(sigma, np.median(self._d4_abs[:n_d4], axis=0) / D4_MEDIAN_GAIN)
-        ramp = np.arange(n, dtype=float)
-        for c in np.flatnonzero(spread <= NOISE_FLAT * sigma):
-            x = self._window_x[:n, c]
-            x = x - np.polyval(np.polyfit(ramp, x, 1), ramp)
-            power = float(np.dot(x, x))
-            limit = min(WHITE_CORR_MAX, 3.0 / math.sqrt(n)) * power
-            flat[c] = all(abs(float(np.dot(x[k:], x[:-k]))) <= limit for k in (1, 2, 3))
+        tested = np.flatnonzero(spread <= NOISE_FLAT * sigma)
+        if len(tested):  # all channels at once: the least-squares line in closed form
+            x = self._window_x[:n][:, tested]
+            x = x - x.mean(axis=0)
+            ramp = np.arange(n, dtype=float) - 0.5 * (n - 1)
+            x = x - np.outer(ramp, (ramp @ x) / float(ramp @ ramp))
+            limit = min(WHITE_CORR_MAX, 3.0 / math.sqrt(n)) * np.einsum("ij,ij->j", x, x)
+            white = np.ones(len(tested), dtype=bool)
+            for k in (1, 2, 3):
+                white &= np.abs(np.einsum("ij,ij->j", x[k:], x[:-k])) <= limit
+            flat[tested] = white
         return flat, sigma
 
     def _noise_test(self, t: float, out: list[FaultEvent]) -> None:
