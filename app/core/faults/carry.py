@@ -23,6 +23,23 @@ whichever way the hand turns. The component of ``b`` along gravity moves nothing
 while the sensor keeps its attitude: a small ridge keeps that part at zero until the
 rotation makes it seen. Without a magnetometer the vertical axis's bias is found only as the
 sensor turns.
+
+**With the field.** The gyro carries the earth's field as well, and the magnetometer measures
+it: per window the mean field, turned sample by sample into the window-start frame, then into
+the anchor frame, ``F_i = m0 - [m0]x A_i (b, s)`` with ``A_i`` the bias and scale error's turn
+at the window's middle. A static vector, so no motion term: the field part needs no velocity
+sum. Gravity sees the bias across gravity, the field across the field; together, every axis,
+the vertical one while the attitude is held. The two parts are weighed each by its own residual
+scatter (the field's at least ``FIELD_FLOOR_UT``, and times ``(1 + r) / (1 - r)`` for the
+lag-1 correlation ``r`` of its residual: calibration errors and field gradients are smooth in
+time, so windows in a row are not independent evidence). With the field the ridge gives way
+to priors: the bias within 10 dps (``BIAS_PRIOR_RAD_S``), the scale error within 3 %
+(``SCALE_ERROR``; without it a bias's own turn, when the hand holds still, passes for a
+scale error). No hard iron is solved for: within
+8 s a field fixed to the sensor differs from the earth's only by the turn, and a bias's turn
+would be taken for it. The field must therefore come calibrated; the detector
+(:mod:`app.core.faults.detector`) passes it only while the magnetic disturbance detector calls
+it undisturbed, no magnetometer axis is faulty, and the window turns slower than 200 dps.
 """
 
 from __future__ import annotations
@@ -39,6 +56,10 @@ SIGNIFICANCE = 3.0
 CONFIRM = 4
 RIDGE = 1e-3
 """Relative to the largest eigenvalue of the normal equations' bias block."""
+
+
+_Window = tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray | None]
+"""A window: its rotation matrix, mean acceleration, length, rotation vector, mean field."""
 
 
 def rotation_matrix(q: np.ndarray) -> np.ndarray:
@@ -63,8 +84,7 @@ class GravityCarry:
 
     def restart(self) -> None:
         """Forget the horizon (a gap, a new reference bias)."""
-        self._windows: deque[tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray | None]] = (
-            deque())
+        self._windows: deque[_Window] = deque()
         self._span = 0.0
         self._hits = 0
         self.estimate = np.zeros(3)
@@ -73,6 +93,7 @@ class GravityCarry:
         """Windows of the last solve that carried the field."""
         self.field_scatter = 0.0
         self.field_correlation = 0.0
+        """The field residual's lag-1 correlation in the last solve."""
         """The field part's residual scatter in the last solve (uT)."""
 
     def push(self, rotation: np.ndarray, accel: np.ndarray, duration: float,
@@ -109,7 +130,7 @@ class GravityCarry:
         """The field is not to be trusted (disturbed, a magnetometer fault): drop the field
         part of every window in the horizon; gravity's part goes on."""
         if any(w[4] is not None for w in self._windows):
-            self._windows = deque(w[:4] + (None,) for w in self._windows)
+            self._windows = deque((*w[:4], None) for w in self._windows)
 
     def _solve(self) -> None:
         k = len(self._windows)
@@ -222,8 +243,11 @@ SCALE_ERROR = 0.03
 """The gyro's scale error, a prior (3 %: a consumer MEMS gyro's sensitivity tolerance). A
 turn the hand makes tells it from a bias; without one (the attitude held) a bias's own
 turn would be taken as a scale error of 100 % unless the prior says no."""
-BIAS_PRIOR_RAD_S = math.radians(10.0)
 MAX_LAG_CORRELATION = 0.9
+"""The field residual's lag-1 correlation counts up to this (its variance up to 19x)."""
+BIAS_PRIOR_RAD_S = math.radians(10.0)
+"""With the field: a bias step's prior (the rest test's absolute limit); an axis neither
+reference sees keeps an error of that size, never significant."""
 FIELD_GUESS_UT = 0.5
 """The field residual's scatter assumed before the first fit has measured it."""
 NUISANCE_RIDGE = 1e-9
