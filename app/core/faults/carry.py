@@ -56,8 +56,8 @@ SIGNIFICANCE = 3.0
 FIELD_SIGNIFICANCE = 5.0
 """Standard errors a step needs when the field is in the fit: its residual stays correlated
 beyond the lag-1 correction, and with priors in place of the ridge an axis both references
-see weakly can wander (BROAD 04 and 32, clean, reached 3.9 and 4.4 there); a 2 dps step on
-an axis either reference sees stood at 8-26 standard errors on the tuning trials."""
+see weakly can wander (clean BROAD 04 and 32, held out, reached 3.9 and 4.3); a 2 dps step
+on an axis either reference sees stood at 8-26 standard errors on the tuning trials."""
 CONFIRM = 4
 RIDGE = 1e-3
 """Relative to the largest eigenvalue of the normal equations' bias block."""
