@@ -114,9 +114,8 @@ class GravityCarry:
         sine = float(np.linalg.norm(rotation[1:]))
         turned = (2.0 * math.atan2(sine, half) / sine * rotation[1:] if sine > 1e-12
                   else 2.0 * rotation[1:])
-        usable = field is not None and bool(np.all(np.isfinite(field)))
-        self._windows.append((rotation_matrix(rotation), accel.copy(), duration, turned,
-                              field.copy() if usable else None))
+        kept = field.copy() if field is not None and np.all(np.isfinite(field)) else None
+        self._windows.append((rotation_matrix(rotation), accel.copy(), duration, turned, kept))
         self._span += duration
         while self._span - self._windows[0][2] >= HORIZON_S:
             self._span -= self._windows.popleft()[2]
