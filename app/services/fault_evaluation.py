@@ -230,7 +230,9 @@ def _join(blocks: list[SampleBlock]) -> SampleBlock:
     return SampleBlock(
         np.concatenate([b.t_s for b in blocks]), np.concatenate([b.accel_m_s2 for b in blocks]),
         np.concatenate([b.gyro_rad_s for b in blocks]),
-        np.concatenate([b.temp_degc for b in blocks]), np.concatenate([b.gap for b in blocks]))
+        np.concatenate([b.temp_degc for b in blocks]), np.concatenate([b.gap for b in blocks]),
+        mag_ut=(np.concatenate([b.mag_ut for b in blocks])
+                if all(b.mag_ut is not None for b in blocks) else None))
 
 
 # -- the run ---------------------------------------------------------------------------------------

@@ -23,6 +23,23 @@ whichever way the hand turns. The component of ``b`` along gravity moves nothing
 while the sensor keeps its attitude: a small ridge keeps that part at zero until the
 rotation makes it seen. Without a magnetometer the vertical axis's bias is found only as the
 sensor turns.
+
+**With the field.** The gyro carries the earth's field as well, and the magnetometer measures
+it: per window the mean field, turned sample by sample into the window-start frame, then into
+the anchor frame, ``F_i = m0 - [m0]x A_i (b, s)`` with ``A_i`` the bias and scale error's turn
+at the window's middle. A static vector, so no motion term: the field part needs no velocity
+sum. Gravity sees the bias across gravity, the field across the field; together, every axis,
+the vertical one while the attitude is held. The two parts are weighed each by its own residual
+scatter (the field's at least ``FIELD_FLOOR_UT``, and times ``(1 + r) / (1 - r)`` for the
+lag-1 correlation ``r`` of its residual: calibration errors and field gradients are smooth in
+time, so windows in a row are not independent evidence). With the field the ridge gives way
+to priors: the bias within 10 dps (``BIAS_PRIOR_RAD_S``), the scale error within 3 %
+(``SCALE_ERROR``; without it a bias's own turn, when the hand holds still, passes for a
+scale error). No hard iron is solved for: within
+8 s a field fixed to the sensor differs from the earth's only by the turn, and a bias's turn
+would be taken for it. The field must therefore come calibrated; the detector
+(:mod:`app.core.faults.detector`) passes it only while the magnetic disturbance detector calls
+it undisturbed, no magnetometer axis is faulty, and the window turns slower than 200 dps.
 """
 
 from __future__ import annotations
@@ -36,12 +53,22 @@ HORIZON_S = 8.0
 MIN_S = 4.0
 STEP_RAD_S = math.radians(1.6)
 SIGNIFICANCE = 3.0
+FIELD_SIGNIFICANCE = 5.0
+"""Standard errors a step needs when the field is in the fit: its residual stays correlated
+beyond the lag-1 correction, and with priors in place of the ridge an axis both references
+see weakly can wander (clean BROAD 04 and 32, held out, reached 3.9 and 4.3); a 2 dps step
+on an axis either reference sees stood at 8-26 standard errors on the tuning trials."""
 CONFIRM = 4
 RIDGE = 1e-3
 """Relative to the largest eigenvalue of the normal equations' bias block."""
 
 
-def _rotation(q: np.ndarray) -> np.ndarray:
+_Window = tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray | None]
+"""A window: its rotation matrix, mean acceleration, length, rotation vector, mean field."""
+
+
+def rotation_matrix(q: np.ndarray) -> np.ndarray:
+    """The rotation matrix of unit quaternion ``q`` (w, x, y, z)."""
     w, x, y, z = q
     return np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
@@ -62,17 +89,24 @@ class GravityCarry:
 
     def restart(self) -> None:
         """Forget the horizon (a gap, a new reference bias)."""
-        self._windows: deque[tuple[np.ndarray, np.ndarray, float, np.ndarray]] = deque()
+        self._windows: deque[_Window] = deque()
         self._span = 0.0
         self._hits = 0
         self.estimate = np.zeros(3)
         self.error = np.full(3, np.inf)
+        self.field_windows = 0
+        """Windows of the last solve that carried the field."""
+        self.field_scatter = 0.0
+        self.field_correlation = 0.0
+        """The field residual's lag-1 correlation in the last solve."""
+        """The field part's residual scatter in the last solve (uT)."""
 
-    def push(self, rotation: np.ndarray, accel: np.ndarray, duration: float
-             ) -> tuple[int, np.ndarray] | None:
+    def push(self, rotation: np.ndarray, accel: np.ndarray, duration: float,
+             field: np.ndarray | None = None) -> tuple[int, np.ndarray] | None:
         """One window: its rotation quaternion (window start to end), its mean accelerometer
-        in the window-start frame, its length. Returns (axis, bias step in rad/s, (3,)) when a
-        step is declared, else None."""
+        in the window-start frame, its length and, when the field is trusted this window, its
+        mean field in the window-start frame (uT; None: no field part for this window).
+        Returns (axis, bias step in rad/s, (3,)) when a step is declared, else None."""
         if not (duration > 0 and np.all(np.isfinite(accel)) and np.all(np.isfinite(rotation))):
             self.restart()
             return None
@@ -80,35 +114,47 @@ class GravityCarry:
         sine = float(np.linalg.norm(rotation[1:]))
         turned = (2.0 * math.atan2(sine, half) / sine * rotation[1:] if sine > 1e-12
                   else 2.0 * rotation[1:])
-        self._windows.append((_rotation(rotation), accel.copy(), duration, turned))
+        kept = field.copy() if field is not None and np.all(np.isfinite(field)) else None
+        self._windows.append((rotation_matrix(rotation), accel.copy(), duration, turned, kept))
         self._span += duration
         while self._span - self._windows[0][2] >= HORIZON_S:
             self._span -= self._windows.popleft()[2]
         if self._span < MIN_S:
             return None
         self._solve()
+        significance = FIELD_SIGNIFICANCE if self.field_windows else SIGNIFICANCE
         big = (np.abs(self.estimate) > STEP_RAD_S) & (np.abs(self.estimate)
-                                                    > SIGNIFICANCE * self.error)
+                                                    > significance * self.error)
         self._hits = self._hits + 1 if big.any() else 0
         if self._hits < CONFIRM:
             return None
         axis = int(np.argmax(np.where(big, np.abs(self.estimate), 0.0)))
         return axis, self.estimate.copy()
 
+    def forget_field(self) -> None:
+        """The field is not to be trusted (disturbed, a magnetometer fault): drop the field
+        part of every window in the horizon; gravity's part goes on."""
+        if any(w[4] is not None for w in self._windows):
+            self._windows = deque((*w[:4], None) for w in self._windows)
+
     def _solve(self) -> None:
         k = len(self._windows)
         velocity = np.empty((k, 3))
         drift = np.empty((k, 3, 6))
         elapsed = np.empty(k)
+        fields: list[tuple[np.ndarray, np.ndarray]] = []
         turn = np.eye(3)
         angle = np.zeros((3, 6))
         summed = np.zeros(3)
         drifted = np.zeros((3, 6))
         clock = 0.0
-        for i, (rotation, accel, duration, turned) in enumerate(self._windows):
+        for i, (rotation, accel, duration, turned, field) in enumerate(self._windows):
             step = np.hstack([duration * turn, turn * turned])  # bias, scale error
             summed = summed + duration * (turn @ accel)
             drifted = drifted + duration * (angle + 0.5 * step)
+            if field is not None:
+                # the window's mean field in the anchor frame, the carry's error at its middle
+                fields.append((turn @ field, angle + 0.5 * step))
             angle = angle + step
             clock += duration
             velocity[i], drift[i], elapsed[i] = summed, drifted, clock
@@ -119,20 +165,135 @@ class GravityCarry:
         plain[:, 3:] = np.tile(np.eye(3), (k, 1))
         y = velocity.reshape(3 * k)
         gravity = np.linalg.lstsq(plain, y, rcond=None)[0][:3]
-        design = np.zeros((3 * k, 12))
+        design = np.zeros((3 * k, PARTS))
         design[:, :6] = plain
-        design[:, 6:] = (-_skew(gravity) @ drift).reshape(3 * k, 6)
-        normal = design.T @ design
-        for part in (slice(6, 9), slice(9, 12)):
-            block = normal[part, part]
-            normal[part, part] += RIDGE * max(float(np.linalg.eigvalsh(block)[-1]),
-                                              1e-12) * np.eye(3)
+        design[:, 6:12] = (-_skew(gravity) @ drift).reshape(3 * k, 6)
+        fitted = _fit(design, y, 3 * k - 12)
+        if fitted is None:
+            return
+        variance = max(fitted[0], 1e-300)
+        normal = design.T @ design / variance
+        rhs = design.T @ y / variance
+        part = self._field_part(fields) if len(fields) * 3 >= FIELD_MIN_ROWS else None
+        if part is not None:
+            # two references: every axis is seen, given the turn; priors, not a ridge
+            joint = _with_priors(normal + part[0])
+            try:
+                inverse = np.linalg.inv(joint)
+            except np.linalg.LinAlgError:
+                return
+            self.estimate = (inverse @ (rhs + part[1]))[6:9]
+            self.error = np.sqrt(np.maximum(np.diag(inverse)[6:9], 1e-300))
+            self.field_windows = len(fields)
+            return
+        self.field_windows = 0
+        _ridge(normal)
         try:
             inverse = np.linalg.inv(normal)
         except np.linalg.LinAlgError:
             return
-        solution = inverse @ (design.T @ y)
-        residual = y - design @ solution
-        variance = float(residual @ residual) / max(3 * k - 12, 1)
+        solution = inverse @ rhs
         self.estimate = solution[6:9]
-        self.error = np.sqrt(np.maximum(np.diag(inverse)[6:9] * variance, 1e-300))
+        self.error = np.sqrt(np.maximum(np.diag(inverse)[6:9], 1e-300))
+
+    def _field_part(self, fields: list[tuple[np.ndarray, np.ndarray]]
+                    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """The field's normal equations, weighed by the field's own residual scatter.
+
+        Carried into the anchor frame the field of window i is ``F_i = m0 - [m0]x A_i (b,
+        s)``: ``m0`` the earth's field there, ``A_i`` the bias and scale error's turn at the
+        window's middle. No motion term: the field is a static vector. No hard iron either:
+        within 8 s a field fixed to the sensor is told from the earth's only by the turn, and
+        a bias's own turn would be taken for one; the field must come calibrated (one left
+        in it changes the strength as the sensor turns: the disturbance gate takes it).
+        """
+        measured = np.array([f[0] for f in fields])
+        y = measured.reshape(-1)
+        rows = len(fields) * 3
+        design = np.zeros((rows, PARTS))
+        design[:, 12:15] = np.tile(np.eye(3), (len(fields), 1))
+        angles = np.array([f[1] for f in fields])
+        m0 = measured.mean(axis=0)
+        variance = FIELD_GUESS_UT ** 2
+        prior = np.zeros(PARTS)
+        for _ in range(2):  # the bias's effect depends on m0: linearise, then once again
+            design[:, 6:12] = (-_skew(m0) @ angles).reshape(rows, 6)
+            prior[9:12] = variance / SCALE_ERROR ** 2
+            fitted = _fit(design, y, rows - 12, prior)
+            if fitted is None:
+                return None
+            variance, solution, residual = fitted
+            variance = max(variance, FIELD_FLOOR_UT ** 2)
+            m0 = solution[12:15]
+        self.field_scatter = math.sqrt(variance)
+        # the field's residual (calibration, a gradient the sensor moves through) is smooth
+        # in time, not white: window after window it tells less than its scatter says
+        r = residual.reshape(-1, 3)
+        lag = float(np.sum(r[1:] * r[:-1])) / max(float(np.sum(r * r)), 1e-300)
+        lag = min(max(lag, 0.0), MAX_LAG_CORRELATION)
+        self.field_correlation = lag
+        variance *= (1.0 + lag) / (1.0 - lag)
+        normal = design.T @ design / variance
+        return normal, design.T @ y / variance
+
+
+PARTS = 15
+"""Unknowns: gravity, start velocity, bias, scale error, earth field."""
+FIELD_MIN_ROWS = 3 * 16
+"""Field rows (3 per window) the field part needs: 4 s of trusted field."""
+FIELD_FLOOR_UT = 0.05
+"""The field residual's scatter is taken as at least this (uT): a perfect fit is no reason
+to trust the field without bound."""
+SCALE_ERROR = 0.03
+"""The gyro's scale error, a prior (3 %: a consumer MEMS gyro's sensitivity tolerance). A
+turn the hand makes tells it from a bias; without one (the attitude held) a bias's own
+turn would be taken as a scale error of 100 % unless the prior says no."""
+MAX_LAG_CORRELATION = 0.9
+"""The field residual's lag-1 correlation counts up to this (its variance up to 19x)."""
+BIAS_PRIOR_RAD_S = math.radians(10.0)
+"""With the field: a bias step's prior (the rest test's absolute limit); an axis neither
+reference sees keeps an error of that size, never significant."""
+FIELD_GUESS_UT = 0.5
+"""The field residual's scatter assumed before the first fit has measured it."""
+NUISANCE_RIDGE = 1e-9
+"""Relative ridge on the nuisance unknowns (none without a field: it must stay invertible)."""
+
+
+def _with_priors(normal: np.ndarray) -> np.ndarray:
+    out = normal.copy()
+    out[6:9, 6:9] += np.eye(3) / BIAS_PRIOR_RAD_S ** 2
+    out[9:12, 9:12] += np.eye(3) / SCALE_ERROR ** 2
+    _ridge(out, bias=False)
+    return out
+
+
+def _ridge(normal: np.ndarray, bias: bool = True) -> None:
+    """The bias and scale error's ridge (module docstring; ``bias``) and a tiny one on the
+    rest."""
+    for part in (slice(6, 9), slice(9, 12)) if bias else ():
+        block = normal[part, part]
+        normal[part, part] += RIDGE * max(float(np.linalg.eigvalsh(block)[-1]),
+                                          1e-300) * np.eye(3)
+    diagonal = np.diag(normal).copy()
+    top = float(diagonal.max()) if diagonal.size else 1.0
+    for i in range(12, PARTS):
+        normal[i, i] += NUISANCE_RIDGE * top + 1e-300
+
+
+def _fit(design: np.ndarray, y: np.ndarray, dof: int, prior: np.ndarray | None = None
+         ) -> tuple[float, np.ndarray, np.ndarray] | None:
+    """The residual variance of ``y`` against ``design`` (ridged as in the joint fit), the
+    solution (0 on the unknowns ``design`` does not hold) and the residual."""
+    used = np.flatnonzero(np.any(design != 0.0, axis=0))
+    normal = design.T @ design
+    if prior is not None:
+        normal += np.diag(prior)
+    _ridge(normal)
+    try:
+        part = np.linalg.solve(normal[np.ix_(used, used)], design[:, used].T @ y)
+    except np.linalg.LinAlgError:
+        return None
+    residual = y - design[:, used] @ part
+    solution = np.zeros(design.shape[1])
+    solution[used] = part
+    return float(residual @ residual) / max(dof, 1), solution, residual

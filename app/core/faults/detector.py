@@ -47,7 +47,11 @@ Analytical redundancy (needs rest: every channel's window spread within 3 sigma 
     than 10 dps absolute, for 1 s of rest.
 
     *gyro bias in motion.* Gravity carried by the gyro against the accelerometer's, the
-    motion's acceleration averaged out, over 8 s (:mod:`app.core.faults.carry`).
+    motion's acceleration averaged out, over 8 s, and with a magnetometer the earth's field
+    carried by the gyro against the magnetometer's (:mod:`app.core.faults.carry`): the field
+    counts while the magnetic disturbance detector (:mod:`app.core.magnetometer.disturbance`,
+    VQF's bands, the dip against a 3 s low-passed tilt) calls it undisturbed, no magnetometer
+    axis was declared faulty in the last 5 s, and the window turns slower than 200 dps.
 
     *noise in motion.* Each channel's band above a quarter of the rate against its own recent
     level and the other channels' (:mod:`app.core.faults.motion`).
@@ -78,11 +82,18 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from app.core.faults.carry import GravityCarry
+from app.core.faults.carry import GravityCarry, rotation_matrix
 from app.core.faults.events import CHANNELS, FaultEvent, severity_rank
 from app.core.faults.magnetometer import MagnetometerCheck
 from app.core.faults.motion import BAND, MotionNoiseCheck
 from app.core.faults.spec import SensorSpec
+from app.core.magnetometer.disturbance import (
+    OK,
+    DisturbanceSettings,
+    detector_step,
+    new_state,
+    track_rate,
+)
 from app.core.samples import STANDARD_GRAVITY_M_S2, RawBlock, SampleBlock
 
 G = STANDARD_GRAVITY_M_S2
@@ -128,6 +139,15 @@ FLOOR_ALPHA = 0.1
 """Floor learning per quiet window (time constant 2.5 s)."""
 HOLD_S = 5.0
 """An event repeats only after its condition has been clear this long."""
+_DISTURBANCE = DisturbanceSettings().as_array()
+"""The magnetic disturbance detector's settings for the field part of the gyro bias test
+(VQF's: 10 % of strength, 10 deg of dip)."""
+TILT_TAU_S = 3.0
+FIELD_MAX_RATE_RAD_S = math.radians(200.0)
+"""Windows turning faster than this leave the field out of the bias test: at several hundred
+dps the magnetometer's and the gyro's sampling instants and filters, a few ms apart, turn the
+carried field by degrees (BROAD 28, rotated at 300-400 dps RMS, read 6-15 dps of "bias" from
+it; set on the tuning trials: 150 and 250 dps both clean there)."""
 
 STUCK, DEAD, SPIKE, SATURATION, NOISE, BIAS = 1, 2, 4, 8, 16, 32
 FLAG_KINDS = {STUCK: "stuck", DEAD: "dead", SPIKE: "spike", SATURATION: "saturation",
@@ -138,14 +158,16 @@ LATCHED_KINDS = ("bias", "gravity", "consistency")
 
 @njit(cache=True)
 def _scan(t, x, gap, hist, ints, run_val, run_len, sums, quat, local, peak, peak_decay,
-          stuck_len, spike_scale, d4_clip, sat_level, gyro_ref, window_x, d4_abs,
+          stuck_len, spike_scale, d4_clip, sat_level, gyro_ref, window_x, d4_abs, mag,
           flags):  # pragma: no cover
     """Per-sample tests over one chunk; updates the state arrays in place.
 
     ints: [contiguous samples, window samples, window d4 samples]; sums: (6, 4) window sums
     of clipped |d4|, x, x^2 and, in [:, 3] for the gyro rows, nothing; quat: rotation since the
     window start (gyro minus gyro_ref), (w, x, y, z), then [4] the previous sample time and
-    [5:8] the window's sum of accelerometer samples turned into the window-start frame.
+    [5:8] the window's sum of accelerometer samples turned into the window-start frame, [8:11]
+    that of the field samples (``mag``: (n, 3), NaN rows without one; (0, 3): no field) and
+    [11] their count.
     window_x, d4_abs: (window, 6) the window's samples (row ints[1]) and unclipped |d4| (row
     ints[2]), for the median and the autocorrelation at the window's end.
     """
@@ -219,6 +241,16 @@ def _scan(t, x, gap, hist, ints, run_val, run_len, sums, quat, local, peak, peak
         quat[5] += ax + qw * tx + (qy * tz - qz * ty)
         quat[6] += ay + qw * ty + (qz * tx - qx * tz)
         quat[7] += az + qw * tz + (qx * ty - qy * tx)
+        if mag.shape[0] == n:
+            ax, ay, az = mag[i, 0], mag[i, 1], mag[i, 2]
+            if math.isfinite(ax) and math.isfinite(ay) and math.isfinite(az):
+                tx = 2.0 * (qy * az - qz * ay)
+                ty = 2.0 * (qz * ax - qx * az)
+                tz = 2.0 * (qx * ay - qy * ax)
+                quat[8] += ax + qw * tx + (qy * tz - qz * ty)
+                quat[9] += ay + qw * ty + (qz * tx - qx * tz)
+                quat[10] += az + qw * tz + (qx * ty - qy * tx)
+                quat[11] += 1.0
         for k in range(3, 0, -1):
             for c in range(6):
                 hist[k, c] = hist[k - 1, c]
@@ -314,7 +346,7 @@ class FaultDetector:
         self._local = np.zeros(6)
         self._stuck_len = np.full(6, np.iinfo(np.int64).max // 4)
         self._peak = np.zeros(6)
-        self._quat = np.array([1.0, 0.0, 0.0, 0.0, -np.inf, 0.0, 0.0, 0.0])
+        self._quat = np.array([1.0, 0.0, 0.0, 0.0, -np.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
         self._window_t = 0.0
         self._rho: deque[np.ndarray] = deque(maxlen=NOISE_SPAN_WINDOWS)
         self._rho_flat: deque[np.ndarray] = deque(maxlen=NOISE_SPAN_WINDOWS)
@@ -333,6 +365,10 @@ class FaultDetector:
         self._motion.reset()
         self._carry.restart()
         self._field_seen = False
+        self._mag = np.zeros((0, 3))
+        self._field_state = new_state()
+        self._field_trusted = False
+        self._tilt: np.ndarray | None = None
 
     def update(self, block: SampleBlock, raw: RawBlock | None = None) -> list[FaultEvent]:
         """Run every test over ``block``; the events declared in it, in time order."""
@@ -347,6 +383,14 @@ class FaultDetector:
         t = np.ascontiguousarray(block.t_s, dtype=np.float64)
         gap = np.ascontiguousarray(block.gap, dtype=np.bool_)
         out: list[FaultEvent] = []
+        self._mag = (np.zeros((0, 3)) if block.mag_ut is None
+                     else np.ascontiguousarray(block.mag_ut, dtype=np.float64))
+        if block.mag_ut is not None:
+            # before the windows: a magnetometer fault in this block keeps its field out of
+            # the gyro bias test
+            self._field_seen = True
+            counts = None if raw is None else raw.mag_raw
+            out.extend(self.magnetometer.update(t, block.mag_ut, gap, counts))
         if gap[0] or t[0] <= self._last_t:
             self._restart(t[0], out, lost=raw.lost_samples if raw is not None else 0)
         start = 0
@@ -363,10 +407,7 @@ class FaultDetector:
             start = stop
         self._last_t = float(t[-1])
         self._emit_sample_flags(t, x, out)
-        if block.mag_ut is not None:
-            self._field_seen = True
-            counts = None if raw is None else raw.mag_raw
-            out.extend(self.magnetometer.update(t, block.mag_ut, gap, counts))
+        self._mag = np.zeros((0, 3))
         out.sort(key=lambda e: e.t)
         self.events.extend(out)
         return out
@@ -399,13 +440,14 @@ class FaultDetector:
         self._ints[:] = 0
         self._sums[:] = 0.0
         self._quat[:4] = (1.0, 0.0, 0.0, 0.0)
-        self._quat[5:8] = 0.0
+        self._quat[5:] = 0.0
         self._carry.restart()
         self._rho.clear()
         self._rho_flat.clear()
         self._rho_white.clear()
         self._rate.clear()
         self._rest = None
+        self._tilt = None
         self._motion.restart()
         for key in self._counts:
             self._counts[key] = 0
@@ -461,7 +503,7 @@ class FaultDetector:
         _scan(t[a:b], chunk_x, gap[a:b], self._hist, self._ints, self._run_val, self._run_len,
               self._sums, self._quat, self._local, self._peak,
               self._peak_decay, stuck, spike, clip, self._sat, gyro_ref, self._window_x,
-              self._d4_abs,
+              self._d4_abs, self._mag[a:b] if len(self._mag) else self._mag,
               self.flags[a:b])
         self.flags[a:b] |= self._active_bits
 
@@ -474,11 +516,13 @@ class FaultDetector:
         m = sums[:, 0] / max(n_d4, 1.0)
         quat = self._quat[:4].copy()
         carried = self._quat[5:8] / max(n, 1.0)
+        field_count = float(self._quat[11])
+        field = self._quat[8:11] / field_count if field_count > 0 else None
         duration = t_end - self._window_t
         self._ints[1:] = 0
         sums[:] = 0.0
         self._quat[:4] = (1.0, 0.0, 0.0, 0.0)
-        self._quat[5:8] = 0.0
+        self._quat[5:] = 0.0
         self._motion.end_window(int(n))
         if n_d4 < 0.5 * self.window:
             return
@@ -498,9 +542,10 @@ class FaultDetector:
                                                            is not None else 0.0))))
         self._noise_test(t_end, out)
         self._motion_noise_test(t_end, out)
-        self._carried_bias_test(quat, carried, duration, t_end, out)
         sigma = self._floor / D4_GAIN
         resting = bool(np.all(spread <= REST_SIGMA * sigma + 1e-12))
+        field = self._trusted_field(field, carried, quat, mean[3:], duration, resting, t_end)
+        self._carried_bias_test(quat, carried, duration, t_end, out, field)
         self._rest_tests(resting, mean, quat, duration, t_end, out)
         # learn the floor from quiet windows only
         quiet = (rho < 1.5) & ((rho >= 0.3) | (self._run_len < 4))
@@ -566,23 +611,68 @@ class FaultDetector:
                         f"{motion.level[c]:.1f}x the other channels' (relative to their own "
                         f"recent levels) for 1.5 s; no motion puts it there", held=True)
 
+    def _trusted_field(self, field: np.ndarray | None, accel: np.ndarray, quat: np.ndarray,
+                       gyro: np.ndarray, duration: float, resting: bool, t: float
+                       ) -> np.ndarray | None:
+        """The window's mean field (window-start frame) when the gyro bias test may use it:
+        the magnetic disturbance detector (:mod:`app.core.magnetometer.disturbance`: strength
+        and dip against a reference learnt at rest or while turning) calls it undisturbed,
+        and no magnetometer axis was declared faulty in the last HOLD_S. Otherwise None, and
+        the field part of the test's horizon is dropped.
+
+        The dip is taken against the direction of gravity from the accelerometer low-passed
+        along the gyro's carry over ``TILT_TAU_S`` (VQF's 3 s), as a filter's tilt: a
+        window's own mean acceleration tilts by up to 20 deg in a hand's translation (BROAD
+        10), while a 2 dps bias moves the low-passed tilt by 6 deg at most."""
+        up = self._tilt
+        norm_a = float(np.linalg.norm(accel))
+        if norm_a > 0:
+            alpha = duration / (TILT_TAU_S + duration) if up is not None else 1.0
+            up = accel / norm_a if up is None else up + alpha * (accel / norm_a - up)
+            up = up / float(np.linalg.norm(up))
+        # carried on into the next window's frame
+        self._tilt = None if up is None else rotation_matrix(quat).T @ up
+        if field is None or up is None:
+            return None
+        state = self._field_state
+        rate = gyro - (self._gyro_ref if self._gyro_ref is not None else 0.0)
+        track_rate(state, float(rate[0]), float(rate[1]), float(rate[2]), duration)
+        norm = float(np.linalg.norm(field))
+        if not norm > 0:
+            return None
+        dip = math.asin(max(-1.0, min(1.0, -float(field @ up) / norm)))
+        status = detector_step(state, _DISTURBANCE, norm, dip, duration, resting)
+        healthy = all(level == "ok" for level in self.magnetometer.health(t).values())
+        trusted = status == OK and healthy
+        if not trusted and self._field_trusted:
+            self._carry.forget_field()
+        self._field_trusted = trusted
+        turned = 2.0 * math.acos(min(1.0, abs(float(quat[0]))))
+        if turned > FIELD_MAX_RATE_RAD_S * duration:
+            return None  # trusted, but not this window's: see FIELD_MAX_RATE_RAD_S
+        return field if trusted else None
+
     def _carried_bias_test(self, quat: np.ndarray, carried: np.ndarray, duration: float,
-                           t: float, out: list[FaultEvent]) -> None:
-        """A gyro bias step in motion: gravity carried by the gyro drifts from the
-        accelerometer's (:mod:`app.core.faults.carry`)."""
+                           t: float, out: list[FaultEvent], field: np.ndarray | None = None
+                           ) -> None:
+        """A gyro bias step in motion: gravity (and the field, when trusted) carried by the
+        gyro drift from the accelerometer's (and magnetometer's) (:mod:`app.core.faults.carry`)."""
         noisy = (self._active_bits[3:] & NOISE).any()
         if self._gyro_ref is None or noisy or self._frozen(t).any():
             # a channel already declared frozen or noisy explains a drift: no second culprit
             self._carry.restart()
             return
-        found = self._carry.push(quat, carried, duration)
+        found = self._carry.push(quat, carried, duration, field)
         if found is None:
             return
         axis, step = found
+        with_field = self._carry.field_windows > 0
+        carried_what = "gravity and the field" if with_field else "gravity"
+        measured_by = "accelerometer and magnetometer" if with_field else "accelerometer"
         self._event(out, t, CHANNELS[3 + axis], "bias", "fault",
                     f"gyro bias changed by {_units(3 + axis, step[axis])} on "
-                    f"{CHANNELS[3 + axis]} in motion (gravity carried by the gyro drifts "
-                    f"from the accelerometer's)")
+                    f"{CHANNELS[3 + axis]} in motion ({carried_what} carried by the gyro "
+                    f"drifts from what the {measured_by} measures)")
         self._gyro_ref = self._gyro_ref + step
         self._carry.restart()
 

@@ -164,7 +164,7 @@ def inject(samples: SampleBlock, specs: Sequence[FaultSpec], seed: int = 0,
         values[:, ok] = np.rint(values[:, ok] / q[ok]) * q[ok]
     return SampleBlock(samples.t_s, np.ascontiguousarray(values[:, :3]),
                        np.ascontiguousarray(values[:, 3:]), samples.temp_degc, samples.gap,
-                       samples.reference_quat)
+                       samples.reference_quat, samples.mag_ut)
 
 
 # -- one source ------------------------------------------------------------------------------------
@@ -413,11 +413,12 @@ def _values(samples: SampleBlock) -> np.ndarray:
 
 
 def sample_rows(samples: SampleBlock, start: int, stop: int) -> SampleBlock:
-    """Rows ``start:stop`` of ``samples`` (views)."""
-    ref = samples.reference_quat
+    """Rows ``start:stop`` of ``samples`` (views), the field's too when there is one."""
+    ref, mag = samples.reference_quat, samples.mag_ut
     return SampleBlock(samples.t_s[start:stop], samples.accel_m_s2[start:stop],
                        samples.gyro_rad_s[start:stop], samples.temp_degc[start:stop],
-                       samples.gap[start:stop], None if ref is None else ref[start:stop])
+                       samples.gap[start:stop], None if ref is None else ref[start:stop],
+                       None if mag is None else mag[start:stop])
 
 
 def _duration(samples: SampleBlock, odr_hz: float) -> float:
