@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from app.core.calibration import MagnetometerCalibration
 from app.core.faults import FaultDetector, SensorSpec
 from app.core.faults import detector as detector_module
 from app.core.faults.carry import GravityCarry
@@ -65,8 +66,12 @@ def _without_field(samples: SampleBlock) -> SampleBlock:
                        samples.gap)
 
 
-def _bias_events(samples: SampleBlock) -> list:
+def _bias_events(samples: SampleBlock, calibration: MagnetometerCalibration | None = None,
+                 calibrated: bool = True) -> list:
+    """The bias events; the field as calibrated (``calibrated``) or through ``calibration``."""
     detector = FaultDetector(SensorSpec(odr_hz=ODR))
+    detector.field_calibrated = calibrated
+    detector.field_calibration = calibration
     events = []
     for start in range(0, len(samples), 10):
         events += detector.update(sample_rows(samples, start, min(len(samples), start + 10)))
@@ -82,6 +87,20 @@ def test_a_vertical_bias_gravity_misses_is_found_by_the_field() -> None:
     size = float(events[0].message.split("by ")[1].split(" dps")[0])
     assert 1.4 <= size <= 2.6
     assert "field" in events[0].message
+
+
+def test_an_uncalibrated_field_is_used_only_through_its_calibration() -> None:
+    """A board's hard iron does not turn with the earth's field: the field part waits for the
+    magnetometer's calibration, then finds the vertical bias through it."""
+    faulty = _stream(2.0, 2, 14.0)
+    hard_iron = np.array([20.0, -35.0, 12.0])
+    assert faulty.mag_ut is not None
+    with_iron = SampleBlock(faulty.t_s, faulty.accel_m_s2, faulty.gyro_rad_s, faulty.temp_degc,
+                            faulty.gap, None, faulty.mag_ut + hard_iron)
+    assert _bias_events(with_iron, calibrated=False) == []  # gravity alone: blind
+    calibration = MagnetometerCalibration(hard_iron_ut=hard_iron)
+    events = _bias_events(with_iron, calibration, calibrated=False)
+    assert events and events[0].channel == "gz" and "field" in events[0].message, events
 
 
 def test_the_clean_stream_with_its_field_raises_nothing() -> None:
@@ -109,6 +128,7 @@ def test_a_stuck_magnetometer_is_named_and_raises_no_gyro_bias() -> None:
     frozen = samples.mag_ut.copy()
     frozen[samples.t_s >= 14.0] = frozen[int(14.0 * ODR)]
     detector = FaultDetector(SensorSpec(odr_hz=ODR))
+    detector.field_calibrated = True
     events = []
     for start in range(0, len(samples), 10):
         block = sample_rows(samples, start, min(len(samples), start + 10))

@@ -313,6 +313,9 @@ class Acquisition:
         if self.detect_faults:
             if self.health.detector is None and self._info is not None:
                 self.health.start(self._info, raw.scale)
+            if self.health.detector is not None and self.pipeline is not None:
+                # the gyro bias test carries the field as the earth's only when calibrated
+                self.health.detector.field_calibration = self.pipeline.calibration.magnetometer
             events = self.health.update(raw, block.uncalibrated)
             if events:
                 for subscriber in self.subscribers:

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from app.core.faults import FaultDetector, FaultEvent, SensorSpec
+from app.core.faults.recording import recorded_field_calibration
 from app.core.recording.errors import RecordingError
 from app.core.recording.format import KEY_MAGNETOMETER
 from app.core.recording.reader import Recording, read_recording
@@ -90,6 +91,8 @@ def diagnose_events(
         recording = read_recording(source)
         _refuse_implausible(recording)
         detector = FaultDetector(recording_spec(recording))
+        detector.field_calibration = recorded_field_calibration(
+            recording.metadata.get(KEY_MAGNETOMETER))
         result.detector = detector
         for raw in recording_blocks(recording, seconds):
             block = convert_raw_block(raw)

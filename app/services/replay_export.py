@@ -128,6 +128,7 @@ def replay_fault_events(source: Path) -> list[FaultEvent]:
 
 def _fault_events(source: Path) -> list[FaultEvent]:
     from app.core.faults import FaultDetector, SensorSpec
+    from app.core.faults.recording import recorded_field_calibration
     from app.core.recording.format import KEY_MAGNETOMETER
     from app.core.recording.stream import device_blocks
     from app.core.sample_checks import implausible_rows
@@ -150,6 +151,7 @@ def _fault_events(source: Path) -> list[FaultEvent]:
                                          .with_magnetometer(magnetometer
                                                             if isinstance(magnetometer, dict)
                                                             else None))
+                detector.field_calibration = recorded_field_calibration(magnetometer)
             block = convert_raw_block(raw)
             if implausible_rows(block.accel_m_s2, block.gyro_rad_s).any():
                 break  # NaN or absurd samples: diagnose names them; no statistics past them

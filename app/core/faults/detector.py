@@ -82,6 +82,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from app.core.calibration import MagnetometerCalibration
 from app.core.faults.carry import GravityCarry, rotation_matrix
 from app.core.faults.events import CHANNELS, FaultEvent, severity_rank
 from app.core.faults.magnetometer import MagnetometerCheck
@@ -327,6 +328,15 @@ class FaultDetector:
                                               spec.mag_odr_hz)
         """The magnetometer's tests (its flags: ``magnetometer.flags``, (N, 3))."""
         self._field_seen = False
+        self.field_calibrated = False
+        """The field handed to :meth:`update` is already free of the sensor's own hard and
+        soft iron (BROAD's, calibrated by its authors). Otherwise the gyro bias test uses the
+        field only through :attr:`field_calibration`: a board's hard iron does not turn with
+        the earth's field, and carried as the earth's it reads as a vertical gyro bias."""
+        self.field_calibration: MagnetometerCalibration | None = None
+        """Applied to the field for the gyro bias test (the magnetometer's own checks keep
+        the field as it came). None and not :attr:`field_calibrated`: the test uses gravity
+        alone."""
         self._motion = MotionNoiseCheck(self.window, spec.odr_hz)
         self._carry = GravityCarry()
         self.reset()
@@ -383,8 +393,7 @@ class FaultDetector:
         t = np.ascontiguousarray(block.t_s, dtype=np.float64)
         gap = np.ascontiguousarray(block.gap, dtype=np.bool_)
         out: list[FaultEvent] = []
-        self._mag = (np.zeros((0, 3)) if block.mag_ut is None
-                     else np.ascontiguousarray(block.mag_ut, dtype=np.float64))
+        self._mag = self._bias_field(block.mag_ut)
         if block.mag_ut is not None:
             # before the windows: a magnetometer fault in this block keeps its field out of
             # the gyro bias test
@@ -610,6 +619,14 @@ class FaultDetector:
                         f"{CHANNELS[c]} noise: its band above {low:.0f} Hz is "
                         f"{motion.level[c]:.1f}x the other channels' (relative to their own "
                         f"recent levels) for 1.5 s; no motion puts it there", held=True)
+
+    def _bias_field(self, mag_ut: np.ndarray | None) -> np.ndarray:
+        """The field the gyro bias test carries: calibrated, or (0, 3) (none)."""
+        if mag_ut is None or not (self.field_calibrated or self.field_calibration is not None):
+            return np.zeros((0, 3))
+        if self.field_calibration is not None:
+            return np.ascontiguousarray(self.field_calibration.apply(mag_ut))
+        return np.ascontiguousarray(mag_ut, dtype=np.float64)
 
     def _trusted_field(self, field: np.ndarray | None, accel: np.ndarray, quat: np.ndarray,
                        gyro: np.ndarray, duration: float, resting: bool, t: float

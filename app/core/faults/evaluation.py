@@ -137,8 +137,10 @@ class DetectorRun:
 
 def run_detector(samples: SampleBlock, spec: SensorSpec, block_s: float = BLOCK_S
                  ) -> DetectorRun:
-    """A fresh :class:`FaultDetector` over ``samples`` in blocks of ``block_s``."""
+    """A fresh :class:`FaultDetector` over ``samples`` in blocks of ``block_s``. The field
+    is taken as calibrated (BROAD's is, by its authors)."""
     detector = FaultDetector(spec)
+    detector.field_calibrated = True
     n = len(samples)
     size = max(1, round(block_s * spec.odr_hz))
     flags = np.zeros((n, len(CHANNELS)), dtype=np.uint8)

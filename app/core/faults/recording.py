@@ -11,6 +11,7 @@ import os
 from collections.abc import Iterable, Mapping
 from typing import Any
 
+from app.core.calibration import MagnetometerCalibration
 from app.core.faults.events import FaultEvent
 
 KEY_FAULT_EVENTS = "fault_events"
@@ -34,3 +35,16 @@ def recorded_fault_events(metadata: Mapping[str, Any]) -> list[FaultEvent]:
     from app.core.recording.format import metadata_entries
 
     return metadata_entries(metadata, KEY_FAULT_EVENTS, FaultEvent.from_dict)
+
+
+def recorded_field_calibration(magnetometer: Any) -> MagnetometerCalibration | None:
+    """The magnetometer calibration a recording's ``magnetometer`` metadata holds (applied
+    while it was recorded), for the fault detector's gyro bias test; None when there is none
+    or it is malformed (the test then uses gravity alone)."""
+    value = magnetometer.get("calibration") if isinstance(magnetometer, Mapping) else None
+    if value is None:
+        return None
+    try:
+        return MagnetometerCalibration.from_json(value)
+    except (TypeError, ValueError, KeyError):
+        return None
