@@ -557,10 +557,15 @@ class FaultDetector:
         low = BAND[0] * self.spec.odr_hz
         for c in np.flatnonzero(motion.flagged):
             self._active_bits[c] |= NOISE
+            if motion.by_band[c]:
+                why = (f"its band above {low:.0f} Hz is {motion.level[c]:.1f}x the other "
+                       "channels' (relative to their own recent levels)")
+            else:
+                why = (f"what the other channels do not explain of its band above {low:.0f} Hz "
+                       f"is {motion.residual_level[c]:.1f}x its recent level")
             self._event(out, t, CHANNELS[c], "noise", "fault",
-                        f"{CHANNELS[c]} noise: its band above {low:.0f} Hz is "
-                        f"{motion.level[c]:.1f}x the other channels' (relative to their own "
-                        f"recent levels) for 1.5 s; no motion puts it there", held=True)
+                        f"{CHANNELS[c]} noise: {why} for 1.5 s; no motion puts it there",
+                        held=True)
 
     def _carried_bias_test(self, quat: np.ndarray, carried: np.ndarray, duration: float,
                            t: float, out: list[FaultEvent]) -> None:

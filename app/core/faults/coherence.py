@@ -1,0 +1,172 @@
+"""Added noise while moving, by analytic redundancy between the six channels (issue 33).
+
+Real high-band energy is coherent: a phone vibrating on the sensor (BROAD trial 26: a tone at
+~100 Hz, 1 m/s^2 on every accelerometer axis and 0.5 dps on gx, band coherence 0.4-0.7
+between axes), a tap or a jolt drives several channels and both sensors at once, a rigid
+body's vibration the gyro and the accelerometer together. Noise added to one channel is
+uncorrelated with every other channel and with its own past beyond the band's own colour.
+
+So each channel's band-passed signal (:mod:`app.core.faults.motion`) is *predicted*: from the
+other five channels' band output at lags ``-LAGS..LAGS`` and its own ``OWN_LAGS`` past
+samples (a tone is predicted from its own past), by least squares over the last
+``motion.HISTORY_WINDOWS`` windows (10 s, leaving out the last ``HISTORY_GAP``; windows with
+a flagged channel teach nothing), ridge ``RIDGE`` times the mean diagonal. What the predictor
+does not explain, the *residual*, is what added noise raises by its full power. Its power
+per window (the median of the squared residual, as for the band) over its own recent level is
+``r_c``; the test on channel c divides it by the other channels' ratios measured *without*
+channel c among their regressors (a structured residual set: noise on c, entering the others'
+predictions through their weights on c, cannot raise those) and by their band ratios (the
+motion's own change), as the band test does. The decision is the median over
+``SPAN_WINDOWS`` (1.5 s) against ``RESIDUAL_RATIO_ACCEL`` / ``RESIDUAL_RATIO_GYRO``, and the
+part of the band the *other* channels do not explain (no own lags) must look white in more
+than half of those windows (a rotation's rate-dependent artefact on one gyro axis is not).
+
+A history learnt in another regime says nothing: while the gyro's rate (RMS of the norm over
+the window) is more than ``REGIME_CHANGE`` times its median over the history, the window does
+not count (a start of motion after rest raised one gyro axis' residual 5-40x for seconds on
+BROAD trial 06). Added noise of a few dps does not move a rate of tens of dps; at rest the rest
+test finds it.
+
+Cost per window: the 30x30 lagged covariance (one matrix product), three batched solves
+(6 + 30 + 6 small systems) and one product for the 42 residuals.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+LAGS = 2
+"""The other channels' band output at lags -2..2 around the predicted sample."""
+OWN_LAGS = 2
+"""The channel's own band output 1-2 samples before it."""
+RIDGE = 1e-3
+SPAN = 2 * LAGS + 1
+DIM = 6 * SPAN
+RESIDUAL_RATIO_ACCEL = 3.7
+RESIDUAL_RATIO_GYRO = 2.5
+REGIME_CHANGE = 2.0
+_TARGET = np.array([c * SPAN + LAGS for c in range(6)])
+
+
+def _regressors(c: int, skip: int | None, own: bool) -> list[int]:
+    cols = [k * SPAN + j for k in range(6) if k not in (c, skip) for j in range(SPAN)]
+    if own:
+        cols += [c * SPAN + LAGS + j for j in range(1, OWN_LAGS + 1)]
+    return cols
+
+
+_FULL = [_regressors(c, None, True) for c in range(6)]
+"""Predictor of c from the others and its own past (the tested residual)."""
+_WITHOUT = [(c, s, _regressors(c, s, True)) for c in range(6) for s in range(6) if s != c]
+"""Predictor of c without channel s (the isolation's structured residuals)."""
+_CROSS = [_regressors(c, None, False) for c in range(6)]
+"""Predictor of c from the others only (the whiteness gate)."""
+
+
+def lagged(band: np.ndarray, tail: np.ndarray) -> np.ndarray:
+    """(N, DIM) rows ``[channel k delayed j]`` (index ``k * SPAN + j``) of the band output
+    (N, 6), ``tail`` the previous ``2 * LAGS`` rows (oldest first)."""
+    x = np.vstack([tail, band])
+    n = len(band)
+    z = np.empty((n, 6, SPAN))
+    for j in range(SPAN):
+        z[:, :, j] = x[SPAN - 1 - j:SPAN - 1 - j + n]
+    return z.reshape(n, DIM)
+
+
+def _weights(cov: np.ndarray, sets: list[list[int]], targets: list[int]) -> np.ndarray:
+    """(DIM, len(sets)) least-squares weights of each target on its regressor set."""
+    k = len(sets[0])
+    idx = np.array(sets)
+    a = cov[idx[:, :, None], idx[:, None, :]]
+    b = cov[idx, np.array(targets)[:, None]]
+    ridge = RIDGE * np.trace(a, axis1=1, axis2=2) / k + 1e-200
+    a = a + ridge[:, None, None] * np.eye(k)
+    w = np.linalg.solve(a, b[:, :, None])[:, :, 0]
+    out = np.zeros((DIM, len(sets)))
+    for m, cols in enumerate(sets):
+        out[cols, m] = -w[m]
+        out[targets[m], m] = 1.0
+    return out
+
+
+class CoherenceCheck:
+    """The residual test; fed each window's band output by :class:`MotionNoiseCheck`.
+
+    :meth:`window` returns per channel the window's log ratio for the test (or NaN when the
+    test cannot count it) and whether the cross residual looks white.
+    """
+
+    def __init__(self, history: int, gap: int, minimum: int, white_reference: np.ndarray,
+                 white_tolerance: float) -> None:
+        self._history_len = history
+        self._gap = gap
+        self._minimum = minimum
+        self._white_reference = white_reference
+        self._white_tolerance = white_tolerance
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything learnt (a new sensor)."""
+        self._covs: deque[np.ndarray] = deque(maxlen=self._history_len + self._gap)
+        self._powers: deque[np.ndarray] = deque(maxlen=self._history_len + self._gap)
+        self._rates: deque[float] = deque(maxlen=self._history_len + self._gap)
+        self._level = np.ones((6, 7))
+        self.restart()
+
+    def restart(self) -> None:
+        """A gap: the lags start again; what was learnt stays."""
+        self._tail = np.zeros((2 * LAGS, 6))
+
+    def window(self, band: np.ndarray, rate: float, log_raw: np.ndarray | None,
+               flagged: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One window's band output (n, 6), the gyro's rate RMS, the band test's log ratios
+        (None before it is armed) and the channels flagged so far: (log ratio for the test
+        per channel, NaN where it does not count; the cross residual white)."""
+        z = lagged(band, self._tail)
+        self._tail = np.vstack([self._tail, band])[-2 * LAGS:]
+        log_s = np.full(6, np.nan)
+        white = np.zeros(6, dtype=bool)
+        power = None
+        if len(self._covs) >= self._minimum + self._gap:
+            cov = np.sum(list(self._covs)[:-self._gap], axis=0)
+            weights = np.hstack([
+                _weights(cov, _FULL, list(_TARGET)),
+                _weights(cov, [cols for _, _, cols in _WITHOUT],
+                         [int(_TARGET[c]) for c, _, _ in _WITHOUT]),
+                _weights(cov, _CROSS, list(_TARGET))])
+            e = z @ weights
+            med = np.median(e[:, :36] ** 2, axis=0)
+            power = np.empty((6, 7))
+            power[:, 6] = med[:6]
+            for m, (c, s, _) in enumerate(_WITHOUT):
+                power[c, s] = med[6 + m]
+            for c in range(6):
+                power[c, c] = power[c, 6]
+            white = self._whiteness(e[:, 36:])
+            if len(self._powers) >= self._minimum + self._gap and log_raw is not None:
+                past = np.array(self._powers)[:-self._gap]
+                self._level = np.maximum(np.median(past, axis=0), 1e-300)
+                rates = np.array(self._rates)[:-self._gap]
+                steady = rate <= REGIME_CHANGE * max(float(np.median(rates)), 1e-12)
+                if steady:
+                    lr = np.log(np.maximum(power, 1e-300) / self._level)
+                    for c in range(6):
+                        others = [max(lr[k, c], log_raw[k]) for k in range(6) if k != c]
+                        log_s[c] = lr[c, 6] - max(0.0, max(others))
+        if not flagged.any():
+            self._covs.append(z.T @ z)
+        if power is not None:
+            self._powers.append(np.where(flagged[:, None], self._level, power))
+        self._rates.append(rate)
+        return log_s, white
+
+    def _whiteness(self, e: np.ndarray) -> np.ndarray:
+        power = np.einsum("ij,ij->j", e, e)
+        worst = np.zeros(6)
+        for k, reference in enumerate(self._white_reference, start=1):
+            lagged_ = np.einsum("ij,ij->j", e[k:], e[:-k]) / np.maximum(power, 1e-300)
+            worst = np.maximum(worst, np.abs(lagged_ - reference))
+        return worst <= self._white_tolerance
