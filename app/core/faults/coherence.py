@@ -27,8 +27,9 @@ not count (a start of motion after rest raised one gyro axis' residual 5-40x for
 BROAD trial 06). Added noise of a few dps does not move a rate of tens of dps; at rest the rest
 test finds it.
 
-Cost per window: the 30x30 lagged covariance (one matrix product), three batched solves
-(6 + 30 + 6 small systems) and one product for the 42 residuals.
+Cost per window: the 30x30 lagged covariance and the 42 residuals of at most ``MAX_ROWS``
+samples (numba), and every ``REFIT_WINDOWS`` three batched solves (6 + 30 + 6 systems of
+20-27 unknowns).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from __future__ import annotations
 from collections import deque
 
 import numpy as np
+from numba import njit
 
 LAGS = 2
 """The other channels' band output at lags -2..2 around the predicted sample."""
@@ -47,6 +49,11 @@ DIM = 6 * SPAN
 RESIDUAL_RATIO_ACCEL = 3.7
 RESIDUAL_RATIO_GYRO = 2.5
 REGIME_CHANGE = 2.0
+MAX_ROWS = 128
+"""The test uses at most the last 128 samples of each window (all of BROAD's 71; 19 ms of a
+window at 6667 Hz): its cost per window does not grow with the rate."""
+REFIT_WINDOWS = 4
+"""The predictors are fitted again every 4 windows (1 s; their history is 10 s)."""
 _TARGET = np.array([c * SPAN + LAGS for c in range(6)])
 
 
@@ -76,20 +83,83 @@ def lagged(band: np.ndarray, tail: np.ndarray) -> np.ndarray:
     return z.reshape(n, DIM)
 
 
-def _weights(cov: np.ndarray, sets: list[list[int]], targets: list[int]) -> np.ndarray:
-    """(DIM, len(sets)) least-squares weights of each target on its regressor set."""
-    k = len(sets[0])
-    idx = np.array(sets)
-    a = cov[idx[:, :, None], idx[:, None, :]]
-    b = cov[idx, np.array(targets)[:, None]]
-    ridge = RIDGE * np.trace(a, axis1=1, axis2=2) / k + 1e-200
-    a = a + ridge[:, None, None] * np.eye(k)
-    w = np.linalg.solve(a, b[:, :, None])[:, :, 0]
-    out = np.zeros((DIM, len(sets)))
-    for m, cols in enumerate(sets):
-        out[cols, m] = -w[m]
-        out[targets[m], m] = 1.0
+@njit(cache=True)
+def _gram(z):  # pragma: no cover
+    """``z.T @ z`` without BLAS: its threads spin on a loaded machine for matrices this small
+    (a window cost 10x more CPU time under load)."""
+    m, d = z.shape
+    out = np.zeros((d, d))
+    for i in range(m):
+        for a in range(d):
+            za = z[i, a]
+            for b in range(a, d):
+                out[a, b] += za * z[i, b]
+    for a in range(d):
+        for b in range(a):
+            out[a, b] = out[b, a]
     return out
+
+
+@njit(cache=True)
+def _product(z, w):  # pragma: no cover
+    """``z @ w`` without BLAS (see :func:`_gram`)."""
+    m, d = z.shape
+    p = w.shape[1]
+    out = np.zeros((m, p))
+    for i in range(m):
+        for a in range(d):
+            za = z[i, a]
+            if za != 0.0:
+                for k in range(p):
+                    out[i, k] += za * w[a, k]
+    return out
+
+
+@njit(cache=True)
+def _worst_lag(e, reference):  # pragma: no cover
+    """Per column of ``e``: the largest |autocorrelation - reference| over lags 1..len."""
+    m, p = e.shape
+    out = np.zeros(p)
+    for k in range(p):
+        power = 0.0
+        for i in range(m):
+            power += e[i, k] * e[i, k]
+        power = max(power, 1e-300)
+        for lag in range(1, len(reference) + 1):
+            acc = 0.0
+            for i in range(lag, m):
+                acc += e[i, k] * e[i - lag, k]
+            out[k] = max(out[k], abs(acc / power - reference[lag - 1]))
+    return out
+
+
+class _Set:
+    """Predictors of equal size: their regressor columns and targets (indices into DIM)."""
+
+    def __init__(self, rows: list[tuple[int, list[int]]]) -> None:
+        self.targets = np.array([target for target, _ in rows])
+        self.columns = np.array([cols for _, cols in rows])
+        self.size = self.columns.shape[1]
+        self.where = np.arange(len(rows))
+
+    def weights(self, cov: np.ndarray) -> np.ndarray:
+        """(DIM, predictors): residual = z @ weights, by ridge least squares on ``cov``."""
+        idx = self.columns
+        a = cov[idx[:, :, None], idx[:, None, :]]
+        b = cov[idx, self.targets[:, None]]
+        ridge = RIDGE * np.trace(a, axis1=1, axis2=2) / self.size + 1e-200
+        a = a + ridge[:, None, None] * np.eye(self.size)
+        w = np.linalg.solve(a, b[:, :, None])[:, :, 0]
+        out = np.zeros((DIM, len(self.targets)))
+        out[idx, self.where[:, None]] = -w
+        out[self.targets, self.where] = 1.0
+        return out
+
+
+_SETS = (_Set([(int(_TARGET[c]), cols) for c, cols in enumerate(_FULL)]),
+         _Set([(int(_TARGET[c]), cols) for c, _, cols in _WITHOUT]),
+         _Set([(int(_TARGET[c]), cols) for c, cols in enumerate(_CROSS)]))
+_WITHOUT_INDEX = (np.array([c for c, _, _ in _WITHOUT]), np.array([s for _, s, _ in _WITHOUT]))
 
 
 class CoherenceCheck:
@@ -114,6 +184,8 @@ class CoherenceCheck:
         self._powers: deque[np.ndarray] = deque(maxlen=self._history_len + self._gap)
         self._rates: deque[float] = deque(maxlen=self._history_len + self._gap)
         self._level = np.ones((6, 7))
+        self._weights: np.ndarray | None = None
+        self._age = 0
         self.restart()
 
     def restart(self) -> None:
@@ -125,26 +197,25 @@ class CoherenceCheck:
         """One window's band output (n, 6), the gyro's rate RMS, the band test's log ratios
         (None before it is armed) and the channels flagged so far: (log ratio for the test
         per channel, NaN where it does not count; the cross residual white)."""
-        z = lagged(band, self._tail)
-        self._tail = np.vstack([self._tail, band])[-2 * LAGS:]
+        x = np.vstack([self._tail, band])[-(MAX_ROWS + 2 * LAGS):]
+        self._tail = x[-2 * LAGS:]
+        z = lagged(x[2 * LAGS:], x[:2 * LAGS])
         log_s = np.full(6, np.nan)
         white = np.zeros(6, dtype=bool)
         power = None
         if len(self._covs) >= self._minimum + self._gap:
-            cov = np.sum(list(self._covs)[:-self._gap], axis=0)
-            weights = np.hstack([
-                _weights(cov, _FULL, list(_TARGET)),
-                _weights(cov, [cols for _, _, cols in _WITHOUT],
-                         [int(_TARGET[c]) for c, _, _ in _WITHOUT]),
-                _weights(cov, _CROSS, list(_TARGET))])
-            e = z @ weights
-            med = np.median(e[:, :36] ** 2, axis=0)
+            if self._weights is None or self._age >= REFIT_WINDOWS:
+                cov = np.sum(list(self._covs)[:-self._gap], axis=0)
+                self._weights = np.hstack([s.weights(cov) for s in _SETS])
+                self._age = 0
+            self._age += 1
+            e = _product(z, self._weights)
+            half = (len(z) - 1) // 2
+            med = np.partition(e[:, :36] ** 2, half, axis=0)[half]
             power = np.empty((6, 7))
             power[:, 6] = med[:6]
-            for m, (c, s, _) in enumerate(_WITHOUT):
-                power[c, s] = med[6 + m]
-            for c in range(6):
-                power[c, c] = power[c, 6]
+            power[_WITHOUT_INDEX] = med[6:36]
+            power[np.arange(6), np.arange(6)] = med[:6]
             white = self._whiteness(e[:, 36:])
             if len(self._powers) >= self._minimum + self._gap and log_raw is not None:
                 past = np.array(self._powers)[:-self._gap]
@@ -157,16 +228,11 @@ class CoherenceCheck:
                         others = [max(lr[k, c], log_raw[k]) for k in range(6) if k != c]
                         log_s[c] = lr[c, 6] - max(0.0, max(others))
         if not flagged.any():
-            self._covs.append(z.T @ z)
+            self._covs.append(_gram(z) * (len(band) / len(z)))
         if power is not None:
             self._powers.append(np.where(flagged[:, None], self._level, power))
         self._rates.append(rate)
         return log_s, white
 
     def _whiteness(self, e: np.ndarray) -> np.ndarray:
-        power = np.einsum("ij,ij->j", e, e)
-        worst = np.zeros(6)
-        for k, reference in enumerate(self._white_reference, start=1):
-            lagged_ = np.einsum("ij,ij->j", e[k:], e[:-k]) / np.maximum(power, 1e-300)
-            worst = np.maximum(worst, np.abs(lagged_ - reference))
-        return worst <= self._white_tolerance
+        return _worst_lag(e, self._white_reference) <= self._white_tolerance
