@@ -131,3 +131,27 @@ def test_a_window_whose_rate_left_the_historys_regime_does_not_count() -> None:
         assert np.isfinite(log_s[3]) == expect_counted
         if expect_counted:
             assert log_s[3] > math.log(20.0)
+
+
+def test_the_detector_names_the_channel_and_says_the_others_do_not_explain_it() -> None:
+    from app.core.faults import FaultDetector, SensorSpec
+    from app.core.samples import SampleBlock
+
+    x = _stream(24.0, seed=2)
+    onset = round(20.0 * ODR)
+    x[onset:, 4] += np.random.default_rng(7).normal(0.0, math.radians(1.0), len(x) - onset)
+    n = len(x)
+    t = np.arange(n) / ODR
+    detector = FaultDetector(SensorSpec(odr_hz=ODR))
+    events = []
+    for start in range(0, n, 40):
+        stop = min(n, start + 40)
+        events += detector.update(SampleBlock(t[start:stop], x[start:stop, :3],
+                                              x[start:stop, 3:], np.zeros(stop - start),
+                                              np.zeros(stop - start, dtype=bool)))
+    alarms = [e for e in events if e.channel != "link"]
+    assert alarms, "nothing found"
+    first = alarms[0]
+    assert (first.channel, first.kind) == ("gy", "noise")
+    assert onset / ODR <= first.t <= onset / ODR + 2.0
+    assert "do not explain" in first.message

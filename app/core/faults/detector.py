@@ -50,7 +50,8 @@ Analytical redundancy (needs rest: every channel's window spread within 3 sigma 
     motion's acceleration averaged out, over 8 s (:mod:`app.core.faults.carry`).
 
     *noise in motion.* Each channel's band above a quarter of the rate against its own recent
-    level and the other channels' (:mod:`app.core.faults.motion`).
+    level and the other channels' (:mod:`app.core.faults.motion`), and what the other
+    channels do not explain of it (:mod:`app.core.faults.coherence`).
 
     *accel bias.* Gravity carried from the previous rest by the gyro (bias removed, under 10 deg
     of rotation and 2 s apart) against the accelerometer: a per-axis difference over 25 mg (half

@@ -26,6 +26,12 @@ twice the sensor's noise is found; in hand motion, whose band power is 1-15x the
 about 1 dps on the gyro and 0.2 m/s^2 on the accelerometer (docs/fault-detection.md).
 
 While a channel is flagged its level is not learnt (a lasting fault stays a fault).
+
+Beside this band test, :mod:`app.core.faults.coherence` tests what the other channels do
+not explain of each channel's band (a vibration that fills the band of every channel hides
+added noise from the band test, not from that one); :attr:`MotionNoiseCheck.flagged` is
+either, :attr:`~MotionNoiseCheck.by_band` and :attr:`~MotionNoiseCheck.by_residual` say
+which.
 """
 
 from __future__ import annotations
