@@ -178,6 +178,18 @@ def _solve_set(cov, columns, targets, ridge):  # pragma: no cover
     return out
 
 
+_EYE = np.eye(6, dtype=bool)
+
+
+def _median(a: np.ndarray) -> np.ndarray:
+    """``np.median(a, axis=0)`` by one partition (its cost is mostly overhead here)."""
+    n = len(a)
+    if n % 2:
+        return np.partition(a, n // 2, axis=0)[n // 2]
+    part = np.partition(a, (n // 2 - 1, n // 2), axis=0)
+    return 0.5 * (part[n // 2 - 1] + part[n // 2])
+
+
 class _Set:
     """Predictors of equal size: their regressor columns and targets (indices into DIM)."""
 
@@ -215,6 +227,10 @@ class CoherenceCheck:
     def reset(self) -> None:
         """Forget everything learnt (a new sensor)."""
         self._covs: deque[np.ndarray] = deque(maxlen=self._history_len + self._gap)
+        self._fit = np.zeros((DIM, DIM))
+        """The sum of ``_covs`` but the last ``gap`` (kept as it goes, rebuilt every
+        ``history`` windows against rounding)."""
+        self._since_rebuild = 0
         self._powers: deque[np.ndarray] = deque(maxlen=self._history_len + self._gap)
         self._rates: deque[float] = deque(maxlen=self._history_len + self._gap)
         self._level = np.ones((6, 7))
@@ -239,8 +255,7 @@ class CoherenceCheck:
         power = None
         if len(self._covs) >= self._minimum + self._gap:
             if self._weights is None or self._age >= REFIT_WINDOWS:
-                cov = np.sum(list(self._covs)[:-self._gap], axis=0)
-                self._weights = np.hstack([s.weights(cov) for s in _SETS])
+                self._weights = np.hstack([s.weights(self._fit) for s in _SETS])
                 self._age = 0
             self._age += 1
             e = _product(z, self._weights)
@@ -252,21 +267,32 @@ class CoherenceCheck:
             power[np.arange(6), np.arange(6)] = med[:6]
             white = self._whiteness(e[:, 36:])
             if len(self._powers) >= self._minimum + self._gap and log_raw is not None:
-                past = np.array(self._powers)[:-self._gap]
-                self._level = np.maximum(np.median(past, axis=0), 1e-300)
+                self._level = np.maximum(_median(np.array(self._powers)[:-self._gap]), 1e-300)
                 rates = np.array(self._rates)[:-self._gap]
-                steady = rate <= REGIME_CHANGE * max(float(np.median(rates)), 1e-12)
-                if steady:
+                if rate <= REGIME_CHANGE * max(float(_median(rates)), 1e-12):
                     lr = np.log(np.maximum(power, 1e-300) / self._level)
-                    for c in range(6):
-                        others = [max(lr[k, c], log_raw[k]) for k in range(6) if k != c]
-                        log_s[c] = lr[c, 6] - max(0.0, max(others))
+                    # others[k, c]: channel k without c, or k's band ratio (k != c)
+                    others = np.maximum(lr[:, :6], log_raw[:, None])
+                    others[_EYE] = -np.inf
+                    log_s = lr[:, 6] - np.maximum(0.0, others.max(axis=0))
         if not flagged.any():
-            self._covs.append(_gram(z) * (len(band) / len(z)))
+            self._learn(_gram(z) * (len(band) / len(z)))
         if power is not None:
             self._powers.append(np.where(flagged[:, None], self._level, power))
         self._rates.append(rate)
         return log_s, white
+
+    def _learn(self, cov: np.ndarray) -> None:
+        covs = self._covs
+        if len(covs) == covs.maxlen:
+            self._fit -= covs[0]
+        if len(covs) >= self._gap:
+            self._fit += covs[-self._gap]
+        covs.append(cov)
+        self._since_rebuild += 1
+        if self._since_rebuild >= self._history_len:
+            self._since_rebuild = 0
+            self._fit = np.sum(list(covs)[:-self._gap], axis=0)
 
     def _whiteness(self, e: np.ndarray) -> np.ndarray:
         return _worst_lag(e, self._white_reference) <= self._white_tolerance
