@@ -179,6 +179,20 @@ def _solve_set(cov, columns, targets, ridge):  # pragma: no cover
 
 
 _EYE = np.eye(6, dtype=bool)
+_loaded: list[bool] = []
+
+
+def _load_kernels() -> None:
+    """Compile or load the kernels now, once per process: not ~8 s into a stream, when the
+    test arms (the first window would take tens of ms, a stall in a live stream)."""
+    if _loaded:
+        return
+    z = np.zeros((4, DIM))
+    cov = np.eye(DIM)
+    weights = np.hstack([s.weights(cov) for s in _SETS])
+    _worst_lag(_product(z, weights)[:, 36:], np.zeros(2))
+    _gram(z)
+    _loaded.append(True)
 
 
 def _median(a: np.ndarray) -> np.ndarray:
@@ -222,6 +236,7 @@ class CoherenceCheck:
         self._minimum = minimum
         self._white_reference = white_reference
         self._white_tolerance = white_tolerance
+        _load_kernels()
         self.reset()
 
     def reset(self) -> None:
