@@ -54,7 +54,8 @@ Analytical redundancy (needs rest: every channel's window spread within 3 sigma 
     axis was declared faulty in the last 5 s, and the window turns slower than 200 dps.
 
     *noise in motion.* Each channel's band above a quarter of the rate against its own recent
-    level and the other channels' (:mod:`app.core.faults.motion`).
+    level and the other channels' (:mod:`app.core.faults.motion`), and what the other
+    channels do not explain of it (:mod:`app.core.faults.coherence`).
 
     *accel bias.* Gravity carried from the previous rest by the gyro (bias removed, under 10 deg
     of rotation and 2 s apart) against the accelerometer: a per-axis difference over 25 mg (half
@@ -615,10 +616,15 @@ class FaultDetector:
         low = BAND[0] * self.spec.odr_hz
         for c in np.flatnonzero(motion.flagged):
             self._active_bits[c] |= NOISE
+            if motion.by_band[c]:
+                why = (f"its band above {low:.0f} Hz is {motion.level[c]:.1f}x the other "
+                       "channels' (relative to their own recent levels)")
+            else:
+                why = (f"what the other channels do not explain of its band above {low:.0f} Hz "
+                       f"is {motion.residual_level[c]:.1f}x its recent level")
             self._event(out, t, CHANNELS[c], "noise", "fault",
-                        f"{CHANNELS[c]} noise: its band above {low:.0f} Hz is "
-                        f"{motion.level[c]:.1f}x the other channels' (relative to their own "
-                        f"recent levels) for 1.5 s; no motion puts it there", held=True)
+                        f"{CHANNELS[c]} noise: {why} for 1.5 s; no motion puts it there",
+                        held=True)
 
     def _bias_field(self, mag_ut: np.ndarray | None) -> np.ndarray:
         """The field the gyro bias test carries: calibrated, or (0, 3) (none)."""

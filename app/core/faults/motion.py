@@ -26,6 +26,12 @@ twice the sensor's noise is found; in hand motion, whose band power is 1-15x the
 about 1 dps on the gyro and 0.2 m/s^2 on the accelerometer (docs/fault-detection.md).
 
 While a channel is flagged its level is not learnt (a lasting fault stays a fault).
+
+Beside this band test, :mod:`app.core.faults.coherence` tests what the other channels do
+not explain of each channel's band (a vibration that fills the band of every channel hides
+added noise from the band test, not from that one); :attr:`MotionNoiseCheck.flagged` is
+either, :attr:`~MotionNoiseCheck.by_band` and :attr:`~MotionNoiseCheck.by_residual` say
+which.
 """
 
 from __future__ import annotations
@@ -35,6 +41,12 @@ from collections import deque
 
 import numpy as np
 from numba import njit
+
+from app.core.faults.coherence import (
+    RESIDUAL_RATIO_ACCEL,
+    RESIDUAL_RATIO_GYRO,
+    CoherenceCheck,
+)
 
 BAND: tuple[float, float] = (0.25, 0.45)
 """Pass band as fractions of the sample rate."""
@@ -132,12 +144,17 @@ class MotionNoiseCheck:
         self._thresholds = np.log(np.array([RATIO_ACCEL] * 3 + [RATIO_GYRO] * 3))
         self._white_reference = band_autocorrelation(self._sos)
         self._out = np.zeros((window, 6))
+        self._residual_thresholds = np.log(np.array([RESIDUAL_RATIO_ACCEL] * 3
+                                                    + [RESIDUAL_RATIO_GYRO] * 3))
+        self._coherence = CoherenceCheck(HISTORY_WINDOWS, HISTORY_GAP, HISTORY_MIN,
+                                         self._white_reference, WHITE_TOLERANCE)
         self.reset()
 
     def reset(self) -> None:
         """Forget the history (a new sensor)."""
         self._history: deque[np.ndarray] = deque(maxlen=HISTORY_WINDOWS + HISTORY_GAP)
         self._level = np.zeros(6)
+        self._coherence.reset()
         self.restart()
 
     def restart(self) -> None:
@@ -146,8 +163,16 @@ class MotionNoiseCheck:
         self._settle = 2
         self._ratios: deque[np.ndarray] = deque(maxlen=SPAN_WINDOWS)
         self._white: deque[np.ndarray] = deque(maxlen=SPAN_WINDOWS)
+        self._residuals: deque[np.ndarray] = deque(maxlen=SPAN_WINDOWS)
+        self._residual_white: deque[np.ndarray] = deque(maxlen=SPAN_WINDOWS)
+        self._rate_sq = 0.0
+        self._coherence.restart()
         self.flagged = np.zeros(6, dtype=bool)
+        self.by_band = np.zeros(6, dtype=bool)
+        self.by_residual = np.zeros(6, dtype=bool)
+        self._rate_window = 0.0
         self.level = np.ones(6)
+        self.residual_level = np.ones(6)
         self.own = np.ones(6)
 
     def filter(self, x: np.ndarray, position: int) -> None:
@@ -155,20 +180,25 @@ class MotionNoiseCheck:
         if self.enabled:
             _band_filter(x, self._sos, self._state,
                          self._out[position:position + len(x)])
+            self._rate_sq += float(np.einsum("ij,ij->", x[:, 3:], x[:, 3:]))
 
     def end_window(self, n: int) -> None:
         """Close a window of ``n`` samples: its power, the ratio, the decision."""
+        self._rate_window = math.sqrt(self._rate_sq / max(n, 1))
+        self._rate_sq = 0.0
         if n < self.window // 2 or not self.enabled:
             return
         power = np.median(self._out[:n] ** 2, axis=0)
         if self._settle > 0:  # the filter's start-up transient
             self._settle -= 1
             return
+        log_raw = None
         if len(self._history) >= HISTORY_MIN + HISTORY_GAP:
             past = np.array(self._history)[:-HISTORY_GAP]
             level = np.maximum(np.median(past, axis=0), 1e-300)
             self._level = level
             log_r = np.log(np.maximum(power, 1e-300) / level)
+            log_raw = log_r
             log_s = np.empty(6)
             for c in range(6):
                 log_s[c] = log_r[c] - max(0.0, float(np.max(np.delete(log_r, c))))
@@ -178,11 +208,26 @@ class MotionNoiseCheck:
                 ratios = np.array(self._ratios)
                 median = np.median(ratios, axis=0)
                 white = 2 * np.sum(np.array(self._white), axis=0) >= SPAN_WINDOWS
-                self.flagged = (median > self._thresholds) & white
+                self.by_band = (median > self._thresholds) & white
                 self.level = np.exp(median)
                 self.own = np.exp(log_r)
+        self._residual_test(n, log_raw)
+        self.flagged = self.by_band | self.by_residual
         # a flagged channel keeps the level it had: its noisy windows teach nothing
         self._history.append(np.where(self.flagged, self._level, power))
+
+    def _residual_test(self, n: int, log_raw: np.ndarray | None) -> None:
+        """The coherence test (:mod:`app.core.faults.coherence`) beside the band's."""
+        log_s, white = self._coherence.window(self._out[:n], self._rate_window, log_raw,
+                                              self.flagged)
+        self._residuals.append(np.where(np.isfinite(log_s), log_s, 0.0))
+        self._residual_white.append(white)
+        if len(self._residuals) < SPAN_WINDOWS:
+            return
+        median = np.median(np.array(self._residuals), axis=0)
+        white_most = 2 * np.sum(np.array(self._residual_white), axis=0) > SPAN_WINDOWS
+        self.by_residual = (median > self._residual_thresholds) & white_most
+        self.residual_level = np.exp(median)
 
     def _whiteness(self, n: int) -> np.ndarray:
         """Per channel: the window's band output looks like band-limited white noise."""
