@@ -10,6 +10,7 @@ after the window's pending paints went out.
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ from PySide6.QtWidgets import QLabel, QWidget
 from app.core.orientation import quaternion_from_roll_pitch, up_in_sensor_frame
 from app.core.samples import RawBlock, ScaleFactors
 from app.gui.bubble_level import REPAINT_THRESHOLD_PX, BubbleLevel
+from app.gui.feeds.plots import MAX_SCROLL_LEAD_S, SETTLE_REBUILD_S
 from app.gui.frame_clock import FALLBACK_REFRESH_HZ, FrameClock, frame_interval_ms
 from app.gui.presenter import PLOT_DATA_INTERVAL_S
 from app.gui.readouts import TiltReadouts
@@ -195,7 +197,16 @@ def test_a_stream_that_stopped_lets_the_display_rest(qtbot, live):
     assert live.presenter.refresh()
     live.presenter.settings.readout_rate_hz = 1e9  # no readout update pending
     # Nothing new: the plots scroll on until the lead limit stops them, then nothing is drawn.
-    qtbot.waitUntil(lambda: not live.presenter.refresh(), timeout=2000)
+    # One refresh that draws nothing is not yet rest (the next may scroll a pixel on): rest is
+    # nothing drawn once the last drawing is older than the scroll lead and a settling rebuild.
+    feed = live.presenter.plot_feed
+
+    def resting() -> bool:
+        drew = live.presenter.refresh()
+        return not drew and (time.monotonic() - feed.drawn_wall
+                             > max(MAX_SCROLL_LEAD_S, SETTLE_REBUILD_S))
+
+    qtbot.waitUntil(resting, timeout=3000)
     # The first rebuilds may repeat while the value axes settle their width (it depends on the
     # fonts installed); once the display rests nothing is drawn or handed over.
     frames, handed = live.presenter.frames, len(live.handed)

@@ -70,10 +70,11 @@ def test_restart_brings_back_every_choice(qtbot, tmp_path):
     choose(window.averaging_combo, 2.0)
     choose(window.range_combo, 1.0)
     choose(window.window_combo, 30)
+    # Picked in the Filter dock (a choice kept for every source, not the source's default).
     with qtbot.waitSignal(session.filterChanged, timeout=TIMEOUT_MS):
-        session.requestFilter.emit("complementary")
+        window.filter_panel.filterRequested.emit("complementary")
     with qtbot.waitSignal(session.filterChanged, timeout=TIMEOUT_MS):
-        session.requestFilterParameter.emit("tau_s", 2.25)
+        window.filter_panel.parameterChanged.emit("tau_s", 2.25)
     with qtbot.waitSignal(session.comparisonsChanged, timeout=TIMEOUT_MS):
         session.requestComparisons.emit(["accel", "madgwick"])
     window.docks["measure"].hide()

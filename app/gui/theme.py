@@ -17,7 +17,7 @@ from pathlib import Path
 
 from PySide6.QtCore import QBuffer, QByteArray, QIODevice, QObject, QSize, Qt, Signal
 from PySide6.QtGui import QColor, QGuiApplication, QIcon, QImageReader, QPalette, QPixmap
-from PySide6.QtWidgets import QApplication
+from PySide6.QtWidgets import QApplication, QProxyStyle
 
 
 @dataclass(frozen=True)
@@ -371,7 +371,9 @@ def _apply(app: QApplication, theme: Theme) -> Theme:
     _make_current(theme)
     # Under a stylesheet the style reports no name; the base is Fusion when no stylesheet
     # is set yet (a new style would re-polish every widget: only when needed).
-    if not app.styleSheet() and app.style().name().lower() != "fusion":
+    style = app.style()
+    base = style.baseStyle() if isinstance(style, QProxyStyle) else style  # the wheel guard's
+    if not app.styleSheet() and base.name().lower() != "fusion":
         app.setStyle("Fusion")
     # Setting an equal stylesheet again would still re-polish every widget: skip it.
     stylesheet = load_stylesheet(theme)

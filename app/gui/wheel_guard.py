@@ -15,6 +15,8 @@ slower and cost the live window the same on each repaint.
 
 from __future__ import annotations
 
+import atexit
+
 from PySide6.QtCore import QEvent, QObject, QPointF, Qt
 from PySide6.QtGui import QWheelEvent
 from PySide6.QtWidgets import (
@@ -25,7 +27,6 @@ from PySide6.QtWidgets import (
     QComboBox,
     QProxyStyle,
     QScrollBar,
-    QStyleFactory,
     QWidget,
 )
 
@@ -64,7 +65,7 @@ class GuardingStyle(QProxyStyle):
     its base style, so themes keep working)."""
 
     def __init__(self, guard: WheelGuard) -> None:
-        super().__init__(QStyleFactory.create(BASE_STYLE))
+        super().__init__(BASE_STYLE)  # by name: the proxy makes and owns its base style
         self._guard = guard
 
     def polish(self, target):  # type: ignore[no-untyped-def, override]
@@ -100,12 +101,27 @@ _style: GuardingStyle | None = None
 
 def install(app: QApplication) -> WheelGuard:
     """Give ``app`` the guarding style (once; later calls return the same guard). Widgets
-    that exist already are polished again by the new style, so they are guarded too."""
+    that exist already are polished again by the new style, so they are guarded too. The
+    style is taken back as the application quits (:func:`uninstall`)."""
     global _guard, _style
     if _guard is None:
         _guard = WheelGuard()
+        app.aboutToQuit.connect(uninstall)
+        atexit.register(uninstall)  # before PySide's own clean-up (registered earlier)
+    if _style is None:
         _style = GuardingStyle(_guard)
         app.setStyle(_style)
         for widget in app.allWidgets():
             _guard.guard(widget)
     return _guard
+
+
+def uninstall() -> None:
+    """Plain Fusion again while Python still runs: the widgets Qt deletes at exit are
+    re-styled as they go, and the guarding style's polish is Python (called during PySide's
+    clean-up at exit, it crashed the process). The filters on the fields stay, harmless."""
+    global _style
+    app = QApplication.instance()
+    if _style is not None and isinstance(app, QApplication):
+        app.setStyle(BASE_STYLE)
+    _style = None
