@@ -48,6 +48,7 @@ import math
 from collections import deque
 
 import numpy as np
+from numba import njit
 
 HORIZON_S = 8.0
 MIN_S = 4.0
@@ -138,33 +139,23 @@ class GravityCarry:
             self._windows = deque((*w[:4], None) for w in self._windows)
 
     def _solve(self) -> None:
-        k = len(self._windows)
-        velocity = np.empty((k, 3))
-        drift = np.empty((k, 3, 6))
-        elapsed = np.empty(k)
-        fields: list[tuple[np.ndarray, np.ndarray]] = []
-        turn = np.eye(3)
-        angle = np.zeros((3, 6))
-        summed = np.zeros(3)
-        drifted = np.zeros((3, 6))
-        clock = 0.0
-        for i, (rotation, accel, duration, turned, field) in enumerate(self._windows):
-            step = np.hstack([duration * turn, turn * turned])  # bias, scale error
-            summed = summed + duration * (turn @ accel)
-            drifted = drifted + duration * (angle + 0.5 * step)
-            if field is not None:
-                # the window's mean field in the anchor frame, the carry's error at its middle
-                fields.append((turn @ field, angle + 0.5 * step))
-            angle = angle + step
-            clock += duration
-            velocity[i], drift[i], elapsed[i] = summed, drifted, clock
-            turn = turn @ rotation
+        windows = self._windows
+        k = len(windows)
+        has_field = np.array([w[4] is not None for w in windows])
+        velocity, drift, elapsed, anchored, angles = _carry_sums(
+            np.array([w[0] for w in windows]), np.array([w[1] for w in windows]),
+            np.array([w[2] for w in windows]), np.array([w[3] for w in windows]),
+            np.array([w[4] if w[4] is not None else np.zeros(3) for w in windows]), has_field)
+        fields = list(zip(anchored[has_field], angles[has_field], strict=True))
         # first gravity and the start velocity alone, then with the bias and scale errors
         plain = np.zeros((3 * k, 6))
         plain[:, :3] = np.kron(elapsed[:, None], np.eye(3))
         plain[:, 3:] = np.tile(np.eye(3), (k, 1))
         y = velocity.reshape(3 * k)
-        gravity = np.linalg.lstsq(plain, y, rcond=None)[0][:3]
+        # the least-squares line of each axis's velocity over time: its slope is gravity
+        centred = elapsed - elapsed.mean()
+        gravity = centred @ (velocity - velocity.mean(axis=0)) / max(float(centred @ centred),
+                                                                      1e-300)
         design = np.zeros((3 * k, PARTS))
         design[:, :6] = plain
         design[:, 6:12] = (-_skew(gravity) @ drift).reshape(3 * k, 6)
@@ -235,6 +226,55 @@ class GravityCarry:
         variance *= (1.0 + lag) / (1.0 - lag)
         normal = design.T @ design / variance
         return normal, design.T @ y / variance
+
+
+@njit(cache=True)
+def _carry_sums(rotations, accels, durations, turned, fields, has_field
+                ):  # pragma: no cover - compiled
+    """The horizon's windows carried into the anchor frame, one after the other: per window
+    the summed velocity (k, 3), its drift's kernel for the bias and scale error (k, 3, 6), the
+    time elapsed (k,), and where it has a field, that field in the anchor frame (k, 3) and
+    the carry's error kernel at the window's middle (k, 3, 6)."""
+    k = len(durations)
+    velocity = np.empty((k, 3))
+    drift = np.empty((k, 3, 6))
+    elapsed = np.empty(k)
+    anchored = np.zeros((k, 3))
+    middle = np.zeros((k, 3, 6))
+    turn = np.eye(3)
+    angle = np.zeros((3, 6))
+    summed = np.zeros(3)
+    drifted = np.zeros((3, 6))
+    step = np.empty((3, 6))
+    following = np.empty((3, 3))
+    clock = 0.0
+    for i in range(k):
+        d = durations[i]
+        for r in range(3):
+            for c in range(3):
+                step[r, c] = d * turn[r, c]  # the bias's turn
+                step[r, 3 + c] = turn[r, c] * turned[i, c]  # the scale error's
+            summed[r] += d * (turn[r, 0] * accels[i, 0] + turn[r, 1] * accels[i, 1]
+                              + turn[r, 2] * accels[i, 2])
+            if has_field[i]:
+                anchored[i, r] = (turn[r, 0] * fields[i, 0] + turn[r, 1] * fields[i, 1]
+                                  + turn[r, 2] * fields[i, 2])
+        for r in range(3):
+            for c in range(6):
+                drifted[r, c] += d * (angle[r, c] + 0.5 * step[r, c])
+                if has_field[i]:
+                    middle[i, r, c] = angle[r, c] + 0.5 * step[r, c]
+                angle[r, c] += step[r, c]
+        clock += d
+        velocity[i] = summed
+        drift[i] = drifted
+        elapsed[i] = clock
+        for r in range(3):
+            for c in range(3):
+                following[r, c] = (turn[r, 0] * rotations[i, 0, c] + turn[r, 1] * rotations[i, 1, c]
+                                   + turn[r, 2] * rotations[i, 2, c])
+        turn[:, :] = following
+    return velocity, drift, elapsed, anchored, middle
 
 
 PARTS = 15
