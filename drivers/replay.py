@@ -58,8 +58,9 @@ from urllib.parse import unquote
 import numpy as np
 
 from app.core.calibration import SensorCalibration
+from app.core.devices import MagnetometerInfo
 from app.core.recording.errors import RecordingError, RecordingTooLargeError
-from app.core.recording.format import KEY_BOOKMARKS, KEY_REFERENCE
+from app.core.recording.format import KEY_BOOKMARKS, KEY_MAGNETOMETER, KEY_REFERENCE
 from app.core.recording.index import Overview
 from app.core.recording.reader import (
     UNIT_SCALE,
@@ -134,6 +135,28 @@ class ReplayOptions:
 def is_recording_path(url: str) -> bool:
     """True for a plain file path ending in ``.csv`` or ``.csv.gz`` (no ``scheme://``)."""
     return "://" not in url and url.strip().lower().endswith((".csv", ".csv.gz"))
+
+
+def _recorded_magnetometer(recording: Recording, odr_hz: float) -> MagnetometerInfo | None:
+    """The magnetometer of a recording with field columns (``mx,my,mz``): its ``magnetometer``
+    metadata, or for a file without it (an import, a BROAD trial) a field sampled with the
+    rows; None without field columns. A replay of a 9-axis recording is a 9-axis source."""
+    if not recording.has_magnetometer:
+        return None
+    meta = recording.metadata.get(KEY_MAGNETOMETER)
+    meta = meta if isinstance(meta, dict) else {}
+
+    def number(key: str, default: float) -> float:
+        value = meta.get(key)
+        ok = isinstance(value, int | float) and not isinstance(value, bool)
+        return float(value) if ok and math.isfinite(value) and value > 0 else default
+
+    address = meta.get("address")
+    return MagnetometerInfo(
+        chip=str(meta.get("chip") or "recorded"), odr_hz=number("odr_hz", odr_hz),
+        range_ut=number("range_ut", 0.0), ut_per_lsb=number("ut_per_lsb", 0.0),
+        address=address if isinstance(address, int) and not isinstance(address, bool) else None,
+        mode=str(meta.get("mode") or ""), path="recording")
 
 
 def replay_url(path: str | Path, **options: Any) -> str:
@@ -620,6 +643,7 @@ class ReplayDevice(Device):
             gyro_fs_dps=int(number("gyro_fs_dps", 0)),
             firmware=str(device.get("firmware") or ""),
             extra=extra,
+            magnetometer=_recorded_magnetometer(recording, odr),
         )
 
     def _position_s(self) -> float:

@@ -370,3 +370,34 @@ def test_a_replay_reproduces_the_live_pipeline_bit_for_bit(tmp_path):
             for column in want:
                 assert np.array_equal(want[column], got[column], equal_nan=True), (name, column)
         assert np.array_equal(live.samples.latest(n)["accel"], replayed.samples.latest(n)["accel"])
+
+
+def test_a_replay_of_a_recording_with_a_field_is_a_9_axis_source(tmp_path):
+    """Its magnetometer as recorded, or (no ``magnetometer`` metadata: an import, a BROAD
+    trial) a field sampled with the rows; the live pipeline then takes the 9-axis default."""
+    from app.core.filters import DEFAULT_FILTER_9AXIS
+
+    path = tmp_path / "mag.csv"
+    device = SimulatedDevice("sim://static?odr=104&mag=lis3mdl&realtime=0&seed=4")
+    record_device(device, path, duration_s=2.0)
+    replay = create_device(replay_url(path) + "?speed=max")
+    info = replay.open()
+    replay.close()
+    assert info.magnetometer is not None and info.magnetometer.chip == "LIS3MDL"
+    pipeline = Pipeline(info.odr_hz)
+    assert pipeline.adopt_source(info.magnetometer is not None)
+    assert pipeline.filter.name == DEFAULT_FILTER_9AXIS
+    bare = tmp_path / "bare.csv"
+    bare.write_text("".join(line for line in path.read_text().splitlines(keepends=True)
+                            if not line.startswith("# magnetometer:")))
+    replay = create_device(replay_url(bare) + "?speed=max")
+    info = replay.open()
+    replay.close()
+    assert info.magnetometer is not None and info.magnetometer.chip == "recorded"
+    assert info.magnetometer.odr_hz == pytest.approx(info.odr_hz)
+    six = tmp_path / "six.csv"
+    record_device(SimulatedDevice("sim://static?odr=104&realtime=0&seed=4"), six,
+                  duration_s=1.0)
+    replay = create_device(replay_url(six) + "?speed=max")
+    assert replay.open().magnetometer is None
+    replay.close()
