@@ -148,8 +148,9 @@ def _recorded_magnetometer(recording: Recording, odr_hz: float) -> MagnetometerI
 
     def number(key: str, default: float) -> float:
         value = meta.get(key)
-        ok = isinstance(value, int | float) and not isinstance(value, bool)
-        return float(value) if ok and math.isfinite(value) and value > 0 else default
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            return default
+        return float(value) if math.isfinite(value) and value > 0 else default
 
     address = meta.get("address")
     return MagnetometerInfo(
