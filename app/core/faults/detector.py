@@ -616,15 +616,15 @@ class FaultDetector:
         low = BAND[0] * self.spec.odr_hz
         for c in np.flatnonzero(motion.flagged):
             self._active_bits[c] |= NOISE
+            # (the event names the channel and kind: "gx noise: ..." in the banner)
             if motion.by_band[c]:
                 why = (f"its band above {low:.0f} Hz is {motion.level[c]:.1f}x the other "
                        "channels' (relative to their own recent levels)")
             else:
-                why = (f"what the other channels do not explain of its band above {low:.0f} Hz "
-                       f"is {motion.residual_level[c]:.1f}x its recent level")
+                why = (f"the part of its band above {low:.0f} Hz that the other channels do "
+                       f"not explain is {motion.residual_level[c]:.1f}x its recent level")
             self._event(out, t, CHANNELS[c], "noise", "fault",
-                        f"{CHANNELS[c]} noise: {why} for 1.5 s; no motion puts it there",
-                        held=True)
+                        f"{why} for 1.5 s; no motion puts it there", held=True)
 
     def _bias_field(self, mag_ut: np.ndarray | None) -> np.ndarray:
         """The field the gyro bias test carries: calibrated, or (0, 3) (none)."""
