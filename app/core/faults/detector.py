@@ -158,6 +158,18 @@ LATCHED_KINDS = ("bias", "gravity", "consistency")
 """Kinds whose condition persists once declared: health stays red until :meth:`reset`."""
 
 
+@njit(cache=True, inline="always")
+def _add_turned(out, at, qw, qx, qy, qz, vx, vy, vz):  # pragma: no cover - compiled
+    """Add (vx, vy, vz) turned by the unit quaternion (qw, qx, qy, qz) to ``out[at:at + 3]``:
+    v + 2w(u x v) + 2u x (u x v)."""
+    tx = 2.0 * (qy * vz - qz * vy)
+    ty = 2.0 * (qz * vx - qx * vz)
+    tz = 2.0 * (qx * vy - qy * vx)
+    out[at] += vx + qw * tx + (qy * tz - qz * ty)
+    out[at + 1] += vy + qw * ty + (qz * tx - qx * tz)
+    out[at + 2] += vz + qw * tz + (qx * ty - qy * tx)
+
+
 @njit(cache=True)
 def _scan(t, x, gap, hist, ints, run_val, run_len, sums, quat, local, peak, peak_decay,
           stuck_len, spike_scale, d4_clip, sat_level, gyro_ref, window_x, d4_abs, mag,
@@ -236,22 +248,11 @@ def _scan(t, x, gap, hist, ints, run_val, run_len, sums, quat, local, peak, peak
             quat[0], quat[1], quat[2], quat[3] = nw / norm, nx / norm, ny / norm, nz / norm
         # the accelerometer in the window-start frame: gravity carried by the gyro (issue 33)
         qw, qx, qy, qz = quat[0], quat[1], quat[2], quat[3]
-        ax, ay, az = x[i, 0], x[i, 1], x[i, 2]
-        tx = 2.0 * (qy * az - qz * ay)
-        ty = 2.0 * (qz * ax - qx * az)
-        tz = 2.0 * (qx * ay - qy * ax)
-        quat[5] += ax + qw * tx + (qy * tz - qz * ty)
-        quat[6] += ay + qw * ty + (qz * tx - qx * tz)
-        quat[7] += az + qw * tz + (qx * ty - qy * tx)
+        _add_turned(quat, 5, qw, qx, qy, qz, x[i, 0], x[i, 1], x[i, 2])
         if mag.shape[0] == n:
-            ax, ay, az = mag[i, 0], mag[i, 1], mag[i, 2]
-            if math.isfinite(ax) and math.isfinite(ay) and math.isfinite(az):
-                tx = 2.0 * (qy * az - qz * ay)
-                ty = 2.0 * (qz * ax - qx * az)
-                tz = 2.0 * (qx * ay - qy * ax)
-                quat[8] += ax + qw * tx + (qy * tz - qz * ty)
-                quat[9] += ay + qw * ty + (qz * tx - qx * tz)
-                quat[10] += az + qw * tz + (qx * ty - qy * tx)
+            mx, my, mz = mag[i, 0], mag[i, 1], mag[i, 2]
+            if math.isfinite(mx) and math.isfinite(my) and math.isfinite(mz):
+                _add_turned(quat, 8, qw, qx, qy, qz, mx, my, mz)  # the field likewise
                 quat[11] += 1.0
         for k in range(3, 0, -1):
             for c in range(6):
