@@ -137,6 +137,14 @@ def is_recording_path(url: str) -> bool:
     return "://" not in url and url.strip().lower().endswith((".csv", ".csv.gz"))
 
 
+def _positive_number(mapping: dict, key: str, default: float) -> float:
+    """``mapping[key]`` when it is a positive finite number (not a bool), else ``default``."""
+    value = mapping.get(key)
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return default
+    return float(value) if math.isfinite(value) and value > 0 else default
+
+
 def _recorded_magnetometer(recording: Recording, odr_hz: float) -> MagnetometerInfo | None:
     """The magnetometer of a recording with field columns (``mx,my,mz``): its ``magnetometer``
     metadata, or for a file without it (an import, a BROAD trial) a field sampled with the
@@ -145,17 +153,12 @@ def _recorded_magnetometer(recording: Recording, odr_hz: float) -> MagnetometerI
         return None
     meta = recording.metadata.get(KEY_MAGNETOMETER)
     meta = meta if isinstance(meta, dict) else {}
-
-    def number(key: str, default: float) -> float:
-        value = meta.get(key)
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            return default
-        return float(value) if math.isfinite(value) and value > 0 else default
-
     address = meta.get("address")
     return MagnetometerInfo(
-        chip=str(meta.get("chip") or "recorded"), odr_hz=number("odr_hz", odr_hz),
-        range_ut=number("range_ut", 0.0), ut_per_lsb=number("ut_per_lsb", 0.0),
+        chip=str(meta.get("chip") or "recorded"),
+        odr_hz=_positive_number(meta, "odr_hz", odr_hz),
+        range_ut=_positive_number(meta, "range_ut", 0.0),
+        ut_per_lsb=_positive_number(meta, "ut_per_lsb", 0.0),
         address=address if isinstance(address, int) and not isinstance(address, bool) else None,
         mode=str(meta.get("mode") or ""), path="recording")
 
@@ -622,8 +625,7 @@ class ReplayDevice(Device):
         assert rows is not None
 
         def number(key: str, default: float) -> float:
-            value = device.get(key)
-            return float(value) if isinstance(value, int | float) and value > 0 else default
+            return _positive_number(device, key, default)
 
         odr = number("odr_hz", rows.rate_hz)
         extra = dict(device.get("extra") or {})

@@ -144,17 +144,24 @@ class Pipeline:
 
     # -- configuration ----------------------------------------------------------------------
     def set_filter(self, name: str, **values: Any) -> OrientationFilter:
-        """Switch filters mid-stream; the new one starts from the current orientation.
+        """Switch to the filter the user chose, mid-stream: it stays for every source; it
+        starts from the current orientation.
 
         Raises ValueError for an offline filter (see :func:`require_online`).
         """
+        new_filter = self.set_source_filter(name, **values)
+        self.follows_source = False
+        return new_filter
+
+    def set_source_filter(self, name: str, **values: Any) -> OrientationFilter:
+        """Switch to the filter the source asks for (a recording's own), as
+        :meth:`set_filter` does, without making it the user's choice."""
         require_online(name)
         new_filter = create_filter(name, **values)
         new_filter.warm_up()
         if self.counters.samples:
             new_filter.reset(self.filter.quaternion, self.filter.last_time_s)
         self.filter = new_filter
-        self.follows_source = False
         return new_filter
 
     def follow_source(self, has_magnetometer: bool) -> bool:
@@ -171,8 +178,7 @@ class Pipeline:
         name = default_filter_for(has_magnetometer)
         if not self.follows_source or self.filter.name == name:
             return False
-        self.set_filter(name)
-        self.follows_source = True
+        self.set_source_filter(name)
         return True
 
     def set_filter_parameter(self, name: str, value: Any) -> None:

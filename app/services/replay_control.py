@@ -148,9 +148,7 @@ def restore_recorded_filter(device: Device | None, pipeline: Pipeline) -> Restor
         return RestoredFilter(None)
     try:
         values, dropped = known_parameters(name, recording.filter_parameters)
-        follows = pipeline.follows_source  # the recording's filter is the source's choice,
-        new_filter = pipeline.set_filter(name, **values)  # not the user's
-        pipeline.follows_source = follows
+        new_filter = pipeline.set_source_filter(name, **values)  # the source's, not a choice
     except (KeyError, ValueError) as exc:
         return RestoredFilter(None, error=f"The recording's filter cannot be restored ({exc}); "
                                           f"replaying with {pipeline.filter.title}")
