@@ -453,3 +453,22 @@ def test_theme_screenshot(qtbot, themed, artifacts_dir: str) -> None:
     window.show()
     qtbot.waitExposed(window)
     assert window.grab().save(os.path.join(artifacts_dir, "theme.png"))
+
+
+def test_a_plots_menu_is_built_on_its_first_right_click(qtbot) -> None:
+    from app.gui.plots import LivePlots
+
+    plots = LivePlots()
+    qtbot.addWidget(plots)
+    plots.resize(500, 400)
+    plots.show()
+    qtbot.waitExposed(plots)
+    views = [plot.getViewBox() for plot in (plots.accel_plot, plots.gyro_plot, plots.angle_plot)]
+    assert all(view.menu is None for view in views)  # nothing built with the window
+    view = views[1]
+    centre = plots.graphics.mapFromScene(view.mapToScene(view.boundingRect().center()))
+    qtbot.mouseClick(plots.graphics.viewport(), Qt.MouseButton.RightButton, pos=centre)
+    qtbot.waitUntil(lambda: view.menu is not None and view.menu.isVisible())
+    assert "View All" in [action.text() for action in view.menu.actions()]
+    assert views[0].menu is None and views[2].menu is None  # only the plot clicked
+    view.menu.hide()

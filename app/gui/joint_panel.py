@@ -36,6 +36,7 @@ from PySide6.QtWidgets import (
 
 from app.core.readout import averaged_angle_deg
 from app.gui import file_dialogs, theme
+from app.gui.lazy_menu import lazy_menu_plot
 from app.services.group_attitudes import GroupAttitudes
 from app.services.joint_stream import JointStream
 from app.services.sensor_group import SensorGroup
@@ -130,7 +131,7 @@ class JointPanel(QWidget):
             controls.addWidget(widget)
         outer.addLayout(controls)
 
-        self.plot = pg.PlotWidget()
+        self.plot = pg.PlotWidget(plotItem=lazy_menu_plot())
         self.plot.setMinimumSize(320, 200)
         self.plot.showGrid(x=True, y=True, alpha=0.3)
         self.plot.setLabel("left", "joint", units="°")

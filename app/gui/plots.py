@@ -28,6 +28,7 @@ from PySide6.QtWidgets import QGraphicsItem, QVBoxLayout, QWidget
 
 from app.core.screen_fit import label_step
 from app.gui import theme
+from app.gui.lazy_menu import lazy_menu_plot
 
 TAIL_S = 1.0
 """How much of each trace's newest end :meth:`LivePlots.append` keeps to repaint from."""
@@ -69,7 +70,7 @@ class _UncrowdedAxis(pg.AxisItem):
 
 
 def _make_plot() -> pg.PlotItem:
-    plot = pg.PlotItem(axisItems={"left": _UncrowdedAxis("left")})
+    plot = lazy_menu_plot(axisItems={"left": _UncrowdedAxis("left")})
     # The plot's name and unit lead its header line: a rotated axis label does not fit a
     # short plot. Values stay in the named unit (no "m°" prefixes).
     plot.getAxis("left").setWidth(48)

@@ -14,6 +14,7 @@ from PySide6.QtWidgets import QWidget
 
 from app.core.recording.index import Overview
 from app.gui import theme
+from app.gui.lazy_menu import LazyMenuViewBox
 
 HEIGHT_PX = 36
 
@@ -24,7 +25,8 @@ class ReplayOverview(pg.PlotWidget):
     seekRequested = Signal(float)
 
     def __init__(self, parent: QWidget | None = None) -> None:
-        super().__init__(parent)
+        # No menu (a click seeks): pyqtgraph would build one only to drop it.
+        super().__init__(parent, plotItem=pg.PlotItem(viewBox=LazyMenuViewBox(enableMenu=False)))
         self.setFixedHeight(HEIGHT_PX)
         self.setMinimumWidth(200)
         self.setToolTip("The whole recording: accelerometer x, y, z (min to max). "
