@@ -58,6 +58,10 @@ NOISE_ALPHA = 0.1
 D2_MEDIAN_GAIN = math.sqrt(6.0) * 0.6744897501960817
 """Median |second difference| of unit white noise."""
 HOLD_S = 5.0
+LEARN_MIN_SAMPLES = 64
+"""Field samples gathered before the noise, LSB and interval are learnt from them: a block
+holds a few (a 100 Hz chip gives one or two per block at the top accelerometer rates), too few
+for a median."""
 INT16_MAX, INT16_MIN = 32767, -32768
 
 
@@ -145,6 +149,9 @@ class MagnetometerCheck:
         self._peak_before = np.zeros(3)
         self._last_field_t = np.nan
         self._last_flag: dict[tuple[str, str], float] = {}
+        self._runs: np.ndarray | None = None  # _stuck_samples for the sigma and LSB learnt
+        self._pending: list[tuple[np.ndarray, np.ndarray]] = []  # field samples to learn from
+        self._pending_count = 0
 
     def update(self, t_s: np.ndarray, mag_ut: np.ndarray, gap: np.ndarray,
                mag_counts: np.ndarray | None = None) -> list[FaultEvent]:
@@ -176,9 +183,16 @@ class MagnetometerCheck:
         self._run_start[:] = np.nan
         self._run_count[:] = 0
         self._last_field_t = np.nan
+        self._pending, self._pending_count = [], 0  # no difference across lost data
 
     def _stuck_samples(self) -> np.ndarray:
-        """Run length (field samples) that makes a repeated value a fault, per axis."""
+        """Run length (field samples) that makes a repeated value a fault, per axis (kept
+        until the noise or the LSB is learnt again)."""
+        if self._runs is None:
+            self._runs = self._runs_for_noise()
+        return self._runs
+
+    def _runs_for_noise(self) -> np.ndarray:
         q = self.ut_per_lsb if self.ut_per_lsb else self._lsb_seen
         q = np.broadcast_to(np.asarray(q, dtype=float), (3,))
         runs = np.full(3, float(STUCK_MIN_SAMPLES))
@@ -198,7 +212,12 @@ class MagnetometerCheck:
             return
         times = np.ascontiguousarray(t_s[rows], dtype=np.float64)
         values = np.ascontiguousarray(mag[rows], dtype=np.float64)
-        self._learn(times, values)
+        self._pending.append((times, values))
+        self._pending_count += len(times)
+        if self._pending_count >= LEARN_MIN_SAMPLES:
+            self._learn(np.concatenate([t for t, _ in self._pending]),
+                        np.concatenate([v for _, v in self._pending]))
+            self._pending, self._pending_count = [], 0
         interval = self._interval if np.isfinite(self._interval) else 0.0
         flags = np.zeros((len(rows), 3), dtype=np.uint8)
         spike_t = np.full(len(rows), np.nan)
@@ -210,17 +229,19 @@ class MagnetometerCheck:
                     self._stuck_samples(), max(STUCK_MIN_S, STUCK_MIN_SAMPLES * interval),
                     math.log(2.0) / SPIKE_PEAK_HALF_LIFE_S, flags, spike_t, spike_size)
         self.flags[rows] |= flags
-        for k, axis in zip(*np.nonzero(flags & 4), strict=True):
-            self._flag(out, float(spike_t[k]), int(axis), "spike", "fault",
-                       f"{MAG_CHANNELS[axis]} one-sample spike of {spike_size[k, axis]:.1f} uT "
-                       f"(a bad read or a failing axis)")
-        self._emit_runs(t_s, mag, rows, out)
+        if flags.any():
+            for k, axis in zip(*np.nonzero(flags & 4), strict=True):
+                self._flag(out, float(spike_t[k]), int(axis), "spike", "fault",
+                           f"{MAG_CHANNELS[axis]} one-sample spike of "
+                           f"{spike_size[k, axis]:.1f} uT (a bad read or a failing axis)")
+            self._emit_runs(t_s, mag, rows, out)
         self._last_field_t = float(times[-1])
         if restart_after:
             self._restart()
 
     def _learn(self, times: np.ndarray, values: np.ndarray) -> None:
         """Noise (median |second difference| of distinct samples), LSB and interval."""
+        self._runs = None
         changed = np.concatenate([[True], np.any(np.diff(values, axis=0) != 0, axis=1)])
         distinct = values[changed]
         if len(distinct) > 1:
