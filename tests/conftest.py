@@ -65,6 +65,15 @@ def _compile_kernels_in_parallel() -> None:
         process.wait()
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _qapplication_first(qapp):
+    """The process's QApplication exists before its first test: a command that draws a
+    document (``lab`` reports, the fault plots) makes a bare QGuiApplication when there is
+    none, and every widget test after it in that process then failed ("no attribute
+    'style'"), in whichever process xdist had given such a command first."""
+    return qapp
+
+
 @pytest.fixture(scope="session")
 def firmware_lib(tmp_path_factory):
     """The firmware's portable core built for this machine (``make -C firmware host``)."""
