@@ -171,6 +171,20 @@ def _add_turned(out, at, qw, qx, qy, qz, vx, vy, vz):  # pragma: no cover - comp
 
 
 @njit(cache=True)
+def _smallest_steps(x, lsb_seen):  # pragma: no cover
+    """Lower ``lsb_seen`` (per column) to the smallest non-zero step between rows of ``x``:
+    the LSB where it is not known. True when it did."""
+    lowered = False
+    for i in range(1, x.shape[0]):
+        for c in range(x.shape[1]):
+            step = abs(x[i, c] - x[i - 1, c])
+            if 0.0 < step < lsb_seen[c]:
+                lsb_seen[c] = step
+                lowered = True
+    return lowered
+
+
+@njit(cache=True)
 def _scan(t, x, gap, hist, ints, run_val, run_len, sums, quat, local, peak, peak_decay,
           stuck_len, spike_scale, d4_clip, sat_level, gyro_ref, window_x, d4_abs, mag,
           flags):  # pragma: no cover
@@ -365,7 +379,7 @@ class FaultDetector:
         self._rho_white: deque[np.ndarray] = deque(maxlen=NOISE_SPAN_WINDOWS)
         self._rate: deque[float] = deque(maxlen=NOISE_SPAN_WINDOWS)
         self._activity = np.ones(6)
-        self._threshold_cache: tuple | None = None
+        self._threshold_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._active_bits = np.zeros(6, dtype=np.uint8)
         self._gyro_ref: np.ndarray | None = None
         self._rest: _Rest | None = None
@@ -390,8 +404,10 @@ class FaultDetector:
             return []
         x = np.ascontiguousarray(np.hstack([block.accel_m_s2, block.gyro_rad_s]))
         if raw is not None and raw.scale is not None:
-            self._lsb = np.array([raw.scale.accel_m_s2_per_lsb] * 3
-                                 + [raw.scale.gyro_rad_s_per_lsb] * 3)
+            lsb = [raw.scale.accel_m_s2_per_lsb] * 3 + [raw.scale.gyro_rad_s_per_lsb] * 3
+            if lsb != self._lsb.tolist():
+                self._lsb = np.array(lsb)
+                self._threshold_cache = None
         t = np.ascontiguousarray(block.t_s, dtype=np.float64)
         gap = np.ascontiguousarray(block.gap, dtype=np.bool_)
         out: list[FaultEvent] = []
@@ -464,17 +480,12 @@ class FaultDetector:
             self._counts[key] = 0
 
     def _thresholds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Stuck-run lengths, spike and clip thresholds; recomputed only when what they
-        depend on changed (a block at a time, that is seldom)."""
-        floor = self._floor_or_default()
-        key = (floor.tobytes(), np.asarray(self._lsb).tobytes(),
-               np.asarray(self._lsb_seen).tobytes(), np.asarray(self._activity).tobytes())
-        cached = self._threshold_cache
-        if cached is not None and cached[0] == key:
-            return cached[1]
-        result = self._compute_thresholds(floor)
-        self._threshold_cache = (key, result)
-        return result
+        """Stuck-run lengths, spike and clip thresholds; recomputed only after what they
+        depend on may have changed (the LSB, the smallest step seen, a window's end: the
+        floor and the activity), which sets ``_threshold_cache`` to None."""
+        if self._threshold_cache is None:
+            self._threshold_cache = self._compute_thresholds(self._floor_or_default())
+        return self._threshold_cache
 
     def _compute_thresholds(self, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         sigma = floor / D4_GAIN
@@ -507,10 +518,8 @@ class FaultDetector:
             self._window_t = float(t[a])
         chunk_x = x[a:b]
         self._motion.filter(chunk_x, int(self._ints[1]))
-        if b - a > 1:
-            steps = np.abs(np.diff(chunk_x, axis=0))
-            steps = np.where(steps > 0, steps, np.inf).min(axis=0)
-            self._lsb_seen = np.minimum(self._lsb_seen, steps)
+        if _smallest_steps(chunk_x, self._lsb_seen):
+            self._threshold_cache = None
         _scan(t[a:b], chunk_x, gap[a:b], self._hist, self._ints, self._run_val, self._run_len,
               self._sums, self._quat, self._local, self._peak,
               self._peak_decay, stuck, spike, clip, self._sat, gyro_ref, self._window_x,
@@ -519,6 +528,7 @@ class FaultDetector:
         self.flags[a:b] |= self._active_bits
 
     def _end_window(self, t_end: float, out: list[FaultEvent]) -> None:
+        self._threshold_cache = None  # the floor and the activity are learnt below
         n = float(self._ints[1])
         n_d4 = float(self._ints[2])
         sums = self._sums
@@ -799,6 +809,8 @@ class FaultDetector:
             self._gyro_ref = self._gyro_ref + 0.1 * diff
 
     def _emit_sample_flags(self, t: np.ndarray, x: np.ndarray, out: list[FaultEvent]) -> None:
+        if not self.flags.any():
+            return
         for bit in (STUCK, DEAD, SPIKE, SATURATION):
             rows, cols = np.nonzero(self.flags & bit)
             if rows.size == 0:

@@ -150,6 +150,7 @@ class MagnetometerCheck:
         self._last_field_t = np.nan
         self._last_flag: dict[tuple[str, str], float] = {}
         self._runs: np.ndarray | None = None  # _stuck_samples for the sigma and LSB learnt
+        self._sigma_known = np.zeros(3)  # the noise learnt, 0 where not yet
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []  # field samples to learn from
         self._pending_count = 0
 
@@ -190,6 +191,7 @@ class MagnetometerCheck:
         until the noise or the LSB is learnt again)."""
         if self._runs is None:
             self._runs = self._runs_for_noise()
+            self._sigma_known = np.where(np.isfinite(self._sigma), self._sigma, 0.0)
         return self._runs
 
     def _runs_for_noise(self) -> np.ndarray:
@@ -219,17 +221,17 @@ class MagnetometerCheck:
                         np.concatenate([v for _, v in self._pending]))
             self._pending, self._pending_count = [], 0
         interval = self._interval if np.isfinite(self._interval) else 0.0
+        runs = self._stuck_samples()  # (and the noise it was made for: _sigma_known)
         flags = np.zeros((len(rows), 3), dtype=np.uint8)
         spike_t = np.full(len(rows), np.nan)
         spike_size = np.zeros((len(rows), 3))
         _scan_field(times, values, self._run_value, self._run_start, self._run_count,
                     self._prev, self._prev_t, self._n_prev, self._local, self._peak,
                     self._peak_before,
-                    np.where(np.isfinite(self._sigma), self._sigma, 0.0),
-                    self._stuck_samples(), max(STUCK_MIN_S, STUCK_MIN_SAMPLES * interval),
+                    self._sigma_known, runs, max(STUCK_MIN_S, STUCK_MIN_SAMPLES * interval),
                     math.log(2.0) / SPIKE_PEAK_HALF_LIFE_S, flags, spike_t, spike_size)
-        self.flags[rows] |= flags
         if flags.any():
+            self.flags[rows] |= flags
             for k, axis in zip(*np.nonzero(flags & 4), strict=True):
                 self._flag(out, float(spike_t[k]), int(axis), "spike", "fault",
                            f"{MAG_CHANNELS[axis]} one-sample spike of "
@@ -277,10 +279,13 @@ class MagnetometerCheck:
                     rows: np.ndarray, out: list[FaultEvent]) -> None:
         if not len(rows):
             return
+        raw = counts[rows] if counts is not None and self.ut_per_lsb else None
+        if ((raw is None or INT16_MIN < raw.min() <= raw.max() < INT16_MAX)
+                and (not self.range_ut or np.abs(mag[rows]).max() < self.range_ut * (1 - 1e-9))):
+            return  # the usual block: nothing near either limit
         over = np.zeros((len(rows), 3), dtype=bool)
         messages = {}
-        if counts is not None and self.ut_per_lsb:
-            raw = counts[rows]
+        if raw is not None:
             limit = (raw >= INT16_MAX) | (raw <= INT16_MIN)
             over |= limit
             for axis in np.flatnonzero(limit.any(axis=0)):
