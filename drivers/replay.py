@@ -137,6 +137,16 @@ def is_recording_path(url: str) -> bool:
     return "://" not in url and url.strip().lower().endswith((".csv", ".csv.gz"))
 
 
+def _reference_of(recording: Recording) -> str | None:
+    """What the recording's reference columns hold, as its metadata names it (None without
+    them; "recorded reference" when the metadata does not say)."""
+    if not recording.has_reference:
+        return None
+    source = recording.metadata.get(KEY_REFERENCE)
+    text = source.get("source") if isinstance(source, dict) else None
+    return text if isinstance(text, str) and text else "recorded reference"
+
+
 def _positive_number(mapping: dict, key: str, default: float) -> float:
     """``mapping[key]`` when it is a positive finite number (not a bool), else ``default``."""
     value = mapping.get(key)
@@ -457,11 +467,7 @@ class ReplayDevice(Device):
     @property
     def reference_source(self) -> str | None:
         """The recording's reference orientation, as its metadata names it (None without)."""
-        recording = self.recording
-        if recording is None or not recording.has_reference:
-            return None
-        source = recording.metadata.get(KEY_REFERENCE)
-        return source.get("source") if isinstance(source, dict) else "recorded reference"
+        return None if self.recording is None else _reference_of(self.recording)
 
     @property
     def recorded_calibration(self) -> SensorCalibration | None:
@@ -647,6 +653,7 @@ class ReplayDevice(Device):
             firmware=str(device.get("firmware") or ""),
             extra=extra,
             magnetometer=_recorded_magnetometer(recording, odr),
+            reference=_reference_of(recording) or "",
         )
 
     def _position_s(self) -> float:

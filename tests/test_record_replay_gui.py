@@ -210,3 +210,20 @@ def test_a_replay_restores_the_recorded_filter_and_parameters(qtbot, window, tmp
     assert session.pipeline.filter.get_parameter("tau_s") == 2.5
     qtbot.waitUntil(lambda: window.filter_panel.current_filter == "complementary",
                     timeout=TIMEOUT_MS)
+
+
+def test_a_recordings_own_reference_is_named_not_called_the_simulators_truth(
+        qtbot, window, tmp_path):
+    from tests.broad_trials import trial_path
+
+    lines = trial_path("01_undisturbed_slow_rotation_A").read_text().splitlines()
+    comments = [line for line in lines if line.startswith("#")]
+    path = tmp_path / "broad_01_slice.csv"  # 3 s of the real trial, its metadata as it is
+    path.write_text("\n".join(lines[:len(comments) + 1 + 300]) + "\n")
+    with qtbot.waitSignal(window.session.connected, timeout=TIMEOUT_MS):
+        window.open_recording(str(path))
+    assert "optical motion capture" in window.session.device_info.reference
+    qtbot.waitUntil(lambda: window.truth_label.text().startswith("Reference ("),
+                    timeout=TIMEOUT_MS)
+    assert "Simulator" not in window.truth_label.text()
+    assert "The reference: optical motion capture (BROAD)" in window.truth_label.toolTip()

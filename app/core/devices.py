@@ -10,6 +10,15 @@ import unicodedata
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+SIMULATOR_REFERENCE = "the simulator's true orientation"
+"""The reference source of a simulated stream (and of recordings made from one)."""
+
+
+def reference_title(source: str) -> str:
+    """What a view calls a stream's reference orientation: the simulator's is its truth; any
+    other (a recording's motion capture, say) is a reference, measured, not known."""
+    return "Simulator truth" if source == SIMULATOR_REFERENCE else "Reference"
+
 
 def printable(text: str) -> str:
     """``text`` safe to print on a terminal: control and format characters (escape sequences,
@@ -69,6 +78,9 @@ class DeviceInfo:
     extra: dict[str, Any] = field(default_factory=dict)
     magnetometer: MagnetometerInfo | None = None
     """The magnetometer beside the sensor, None without one."""
+    reference: str = ""
+    """What the stream's reference orientation is, when it delivers one
+    (:data:`SIMULATOR_REFERENCE`, a recording's motion capture ...); empty without."""
 
     def __post_init__(self) -> None:
         for name in ("name", "unique_id", "sensor", "firmware"):

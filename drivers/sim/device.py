@@ -56,6 +56,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from app.core import quaternion as quat
+from app.core.devices import SIMULATOR_REFERENCE
 from app.core.earth_field import DEFAULT_PLACE, EarthField, earth_field
 from app.core.orientation import quaternion_from_roll_pitch
 from app.core.samples import RawBlock, ScaleFactors
@@ -78,7 +79,6 @@ from drivers.sim.scenarios import SCENARIOS, Interactive, Scenario
 from drivers.sim.transient import apply_turn_on_transient
 from drivers.url_options import Option
 
-SIMULATOR_REFERENCE = "the simulator's true orientation"
 """What a simulator's reference orientation is (a recording's ``reference`` metadata)."""
 
 __all__ = ["SCENARIOS", "SimulatedDevice"]
@@ -315,6 +315,7 @@ class SimulatedDevice(Device):
             accel_fs_g=opts.accel_fs_g,
             gyro_fs_dps=opts.gyro_fs_dps,
             firmware=f"simulator {__version__}",
+            reference=SIMULATOR_REFERENCE,
             extra={
                 "scenario": opts.scenario,
                 "scenario_params": dict(self.scenario.params),

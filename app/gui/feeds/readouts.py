@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from PySide6.QtWidgets import QLabel
 
+from app.core.devices import SIMULATOR_REFERENCE, reference_title
 from app.core.measurement_log import Measurement, measure
 from app.core.readout import compare_to_truth, slope_from_angle
 from app.gui.feeds.frame import Frame
@@ -101,14 +102,18 @@ class ReadoutFeed:
                                  recent["incl_error"],
                                  None if tare is None else tare.quaternion)
         untared = "" if tare is None else ", not tared"
+        info = self.session.device_info
+        source = SIMULATOR_REFERENCE if info is None or not info.reference else info.reference
         text = "" if truth is None else (
-            f"Simulator truth ({self.settings.averaging_s:g} s mean{untared})  "
+            f"{reference_title(source)} ({self.settings.averaging_s:g} s mean{untared})  "
             f"roll {truth.roll_deg:+.2f}°  pitch {truth.pitch_deg:+.2f}°  ·  "
             f"reading error {truth.reading_error_deg:.2f}°  ·  "
             f"sample error {truth.sample_rms_deg:.2f}° RMS"
         )
         if self.truth_label.text() != text:
             self.truth_label.setText(text)
+            if text:  # the whole line (it may be cut to "…") and where the reference comes from
+                self.truth_label.setToolTip(f"{text}\nThe reference: {source}")
 
     def clear(self) -> None:
         """No data: dashes, no truth line."""
