@@ -12,6 +12,7 @@ from PySide6.QtCore import QRect, QSettings
 from PySide6.QtGui import QGuiApplication
 
 from app.core.earth_field import Place
+from app.core.field_check import ReferenceSettings
 from app.core.field_light import CLEAN, DISTURBED, NO_FIELD, FieldLight
 from app.core.filters import FILTERS
 from app.core.filters.base import MAGNETOMETER_PARAMETER, OrientationFilter
@@ -145,6 +146,17 @@ def test_a_source_with_a_magnetometer_gets_the_9_axis_default_until_the_user_cho
     try:
         qtbot.waitUntil(lambda: window.status_filter.text().endswith(
             FILTERS[DEFAULT_FILTER_9AXIS].title), timeout=TIMEOUT_MS)
+        # The filter checks the field it learns against the WMM's at the Field dock's place,
+        # and follows the place when it changes.
+        pipeline, presenter = window.session.pipeline, window.field_presenter
+        qtbot.waitUntil(lambda: pipeline.filter._field_reference == presenter.reference,
+                        timeout=TIMEOUT_MS)
+        assert presenter.reference is not None
+        window.field_view.reference_bar.settingsChanged.emit(  # as an edit of the place does
+            ReferenceSettings(Place(-33.9, 151.2, 0.0)))  # Sydney
+        qtbot.waitUntil(lambda: pipeline.filter._field_reference == presenter.reference,
+                        timeout=TIMEOUT_MS)
+        assert pipeline.filter._field_reference.dip_deg < 0  # the southern hemisphere's
         window.connect_device("sim://static?odr=104&seed=2")  # no magnetometer
         qtbot.waitUntil(lambda: window.status_filter.text().endswith(
             FILTERS[DEFAULT_FILTER].title), timeout=TIMEOUT_MS)

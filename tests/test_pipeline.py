@@ -158,3 +158,19 @@ def test_the_filter_follows_the_source_until_one_is_chosen():
     assert pipeline.filter.name == DEFAULT_FILTER_9AXIS
     chosen = Pipeline(104.0, "ekf")
     assert not chosen.follows_source and not chosen.adopt_source(has_magnetometer=True)
+
+
+def test_the_wmm_field_reaches_every_filter_now_and_later():
+    from app.core.field_check import wmm_reference
+
+    pipeline = Pipeline(104.0, "ekf")
+    reference = wmm_reference()
+    pipeline.set_field_reference(reference)
+    assert pipeline.filter._field_reference is reference
+    pipeline.set_comparisons(["vqf-heading", "complementary"])
+    assert pipeline.comparisons["vqf-heading"]._field_reference is reference
+    pipeline.set_filter("vqf-heading")  # a filter made after the reference was given
+    assert pipeline.filter._field_reference is reference
+    pipeline.set_field_reference(None)
+    assert pipeline.filter._field_reference is None
+    assert pipeline.comparisons["vqf-heading"]._field_reference is None

@@ -15,7 +15,7 @@ import numpy as np
 
 from app.core.calibration import IDENTITY_CALIBRATION, SensorCalibration
 from app.core.calibration_procedures.level_reference import TareReference
-from app.core.field_check import FieldMonitor
+from app.core.field_check import FieldMonitor, FieldReference
 from app.core.filters import FILTERS, OrientationFilter, create_filter, default_filter_for
 from app.core.filters.base import MAGNETOMETER_PARAMETER
 from app.core.heading import magnetic_heading_deg
@@ -117,6 +117,9 @@ class Pipeline:
         self.field = RingBuffer(1024, FIELD_COLUMNS)
         """Field samples, for a source with a magnetometer (empty otherwise)."""
         self.field_monitor = FieldMonitor()
+        self.field_reference: FieldReference | None = None
+        """The World Magnetic Model's field where the sensor is, handed to every filter
+        (:meth:`set_field_reference`); None: not known."""
         self._field_gap = False
         self.uncalibrated: SampleBlock | None = None
         """The last block in SI units before calibration (for monitors of the sensor itself,
@@ -161,8 +164,17 @@ class Pipeline:
         new_filter.warm_up()
         if self.counters.samples:
             new_filter.reset(self.filter.quaternion, self.filter.last_time_s)
+        new_filter.set_field_reference(self.field_reference)
         self.filter = new_filter
         return new_filter
+
+    def set_field_reference(self, reference: FieldReference | None) -> None:
+        """The World Magnetic Model's field at the user's place (the Field dock's place and
+        date): the 9-axis filters accept a field reference they learn at rest only when it
+        agrees with it. Kept for every filter to come."""
+        self.field_reference = reference
+        for orientation_filter in (self.filter, *self.comparisons.values()):
+            orientation_filter.set_field_reference(reference)
 
     def follow_source(self, has_magnetometer: bool) -> bool:
         """Let the source choose the filter again: its default from now on, for this
@@ -202,6 +214,7 @@ class Pipeline:
                 continue
             new_filter = create_filter(name)
             new_filter.warm_up()
+            new_filter.set_field_reference(self.field_reference)
             # It starts on its own (from the accelerometer at the next sample): inheriting the
             # main filter's estimate would also inherit its current error.
             running[name] = new_filter

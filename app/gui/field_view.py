@@ -341,6 +341,9 @@ class FieldPresenter(QObject):
     restarts empty (another device)."""
     problem = Signal(str)
     """A one-line message (a reference that could not be learnt or computed)."""
+    wmmChanged = Signal(object)
+    """The World Magnetic Model's field at the place and date set (a FieldReference; None
+    when it cannot be computed), for the filters' check of the field they learn."""
 
     def __init__(self, session, view: FieldView, parent: QObject | None = None) -> None:
         super().__init__(parent)
@@ -370,6 +373,8 @@ class FieldPresenter(QObject):
         self.view.reference_bar.show_settings(self.settings)
         if not self.learned:
             self.use_wmm()
+        else:
+            self.wmmChanged.emit(self.wmm())
 
     def _on_settings(self, settings: object) -> None:
         if isinstance(settings, str):
@@ -378,13 +383,19 @@ class FieldPresenter(QObject):
         self.settings = settings
         self.use_wmm()
 
+    def wmm(self) -> FieldReference | None:
+        """The WMM field at the place and date set (None, with a message, when it cannot be
+        computed)."""
+        try:
+            return self.settings.reference()
+        except ValueError as exc:
+            self.problem.emit(f"Field reference: {exc}")
+            return None
+
     def use_wmm(self) -> None:
         """Compare with the WMM field at the place and date set."""
-        try:
-            self.reference = self.settings.reference()
-        except ValueError as exc:
-            self.reference = None
-            self.problem.emit(f"Field reference: {exc}")
+        self.reference = self.wmm()
+        self.wmmChanged.emit(self.reference)
         self.learned = False
         self.view.plots.set_reference(self.reference)
         self._key = None

@@ -179,6 +179,9 @@ class MainWindow(QMainWindow):
         self.presenter.clock.tick.connect(self.field_presenter.refresh)
         self.field_presenter.availabilityChanged.connect(self.docks["field"].setVisible)
         self.field_presenter.problem.connect(self.show_error)
+        # The filters check the field they learn against the WMM's at the dock's place.
+        self.field_presenter.wmmChanged.connect(session.requestFieldReference)
+        session.requestFieldReference.emit(self.field_presenter.reference)
         self.sections.register("field_reference", self.field_presenter.settings_dict,
                                self.field_presenter.apply_settings)
         # The compass: its heading shares the readouts' window, its light the Field dock's

@@ -41,6 +41,7 @@ REQUESTS: dict[str, str] = {
     "requestAlarms": "set_alarms",  # AlarmConfig
     "requestLsl": "set_lsl",  # on: stream over Lab Streaming Layer
     "requestDeclination": "set_declination",  # Declination or None
+    "requestFieldReference": "set_field_reference",  # FieldReference (WMM here) or None
 }
 """The session's request signals and the worker slots they are queued to (GUI -> worker)."""
 

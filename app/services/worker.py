@@ -19,6 +19,7 @@ from PySide6.QtCore import QObject, QTimer, Signal, Slot
 
 from app.core.alarms import AlarmConfig, AlarmMonitor
 from app.core.calibration_procedures import CalibrationProfile, ProfileStore, TareReference
+from app.core.field_check import FieldReference
 from app.core.heading import Declination
 from app.core.pipeline import Pipeline
 from app.core.recording import RecordingError
@@ -368,6 +369,11 @@ class DeviceWorker(QObject):
             self.error.emit(str(exc))
             return
         self.tareChanged.emit(reference)
+
+    @Slot(object)
+    def set_field_reference(self, reference: FieldReference | None) -> None:
+        """The WMM field at the user's place, for the filters' check of the field they learn."""
+        self.pipeline.set_field_reference(reference)
 
     @Slot(object)
     def set_declination(self, declination: Declination | None) -> None:

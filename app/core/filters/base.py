@@ -136,6 +136,11 @@ class OrientationFilter(ABC):
     def parameter_values(self) -> dict[str, Any]:
         return dict(self._values)
 
+    def set_field_reference(self, reference: Any) -> None:  # noqa: B027 - an optional hook
+        """The World Magnetic Model's field where the sensor is (a
+        :class:`~app.core.field_check.FieldReference`, None: unknown), for filters that check
+        the field reference they learn against it; the others have no use for it."""
+
     def _parameters_changed(self) -> None:  # noqa: B027 - an optional hook
         """Hook for filters that cache derived constants."""
 
