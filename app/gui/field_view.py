@@ -31,7 +31,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.core.earth_field import Place
+from app.core.earth_field import DEFAULT_PLACE, Place
 from app.core.field_check import (
     Disturbance,
     FieldReference,
@@ -342,8 +342,10 @@ class FieldPresenter(QObject):
     problem = Signal(str)
     """A one-line message (a reference that could not be learnt or computed)."""
     wmmChanged = Signal(object)
-    """The World Magnetic Model's field at the place and date set (a FieldReference; None
-    when it cannot be computed), for the filters' check of the field they learn."""
+    """The World Magnetic Model's field at the place and date the user set (a FieldReference),
+    for the filters' check of the field they learn; None while the place is the default (a
+    guess: checked against it, a sensor elsewhere would learn no reference at rest) or the
+    field cannot be computed."""
 
     def __init__(self, session, view: FieldView, parent: QObject | None = None) -> None:
         super().__init__(parent)
@@ -374,7 +376,11 @@ class FieldPresenter(QObject):
         if not self.learned:
             self.use_wmm()
         else:
-            self.wmmChanged.emit(self.wmm())
+            self.wmmChanged.emit(self.for_filters(self.wmm()))
+
+    def for_filters(self, wmm: FieldReference | None) -> FieldReference | None:
+        """What the filters check their field against: the WMM's at a place the user set."""
+        return wmm if self.settings.place != DEFAULT_PLACE else None
 
     def _on_settings(self, settings: object) -> None:
         if isinstance(settings, str):
@@ -395,7 +401,7 @@ class FieldPresenter(QObject):
     def use_wmm(self) -> None:
         """Compare with the WMM field at the place and date set."""
         self.reference = self.wmm()
-        self.wmmChanged.emit(self.reference)
+        self.wmmChanged.emit(self.for_filters(self.reference))
         self.learned = False
         self.view.plots.set_reference(self.reference)
         self._key = None

@@ -181,7 +181,8 @@ class MainWindow(QMainWindow):
         self.field_presenter.problem.connect(self.show_error)
         # The filters check the field they learn against the WMM's at the dock's place.
         self.field_presenter.wmmChanged.connect(session.requestFieldReference)
-        session.requestFieldReference.emit(self.field_presenter.reference)
+        session.requestFieldReference.emit(
+            self.field_presenter.for_filters(self.field_presenter.reference))
         self.sections.register("field_reference", self.field_presenter.settings_dict,
                                self.field_presenter.apply_settings)
         # The compass: its heading shares the readouts' window, its light the Field dock's
