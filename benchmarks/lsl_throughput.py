@@ -99,7 +99,7 @@ def main() -> int:
     from app.services.acquisition import Acquisition, Block, Subscriber, Until
     from app.services.connection import Connection
     from app.services.lsl_outlet import LslOutlet, source_id
-    from app.services.recorder import warm_up_filters
+    from app.services.recorder import warm_up_kernels
 
     class Keep(Subscriber):
         def __init__(self) -> None:
@@ -112,7 +112,7 @@ def main() -> int:
             self.imu.append(np.hstack(columns))
             self.gaps += int(np.count_nonzero(s.gap))
 
-    warm_up_filters(None)
+    warm_up_kernels(None)
     session = Acquisition(Connection(), Pipeline(), detect_faults=False)
     info = session.open(args.device)
     outlet = LslOutlet(lambda: session.connection.device.info, session.pipeline)

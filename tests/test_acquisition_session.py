@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import ast
+import os
+import subprocess
+import sys
 import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,6 +28,8 @@ from drivers.errors import DeviceError, DeviceIOError
 from drivers.registry import create_device
 from drivers.replay import ReplayDevice
 from drivers.sim.device import SIMULATOR_REFERENCE, SimulatedDevice
+
+ROOT = Path(__file__).resolve().parents[1]
 
 STUCK = "sim://wobble?fault=stuck:gz@2&realtime=0&seed=4"
 
@@ -220,14 +227,56 @@ def test_the_drivers_declare_what_they_have(tmp_path):
     assert np.isfinite(interactive.set_target_attitude(5.0, 0.0))
 
 
+_KERNELS_SCRIPT = """
+import sys
+from PySide6.QtCore import QCoreApplication
+from app.core.faults import detector, magnetometer, motion
+from app.core.filters import vqf_heading
+from app.services import worker as worker_module
+
+kernels = {"fault detector": detector._scan, "band filter": motion._band_filter,
+           "magnetometer check": magnetometer._scan_field,
+           "9-axis default filter": vqf_heading._heading_kernel}
+app = QCoreApplication([])
+opened = {}
+real_open = worker_module.Connection.open
+
+def open_(self, url):
+    opened.update({name: bool(kernel.signatures) for name, kernel in kernels.items()})
+    app.quit()
+    return real_open(self, url)
+
+worker_module.Connection.open = open_
+from app.services.session import DeviceSession
+session = DeviceSession()
+session.requestConnect.emit("sim://static?realtime=0&mag=lis3mdl")
+app.exec()
+session.shutdown()
+print(opened)
+"""
+
+
+def test_the_window_loads_every_kernel_a_stream_needs_before_it_opens_the_device():
+    """Loaded at the first block, the 9-axis default filter and the fault detector's kernels
+    cost a live sensor 10-80 samples at every start (its FIFO overflowed meanwhile). Checked
+    in a fresh interpreter, where nothing is loaded yet."""
+    result = subprocess.run([sys.executable, "-c", _KERNELS_SCRIPT], capture_output=True,
+                            text=True, timeout=300, cwd=ROOT,
+                            env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
+    assert result.returncode == 0, result.stderr
+    opened = ast.literal_eval(result.stdout.strip().splitlines()[-1])
+    assert opened == {"fault detector": True, "band filter": True, "magnetometer check": True,
+                      "9-axis default filter": True}
+
+
 def test_record_loads_the_filters_before_it_opens_the_device(tmp_path, monkeypatch):
     """A realtime device opened first overflowed while the filters compiled (the first
     block came seconds late on a busy machine: samples lost, a link gap event)."""
     from app.cli import record  # the command's own names (bound when it was imported)
 
     order: list[str] = []
-    real_warm_up, real_create = record.warm_up_filters, record.create_device
-    monkeypatch.setattr(record, "warm_up_filters",
+    real_warm_up, real_create = record.warm_up_kernels, record.create_device
+    monkeypatch.setattr(record, "warm_up_kernels",
                         lambda *a: order.append("warm up") or real_warm_up(*a))
     monkeypatch.setattr(record, "create_device",
                         lambda url: order.append("create") or real_create(url))

@@ -18,7 +18,7 @@ from app.core.samples import RawBlock, ScaleFactors, convert_raw_block
 from app.services.acquisition import Acquisition, Block, Subscriber, Until
 from app.services.connection import Connection
 from app.services.lsl_outlet import LslOutlet, source_id
-from app.services.recorder import warm_up_filters
+from app.services.recorder import warm_up_kernels
 
 LOOPBACK_CONFIG = """[ports]
 IPv6 = disable
@@ -124,7 +124,7 @@ def test_a_fast_live_source_is_stamped_on_its_own_clock_fit_without_loss():
     at 833 Hz in 0.4 s; the outlet fits the clock itself from the blocks' receive times."""
     import pylsl
 
-    warm_up_filters(None)  # the filter compiled before the live clock runs
+    warm_up_kernels(None)  # the filter compiled before the live clock runs
     session = Acquisition(Connection(), Pipeline(), detect_faults=False)
     info = session.open("sim://static?odr=833&speed=50&seed=5")
     outlet = session.subscribe(LslOutlet(lambda: session.connection.device.info,

@@ -34,7 +34,7 @@ from app.core.recording.sizing import data_rate
 from app.core.safe_output import OutputRefused, check_output
 from app.services.health import fault_line
 from app.services.lsl_outlet import LslUnavailable
-from app.services.recorder import parse_duration, record_device, warm_up_filters
+from app.services.recorder import parse_duration, record_device, warm_up_kernels
 from drivers.errors import DeviceError
 from drivers.registry import create_device, driver_for
 from drivers.replay import recording_path
@@ -141,7 +141,7 @@ def record_command(args: argparse.Namespace, out: TextIO | None = None) -> int:
     except _Refused as exc:
         _error(str(exc))
         return exc.code
-    warm_up_filters(args.record_filter, settings.comparisons)  # before the device streams
+    warm_up_kernels(args.record_filter, settings.comparisons)  # before the device streams
     try:
         device = create_device(args.record_device)
         info = device.open()

@@ -31,6 +31,7 @@ from typing import Any
 from app.core.alarms import AlarmEvent, AlarmMonitor
 from app.core.calibration import SensorCalibration
 from app.core.faults import FaultEvent
+from app.core.faults.warm_up import warm_up_detector
 from app.core.filters import DEFAULT_FILTER, DEFAULT_FILTER_9AXIS, create_filter
 from app.core.pipeline import Pipeline, require_online
 from app.core.recording.errors import RecordingWriteError
@@ -90,11 +91,14 @@ class RecordOutcome:
     """What went out over Lab Streaming Layer (``lsl=True``), else None."""
 
 
-def warm_up_filters(filter_name: str | None, comparisons: Sequence[str] = ()) -> None:
-    """Load the filters' compiled kernels; call it before the device is opened. The first
-    block would otherwise wait for them (0.3 s from numba's cache, seconds on a cold one or a
-    busy machine) while the sensor's FIFO overflows (benchmarks/soak-results: three of four
-    losses were this). Loaded once per process: a second call costs nothing."""
+def warm_up_kernels(filter_name: str | None, comparisons: Sequence[str] = ()) -> None:
+    """Load the filters' and the fault detector's compiled kernels; call it before the device
+    is opened. The first block would otherwise wait for them (0.3 s from numba's cache,
+    seconds on a cold one or a busy machine) while the sensor's FIFO overflows
+    (benchmarks/soak-results: three of four losses were this). ``filter_name`` None: both
+    source defaults (which one runs depends on the device). Loaded once per process: a
+    second call costs nothing."""
+    warm_up_detector()
     defaults = (DEFAULT_FILTER, DEFAULT_FILTER_9AXIS)  # which one depends on the device
     for name in {*([filter_name] if filter_name else defaults), *(comparisons or ())}:
         with contextlib.suppress(ValueError):  # unknown or offline: refused further on
@@ -145,7 +149,7 @@ def record_device(
     same session); :class:`~app.services.lsl_outlet.LslUnavailable` before anything is
     recorded when pylsl cannot be used.
     """
-    warm_up_filters(pipeline.filter.name if pipeline else filter_name, comparisons)
+    warm_up_kernels(pipeline.filter.name if pipeline else filter_name, comparisons)
     info = device.open()
     lock = OutputLock(path)
     try:

@@ -28,6 +28,7 @@ from app.services.calibration_state import CalibrationState
 from app.services.connection import Connection
 from app.services.health import HealthMonitor, recorded_events_note
 from app.services.lsl_outlet import LslOutlet, LslUnavailable, lsl_description
+from app.services.recorder import warm_up_kernels
 from app.services.recording_control import RecordingControl
 from app.services.replay_control import (
     OverviewTracker,
@@ -95,10 +96,13 @@ class DeviceWorker(QObject):
     # -- lifecycle (worker thread) ----------------------------------------------------------
     @Slot()
     def start(self) -> None:
-        """Create the timers in the worker thread and compile the filter."""
+        """Create the timers in the worker thread and load the compiled kernels."""
         self._poll_timer = self._timer(0, self._poll)
         self._status_timer = self._timer(STATUS_INTERVAL_MS, self._emit_status)
         self._reconnect_timer = self._timer(RECONNECT_INTERVAL_MS, self._try_reconnect)
+        # Before any device streams: loaded on its first block, they cost samples (the
+        # source's default filter and the fault detector, too, were loaded only then).
+        warm_up_kernels(None)
         self.pipeline.filter.warm_up()
 
     def _timer(self, interval_ms: int, slot: Any) -> QTimer:
