@@ -23,11 +23,16 @@ ARTIFACTS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "test-artif
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "firmware", "host"))
 
 
-COMPILE_SHARES = (("ekf", "gyro"), ())
+COMPILE_SHARES = (("ekf", "gyro"), (), ("faults",))
 """The live filters' kernels in two shares of about equal compile time (the EKF alone is
-half); ``()`` is every other filter."""
+half; ``()`` is every other filter), and the fault detector's, which every session loads
+before its device opens (about 9 s to compile)."""
 _COMPILE_SCRIPT = (
     "import sys\n"
+    "if sys.argv[1:] == ['faults']:\n"
+    "    from app.core.faults.warm_up import warm_up_detector\n"
+    "    warm_up_detector()\n"
+    "    sys.exit()\n"
     "from app.core.filters import ONLINE_FILTERS, create_filter\n"
     "share = sys.argv[1:] or [n for n in ONLINE_FILTERS if n not in {shared}]\n"
     "for name in share:\n"
@@ -43,16 +48,19 @@ def pytest_sessionstart(session):
     device, and the GUI thread of others stalled mid-test.
 
     Under xdist the controller, before it starts the workers (xdist's hook runs last), has
-    the kernels compiled into numba's cache by two processes, a share each: each worker then
-    loads them, where before every worker compiled all of them at once on a cold cache."""
+    the kernels compiled into numba's cache by three processes, a share each: each worker
+    then loads them, where before every worker compiled all of them at once on a cold cache.
+    The fault detector's too: every session loads them before its device opens."""
     if os.environ.get("PYTEST_XDIST_WORKER") is None and session.config.getoption(
             "numprocesses", default=None):
         _compile_kernels_in_parallel()
         return
+    from app.core.faults.warm_up import warm_up_detector
     from app.core.filters import ONLINE_FILTERS, create_filter
 
     for name in ONLINE_FILTERS:
         create_filter(name).warm_up()
+    warm_up_detector()
 
 
 def _compile_kernels_in_parallel() -> None:
