@@ -63,7 +63,11 @@ def test_frozen_environment_points_numba_at_the_user_cache(monkeypatch):
     from app import frozen
 
     monkeypatch.setattr(sys, "frozen", True, raising=False)
-    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    # Recorded as unset first: delenv of an unset variable records nothing, and the cache
+    # directory set below then stayed in this process's environment for every later test,
+    # whose subprocesses (record, tune's workers, the soak) compiled every kernel again.
+    monkeypatch.setenv("NUMBA_CACHE_DIR", "")
+    monkeypatch.delenv("NUMBA_CACHE_DIR")
     monkeypatch.setattr(sys, "stdout", None)
     monkeypatch.setattr(sys, "dont_write_bytecode", False)
     frozen.prepare_frozen_environment()
