@@ -37,6 +37,49 @@ class RowHistory:
 
 
 @njit(cache=True)
+def _select(v, n, k):  # pragma: no cover - compiled
+    """Reorder ``v[:n]`` (no NaN) so that ``v[k]`` is its k-th smallest and ``v[:k]`` holds
+    no larger value (Hoare's quickselect); returns ``v[k]``."""
+    lo = 0
+    hi = n - 1
+    while lo < hi:
+        pivot = v[(lo + hi) // 2]
+        i = lo
+        j = hi
+        while i <= j:
+            while v[i] < pivot:
+                i += 1
+            while v[j] > pivot:
+                j -= 1
+            if i <= j:
+                v[i], v[j] = v[j], v[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return v[k]
+
+
+@njit(cache=True)
+def _column(a, j, square, column):  # pragma: no cover - compiled
+    """Copy column j of ``a`` (squared when ``square``) without its NaNs into ``column``;
+    returns how many were kept."""
+    kept = 0
+    for i in range(a.shape[0]):
+        v = a[i, j]
+        if square:
+            v = v * v
+        if v == v:
+            column[kept] = v
+            kept += 1
+    return kept
+
+
+@njit(cache=True)
 def column_median(a, square, nan_check):  # pragma: no cover - compiled
     """``np.median(a ** 2 if square else a, axis=0)`` of (n, c) ``a`` (n >= 1), to the bit.
     Without ``nan_check`` the median by ``np.partition`` instead: NaN sorts last, and the
@@ -46,24 +89,35 @@ def column_median(a, square, nan_check):  # pragma: no cover - compiled
     column = np.empty(n)
     half = n // 2
     for j in range(c):
-        nan = False
-        for i in range(n):
-            v = a[i, j]
-            if square:
-                v = v * v
-            column[i] = v
-            if v != v:
-                nan = True
-        if nan and nan_check:
-            out[j] = np.nan
+        kept = _column(a, j, square, column)
+        if kept < n and (nan_check or half >= kept):
+            out[j] = np.nan  # (without the check: the middle is a NaN sorted last)
             continue
-        column.sort()
-        if not nan_check:  # as 0.5 * (the two middle values) or the middle one
-            out[j] = column[half] if n % 2 else 0.5 * (column[half - 1] + column[half])
-        elif n % 2:  # numpy's: the mean of the middle one or two (a sum from +0.0)
-            out[j] = 0.0 + column[half]
+        upper = _select(column, kept, half)
+        if n % 2:
+            # numpy's median is the mean of the middle value (a sum from +0.0)
+            out[j] = 0.0 + upper if nan_check else upper
+            continue
+        lower = column[0]
+        for i in range(1, half):
+            lower = max(lower, column[i])
+        if nan_check:
+            out[j] = ((0.0 + lower) + upper) / 2.0
         else:
-            out[j] = ((0.0 + column[half - 1]) + column[half]) / 2.0
+            out[j] = 0.5 * (lower + upper)
+    return out
+
+
+@njit(cache=True)
+def column_kth(a, k, square):  # pragma: no cover - compiled
+    """``np.partition(a ** 2 if square else a, k, axis=0)[k]`` of (n, c) ``a``: each
+    column's k-th smallest (NaN sorts last)."""
+    n, c = a.shape
+    out = np.empty(c)
+    column = np.empty(n)
+    for j in range(c):
+        kept = _column(a, j, square, column)
+        out[j] = _select(column, kept, k) if k < kept else np.nan
     return out
 
 
@@ -86,18 +140,3 @@ def less_others(log_r):  # pragma: no cover - compiled
         out[c] = log_r[c] - (top if (not nan and top > 0.0) else 0.0)
     return out
 
-
-@njit(cache=True)
-def column_kth(a, k, square):  # pragma: no cover - compiled
-    """``np.partition(a ** 2 if square else a, k, axis=0)[k]`` of (n, c) ``a``: each
-    column's k-th smallest (NaN sorts last)."""
-    n, c = a.shape
-    out = np.empty(c)
-    column = np.empty(n)
-    for j in range(c):
-        for i in range(n):
-            v = a[i, j]
-            column[i] = v * v if square else v
-        column.sort()
-        out[j] = column[k]
-    return out
