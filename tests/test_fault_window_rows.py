@@ -12,6 +12,7 @@ import pytest
 
 from app.core.faults.carry import GravityCarry
 from app.core.faults.detector import _noise_ratios, _rotate_inverse
+from app.core.faults.motion import _worst_lag, band_autocorrelation, butterworth_sos
 from app.core.faults.rows import RowHistory, column_kth, column_median, less_others
 from app.core.samples import STANDARD_GRAVITY_M_S2
 
@@ -100,3 +101,19 @@ def test_the_bias_horizon_does_not_depend_on_its_arrays_size() -> None:
             carry.push(rotation, accel, 0.1, field if i % 3 else None)
         assert _same(small.estimate, large.estimate) and _same(small.error, large.error)
     assert len(small._durations) > 64 and small.field_windows == large.field_windows
+
+
+def test_the_band_whiteness_is_einsum_s() -> None:
+    reference = band_autocorrelation(np.vstack([butterworth_sos(4, 0.25, "high"),
+                                                butterworth_sos(4, 0.45, "low")]))
+    rng = np.random.default_rng(9)
+    for trial in range(100):
+        out = rng.standard_normal(((71, 72, 250)[trial % 3], 6)) * 10.0 ** (trial % 7 - 3)
+        if trial % 5 == 0:
+            out[:, trial % 6] = 0.0  # no power: the 1e-300 floor
+        power = np.einsum("ij,ij->j", out, out)
+        worst = np.zeros(6)
+        for k, value in enumerate(reference, start=1):
+            lagged = np.einsum("ij,ij->j", out[k:], out[:-k]) / np.maximum(power, 1e-300)
+            worst = np.maximum(worst, np.abs(lagged - value))
+        assert _same(_worst_lag(out, reference), worst)

@@ -419,6 +419,8 @@ class FaultDetector:
         self._rate: deque[float] = deque(maxlen=NOISE_SPAN_WINDOWS)
         self._activity = np.ones(6)
         self._threshold_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._stuck_key = b""
+        self._stuck_runs = np.zeros(6, dtype=np.int64)
         self._active_bits = np.zeros(6, dtype=np.uint8)
         self._gyro_ref: np.ndarray | None = None
         self._rest: _Rest | None = None
@@ -529,6 +531,15 @@ class FaultDetector:
     def _compute_thresholds(self, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         sigma = floor / D4_GAIN
         q = np.where(self._lsb > 0, self._lsb, self._lsb_seen)
+        key = floor.tobytes() + q.tobytes()
+        if key != self._stuck_key:  # (the floor stays while the sensor moves)
+            self._stuck_key = key
+            self._stuck_runs = self._compute_stuck_runs(sigma, q)
+        spike = sigma * SPIKE_NOISE_GAIN * self._activity
+        return self._stuck_runs, np.maximum(spike, 1e-300), floor * D4_CLIP
+
+    def _compute_stuck_runs(self, sigma: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """The stuck-run lengths of the module docstring, from the noise and the LSB."""
         with np.errstate(divide="ignore", invalid="ignore"):
             sigma_noise = np.sqrt(np.maximum(sigma**2 - np.where(np.isfinite(q), q, 0.0)**2 / 12,
                                              (0.05 * np.where(np.isfinite(q), q, sigma))**2))
@@ -539,8 +550,7 @@ class FaultDetector:
         odr = self.spec.odr_hz
         stuck = np.clip(np.nan_to_num(runs, nan=np.inf, posinf=1e18),
                         max(8, STUCK_MIN_S * odr), STUCK_MAX_S * odr)
-        spike = sigma * SPIKE_NOISE_GAIN * self._activity
-        return np.ceil(stuck).astype(np.int64), np.maximum(spike, 1e-300), floor * D4_CLIP
+        return np.ceil(stuck).astype(np.int64)
 
     def _floor_or_default(self) -> np.ndarray:
         if np.all(self._floor > 0):

@@ -227,10 +227,29 @@ class MotionNoiseCheck:
 
     def _whiteness(self, n: int) -> np.ndarray:
         """Per channel: the window's band output looks like band-limited white noise."""
-        out = self._out[:n]
-        power = np.einsum("ij,ij->j", out, out)
-        worst = np.zeros(6)
-        for k, reference in enumerate(self._white_reference, start=1):
-            lagged = np.einsum("ij,ij->j", out[k:], out[:-k]) / np.maximum(power, 1e-300)
-            worst = np.maximum(worst, np.abs(lagged - reference))
-        return worst <= WHITE_TOLERANCE
+        return _worst_lag(self._out[:n], self._white_reference) <= WHITE_TOLERANCE
+
+
+@njit(cache=True)
+def _worst_lag(out, reference):  # pragma: no cover - compiled
+    """Per column of ``out``: the largest |autocorrelation - reference| over lags 1..len, as
+    ``np.einsum("ij,ij->j", out[k:], out[:-k]) / np.maximum(power, 1e-300)`` (its sums run
+    row after row from 0.0, as einsum's do here) and ``np.maximum`` (NaN wins)."""
+    n, channels = out.shape
+    power = np.zeros(channels)
+    for i in range(n):
+        for c in range(channels):
+            power[c] += out[i, c] * out[i, c]
+    worst = np.zeros(channels)
+    lagged = np.empty(channels)
+    for k in range(1, len(reference) + 1):
+        lagged[:] = 0.0
+        for i in range(n - k):
+            for c in range(channels):
+                lagged[c] += out[k + i, c] * out[i, c]
+        for c in range(channels):
+            p = power[c] if (power[c] != power[c] or power[c] > 1e-300) else 1e-300
+            d = abs(lagged[c] / p - reference[k - 1])
+            if d != d or d > worst[c]:
+                worst[c] = d
+    return worst
