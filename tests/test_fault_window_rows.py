@@ -11,9 +11,17 @@ import numpy as np
 import pytest
 
 from app.core.faults.carry import GravityCarry
-from app.core.faults.detector import _noise_ratios, _rotate_inverse
+from app.core.faults.detector import (
+    STUCK_FALSE_ALARM,
+    STUCK_MAX_S,
+    STUCK_MIN_S,
+    FaultDetector,
+    _noise_ratios,
+    _rotate_inverse,
+)
 from app.core.faults.motion import _worst_lag, band_autocorrelation, butterworth_sos
 from app.core.faults.rows import RowHistory, column_kth, column_median, less_others
+from app.core.faults.spec import SensorSpec
 from app.core.samples import STANDARD_GRAVITY_M_S2
 
 
@@ -117,3 +125,30 @@ def test_the_band_whiteness_is_einsum_s() -> None:
             lagged = np.einsum("ij,ij->j", out[k:], out[:-k]) / np.maximum(power, 1e-300)
             worst = np.maximum(worst, np.abs(lagged - value))
         assert _same(_worst_lag(out, reference), worst)
+
+
+def _stuck_runs_by_arrays(sigma: np.ndarray, q: np.ndarray, odr: float) -> np.ndarray:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sigma_noise = np.sqrt(np.maximum(sigma**2 - np.where(np.isfinite(q), q, 0.0)**2 / 12,
+                                         (0.05 * np.where(np.isfinite(q), q, sigma))**2))
+        p0 = np.where(np.isfinite(q), np.vectorize(math.erf)(
+            q / (2.0 * math.sqrt(2.0) * np.maximum(sigma_noise, 1e-300))), 0.0)
+        runs = np.where(p0 < 1.0, np.log(STUCK_FALSE_ALARM) / np.log(np.minimum(p0, 1 - 1e-16)),
+                        np.inf)
+    stuck = np.clip(np.nan_to_num(runs, nan=np.inf, posinf=1e18),
+                    max(8, STUCK_MIN_S * odr), STUCK_MAX_S * odr)
+    return np.ceil(stuck).astype(np.int64)
+
+
+@pytest.mark.parametrize("odr", [104.0, 6667.0])
+def test_the_stuck_runs_are_the_array_formulas(odr: float) -> None:
+    detector = FaultDetector(SensorSpec(odr_hz=odr))
+    rng = np.random.default_rng(10)
+    for trial in range(300):
+        sigma = np.abs(rng.standard_normal(6)) * 10.0 ** rng.uniform(-6, 1, 6)
+        q = sigma * rng.uniform(0.0, 10.0, 6) if trial % 2 else rng.uniform(0, 1e-3, 6)
+        q[trial % 6] = (np.inf, 0.0, q[0])[trial % 3]
+        sigma[(trial + 1) % 6] = (np.inf, np.nan, 0.0, sigma[0])[trial % 4]
+        got = detector._compute_stuck_runs(sigma, q)
+        assert got.dtype == np.int64
+        assert got.tolist() == _stuck_runs_by_arrays(sigma, q, odr).tolist()

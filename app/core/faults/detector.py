@@ -317,6 +317,11 @@ def _noise_ratios(rho, white, flat):  # pragma: no cover - compiled
     return level, others, ratios
 
 
+def _maximum(a: float, b: float) -> float:
+    """``np.maximum`` of two floats (NaN wins)."""
+    return a if a != a or a >= b else b
+
+
 def _rotate_inverse(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """``v`` (fixed in the frame at the start) seen from the frame after rotation ``q``:
     ``v + 2w (u x v) + 2 u x (u x v)``, ``u = -q[1:]`` (np.cross's operations, one by one)."""
@@ -539,18 +544,25 @@ class FaultDetector:
         return self._stuck_runs, np.maximum(spike, 1e-300), floor * D4_CLIP
 
     def _compute_stuck_runs(self, sigma: np.ndarray, q: np.ndarray) -> np.ndarray:
-        """The stuck-run lengths of the module docstring, from the noise and the LSB."""
+        """The stuck-run lengths of the module docstring, from the noise and the LSB (per
+        channel in floats: numpy's operations one by one, its logs still by np.log)."""
+        p0 = []
+        for s, step in zip(sigma.tolist(), q.tolist(), strict=True):
+            finite = math.isfinite(step)
+            known = step if finite else 0.0
+            least = 0.05 * (step if finite else s)
+            sigma_noise = math.sqrt(_maximum(s * s - known * known / 12, least * least))
+            scaled = step / (2.0 * math.sqrt(2.0) * _maximum(sigma_noise, 1e-300))
+            p0.append(math.erf(scaled) if finite else 0.0)
+        p = np.array(p0)
         with np.errstate(divide="ignore", invalid="ignore"):
-            sigma_noise = np.sqrt(np.maximum(sigma**2 - np.where(np.isfinite(q), q, 0.0)**2 / 12,
-                                             (0.05 * np.where(np.isfinite(q), q, sigma))**2))
-            scaled = q / (2.0 * math.sqrt(2.0) * np.maximum(sigma_noise, 1e-300))
-            p0 = np.where(np.isfinite(q), [math.erf(v) for v in scaled.tolist()], 0.0)
-            runs = np.where(p0 < 1.0, np.log(STUCK_FALSE_ALARM) / np.log(np.minimum(p0, 1 - 1e-16)),
+            runs = np.where(p < 1.0, np.log(STUCK_FALSE_ALARM) / np.log(np.minimum(p, 1 - 1e-16)),
                             np.inf)
         odr = self.spec.odr_hz
-        stuck = np.clip(np.nan_to_num(runs, nan=np.inf, posinf=1e18),
-                        max(8, STUCK_MIN_S * odr), STUCK_MAX_S * odr)
-        return np.ceil(stuck).astype(np.int64)
+        low, high = max(8, STUCK_MIN_S * odr), STUCK_MAX_S * odr
+        # np.nan_to_num(nan=inf, posinf=1e18), np.clip(low, high), np.ceil
+        return np.array([math.ceil(min(max(math.inf if r != r else 1e18 if r == math.inf else r,
+                                           low), high)) for r in runs.tolist()], dtype=np.int64)
 
     def _floor_or_default(self) -> np.ndarray:
         if np.all(self._floor > 0):
