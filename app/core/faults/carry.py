@@ -45,7 +45,6 @@ it undisturbed, no magnetometer axis is faulty, and the window turns slower than
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 from numba import njit
@@ -64,8 +63,9 @@ RIDGE = 1e-3
 """Relative to the largest eigenvalue of the normal equations' bias block."""
 
 
-_Window = tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray | None]
-"""A window: its rotation matrix, mean acceleration, length, rotation vector, mean field."""
+_CAPACITY = 64
+"""Windows the horizon's arrays hold at first (8 s of 0.25 s windows: 33); they grow."""
+_EYE3 = np.eye(3)
 
 
 def rotation_matrix(q: np.ndarray) -> np.ndarray:
@@ -86,11 +86,50 @@ class GravityCarry:
     """The sliding least-squares test of the module docstring, window by window."""
 
     def __init__(self) -> None:
+        self._allocate(_CAPACITY)
         self.restart()
+
+    def _allocate(self, capacity: int) -> None:
+        """The horizon's windows, rows ``_head .. _head + _count`` of: rotation matrix, mean
+        acceleration, length, rotation vector, mean field (0 without one) and whether it has
+        one (arrays, not a deque of tuples turned into arrays at every solve)."""
+        self._rotations = np.zeros((capacity, 3, 3))
+        self._accels = np.zeros((capacity, 3))
+        self._durations = np.zeros(capacity)
+        self._turned = np.zeros((capacity, 3))
+        self._fields = np.zeros((capacity, 3))
+        self._has_field = np.zeros(capacity, dtype=np.bool_)
+        self._head = 0
+        self._count = 0
+
+    def _append(self, rotation: np.ndarray, accel: np.ndarray, duration: float,
+                turned: np.ndarray, field: np.ndarray | None) -> None:
+        end = self._head + self._count
+        if end == len(self._durations):  # full: move the horizon to the front, or grow
+            held = slice(self._head, end)
+            parts = (self._rotations[held].copy(), self._accels[held].copy(),
+                     self._durations[held].copy(), self._turned[held].copy(),
+                     self._fields[held].copy(), self._has_field[held].copy())
+            count = self._count
+            capacity = len(self._durations)
+            self._allocate(2 * capacity if 2 * count > capacity else capacity)
+            for array, part in zip((self._rotations, self._accels, self._durations,
+                                    self._turned, self._fields, self._has_field), parts,
+                                   strict=True):
+                array[:count] = part
+            self._count = end = count
+        self._rotations[end] = rotation
+        self._accels[end] = accel
+        self._durations[end] = duration
+        self._turned[end] = turned
+        self._has_field[end] = field is not None
+        self._fields[end] = 0.0 if field is None else field
+        self._count += 1
 
     def restart(self) -> None:
         """Forget the horizon (a gap, a new reference bias)."""
-        self._windows: deque[_Window] = deque()
+        self._head = 0
+        self._count = 0
         self._span = 0.0
         self._hits = 0
         self.estimate = np.zeros(3)
@@ -115,11 +154,13 @@ class GravityCarry:
         sine = float(np.linalg.norm(rotation[1:]))
         turned = (2.0 * math.atan2(sine, half) / sine * rotation[1:] if sine > 1e-12
                   else 2.0 * rotation[1:])
-        kept = field.copy() if field is not None and np.all(np.isfinite(field)) else None
-        self._windows.append((rotation_matrix(rotation), accel.copy(), duration, turned, kept))
+        kept = field if field is not None and np.all(np.isfinite(field)) else None
+        self._append(rotation_matrix(rotation), accel, duration, turned, kept)
         self._span += duration
-        while self._span - self._windows[0][2] >= HORIZON_S:
-            self._span -= self._windows.popleft()[2]
+        while self._span - self._durations[self._head] >= HORIZON_S:
+            self._span -= self._durations[self._head]
+            self._head += 1
+            self._count -= 1
         if self._span < MIN_S:
             return None
         self._solve()
@@ -135,29 +176,27 @@ class GravityCarry:
     def forget_field(self) -> None:
         """The field is not to be trusted (disturbed, a magnetometer fault): drop the field
         part of every window in the horizon; gravity's part goes on."""
-        if any(w[4] is not None for w in self._windows):
-            self._windows = deque((*w[:4], None) for w in self._windows)
+        held = slice(self._head, self._head + self._count)
+        self._has_field[held] = False
+        self._fields[held] = 0.0
 
     def _solve(self) -> None:
-        windows = self._windows
-        k = len(windows)
-        has_field = np.array([w[4] is not None for w in windows])
+        k = self._count
+        held = slice(self._head, self._head + k)
+        has_field = self._has_field[held]
         velocity, drift, elapsed, anchored, angles = _carry_sums(
-            np.array([w[0] for w in windows]), np.array([w[1] for w in windows]),
-            np.array([w[2] for w in windows]), np.array([w[3] for w in windows]),
-            np.array([w[4] if w[4] is not None else np.zeros(3) for w in windows]), has_field)
-        fields = list(zip(anchored[has_field], angles[has_field], strict=True))
-        # first gravity and the start velocity alone, then with the bias and scale errors
-        plain = np.zeros((3 * k, 6))
-        plain[:, :3] = np.kron(elapsed[:, None], np.eye(3))
-        plain[:, 3:] = np.tile(np.eye(3), (k, 1))
+            self._rotations[held], self._accels[held], self._durations[held],
+            self._turned[held], self._fields[held], has_field)
         y = velocity.reshape(3 * k)
         # the least-squares line of each axis's velocity over time: its slope is gravity
         centred = elapsed - elapsed.mean()
         gravity = centred @ (velocity - velocity.mean(axis=0)) / max(float(centred @ centred),
                                                                       1e-300)
+        # first gravity and the start velocity alone, then with the bias and scale errors
         design = np.zeros((3 * k, PARTS))
-        design[:, :6] = plain
+        for axis in range(3):  # gravity times the time elapsed, the start velocity
+            design[axis::3, axis] = elapsed
+            design[axis::3, 3 + axis] = 1.0
         design[:, 6:12] = (-_skew(gravity) @ drift).reshape(3 * k, 6)
         fitted = _fit(design, y, 3 * k - 12)
         if fitted is None:
@@ -165,7 +204,9 @@ class GravityCarry:
         variance = max(fitted[0], 1e-300)
         normal = design.T @ design / variance
         rhs = design.T @ y / variance
-        part = self._field_part(fields) if len(fields) * 3 >= FIELD_MIN_ROWS else None
+        fields = int(np.count_nonzero(has_field))
+        part = (self._field_part(anchored[has_field], angles[has_field])
+                if fields * 3 >= FIELD_MIN_ROWS else None)
         if part is not None:
             # two references: every axis is seen, given the turn; priors, not a ridge
             joint = _with_priors(normal + part[0])
@@ -175,7 +216,7 @@ class GravityCarry:
                 return
             self.estimate = (inverse @ (rhs + part[1]))[6:9]
             self.error = np.sqrt(np.maximum(np.diag(inverse)[6:9], 1e-300))
-            self.field_windows = len(fields)
+            self.field_windows = fields
             return
         self.field_windows = 0
         _ridge(normal)
@@ -187,7 +228,7 @@ class GravityCarry:
         self.estimate = solution[6:9]
         self.error = np.sqrt(np.maximum(np.diag(inverse)[6:9], 1e-300))
 
-    def _field_part(self, fields: list[tuple[np.ndarray, np.ndarray]]
+    def _field_part(self, measured: np.ndarray, angles: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray] | None:
         """The field's normal equations, weighed by the field's own residual scatter.
 
@@ -198,12 +239,11 @@ class GravityCarry:
         a bias's own turn would be taken for one; the field must come calibrated (one left
         in it changes the strength as the sensor turns: the disturbance gate takes it).
         """
-        measured = np.array([f[0] for f in fields])
         y = measured.reshape(-1)
-        rows = len(fields) * 3
+        rows = len(measured) * 3
         design = np.zeros((rows, PARTS))
-        design[:, 12:15] = np.tile(np.eye(3), (len(fields), 1))
-        angles = np.array([f[1] for f in fields])
+        for axis in range(3):
+            design[axis::3, 12 + axis] = 1.0
         m0 = measured.mean(axis=0)
         variance = FIELD_GUESS_UT ** 2
         prior = np.zeros(PARTS)
@@ -310,10 +350,10 @@ def _with_priors(normal: np.ndarray) -> np.ndarray:
 def _ridge(normal: np.ndarray, bias: bool = True) -> None:
     """The bias and scale error's ridge (module docstring; ``bias``) and a tiny one on the
     rest."""
-    for part in (slice(6, 9), slice(9, 12)) if bias else ():
-        block = normal[part, part]
-        normal[part, part] += RIDGE * max(float(np.linalg.eigvalsh(block)[-1]),
-                                          1e-300) * np.eye(3)
+    if bias:  # both blocks' largest eigenvalue in one call
+        largest = np.linalg.eigvalsh(np.stack((normal[6:9, 6:9], normal[9:12, 9:12])))[:, -1]
+        for part, top in zip((slice(6, 9), slice(9, 12)), largest.tolist(), strict=True):
+            normal[part, part] += RIDGE * max(top, 1e-300) * _EYE3
     diagonal = np.diag(normal).copy()
     top = float(diagonal.max()) if diagonal.size else 1.0
     for i in range(12, PARTS):

@@ -39,6 +39,8 @@ from collections import deque
 import numpy as np
 from numba import njit
 
+from app.core.faults.rows import RowHistory, column_kth, column_median
+
 LAGS = 2
 """The other channels' band output at lags -2..2 around the predicted sample."""
 OWN_LAGS = 2
@@ -199,15 +201,6 @@ def _load_kernels() -> None:
     _loaded.append(True)
 
 
-def _median(a: np.ndarray) -> np.ndarray:
-    """``np.median(a, axis=0)`` by one partition (its cost is mostly overhead here)."""
-    n = len(a)
-    if n % 2:
-        return np.partition(a, n // 2, axis=0)[n // 2]
-    part = np.partition(a, (n // 2 - 1, n // 2), axis=0)
-    return 0.5 * (part[n // 2 - 1] + part[n // 2])
-
-
 class _Set:
     """Predictors of equal size: their regressor columns and targets (indices into DIM)."""
 
@@ -250,8 +243,8 @@ class CoherenceCheck:
         """The sum of ``_covs`` but the last ``gap`` (kept as it goes, rebuilt every
         ``history`` windows against rounding)."""
         self._since_rebuild = 0
-        self._powers: deque[np.ndarray] = deque(maxlen=self._history_len + self._gap)
-        self._rates: deque[float] = deque(maxlen=self._history_len + self._gap)
+        self._powers = RowHistory(self._history_len + self._gap, 42)
+        self._rates = RowHistory(self._history_len + self._gap, 1)
         self._level = np.ones((6, 7))
         self._weights: np.ndarray | None = None
         self._age = 0
@@ -279,16 +272,18 @@ class CoherenceCheck:
             self._age += 1
             e = _product(z, self._weights)
             half = (len(z) - 1) // 2
-            med = np.partition(e[:, :36] ** 2, half, axis=0)[half]
+            med = column_kth(e[:, :36], half, True)
             power = np.empty((6, 7))
             power[:, 6] = med[:6]
             power[_WITHOUT_INDEX] = med[6:36]
             power[np.arange(6), np.arange(6)] = med[:6]
             white = self._whiteness(e[:, 36:])
             if len(self._powers) >= self._minimum + self._gap and log_raw is not None:
-                self._level = np.maximum(_median(np.array(self._powers)[:-self._gap]), 1e-300)
-                rates = np.array(self._rates)[:-self._gap]
-                if rate <= REGIME_CHANGE * max(float(_median(rates)), 1e-12):
+                past = self._powers.rows()[:-self._gap]
+                self._level = np.maximum(column_median(past, False, False), 1e-300).reshape(6, 7)
+                rates = self._rates.rows()[:-self._gap]
+                if rate <= REGIME_CHANGE * max(float(column_median(rates, False, False)[0]),
+                                               1e-12):
                     lr = np.log(np.maximum(power, 1e-300) / self._level)
                     # others[k, c]: channel k without c, or k's band ratio (k != c)
                     others = np.maximum(lr[:, :6], log_raw[:, None])
@@ -297,8 +292,8 @@ class CoherenceCheck:
         if not flagged.any():
             self._learn(_gram(z) * (len(band) / len(z)))
         if power is not None:
-            self._powers.append(np.where(flagged[:, None], self._level, power))
-        self._rates.append(rate)
+            self._powers.append(np.where(flagged[:, None], self._level, power).reshape(42))
+        self._rates.append(np.array([rate]))
         return log_s, white
 
     def _learn(self, cov: np.ndarray) -> None:

@@ -88,6 +88,7 @@ from app.core.faults.carry import GravityCarry, rotation_matrix
 from app.core.faults.events import CHANNELS, FaultEvent, severity_rank
 from app.core.faults.magnetometer import MagnetometerCheck
 from app.core.faults.motion import BAND, MotionNoiseCheck
+from app.core.faults.rows import RowHistory, column_median
 from app.core.faults.spec import SensorSpec
 from app.core.magnetometer.disturbance import (
     OK,
@@ -283,10 +284,53 @@ def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                      w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
 
 
+@njit(cache=True)
+def _noise_ratios(rho, white, flat):  # pragma: no cover - compiled
+    """The noise test's means over its windows (k, 6): ``np.mean(white, axis=0)``, per
+    channel the largest mean ``rho`` of its sensor's two other axes and its mean flat ``rho``
+    over that (at least 1); the sums in numpy's order (row after row from 0.0)."""
+    k = rho.shape[0]
+    low = np.zeros(6)
+    level = np.zeros(6)
+    low_flat = np.zeros(6)
+    for i in range(k):
+        for c in range(6):
+            low[c] += rho[i, c]
+            level[c] += white[i, c]
+            low_flat[c] += flat[i, c]
+    for c in range(6):
+        low[c] /= k
+        level[c] /= k
+        low_flat[c] /= k
+    others = np.empty(6)
+    ratios = np.empty(6)
+    for c in range(6):
+        base = 0 if c < 3 else 3
+        top = 0.0
+        first = True
+        for o in range(base, base + 3):
+            if o != c and (first or low[o] > top):  # as Python's max()
+                top = low[o]
+                first = False
+        others[c] = top
+        ratios[c] = low_flat[c] / (top if top > 1.0 else 1.0)
+    return level, others, ratios
+
+
+def _maximum(a: float, b: float) -> float:
+    """``np.maximum`` of two floats (NaN wins)."""
+    return a if a != a or a >= b else b
+
+
 def _rotate_inverse(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``v`` (fixed in the frame at the start) seen from the frame after rotation ``q``."""
-    w, u = q[0], -q[1:]
-    return v + 2.0 * w * np.cross(u, v) + 2.0 * np.cross(u, np.cross(u, v))
+    """``v`` (fixed in the frame at the start) seen from the frame after rotation ``q``:
+    ``v + 2w (u x v) + 2 u x (u x v)``, ``u = -q[1:]`` (np.cross's operations, one by one)."""
+    w2 = 2.0 * float(q[0])
+    ux, uy, uz = -float(q[1]), -float(q[2]), -float(q[3])
+    vx, vy, vz = float(v[0]), float(v[1]), float(v[2])
+    cx, cy, cz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    dx, dy, dz = uy * cz - uz * cy, uz * cx - ux * cz, ux * cy - uy * cx
+    return np.array([vx + w2 * cx + 2.0 * dx, vy + w2 * cy + 2.0 * dy, vz + w2 * cz + 2.0 * dz])
 
 
 def _units(channel: int, value: float) -> str:
@@ -374,12 +418,14 @@ class FaultDetector:
         self._peak = np.zeros(6)
         self._quat = np.array([1.0, 0.0, 0.0, 0.0, -np.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
         self._window_t = 0.0
-        self._rho: deque[np.ndarray] = deque(maxlen=NOISE_SPAN_WINDOWS)
-        self._rho_flat: deque[np.ndarray] = deque(maxlen=NOISE_SPAN_WINDOWS)
-        self._rho_white: deque[np.ndarray] = deque(maxlen=NOISE_SPAN_WINDOWS)
+        self._rho = RowHistory(NOISE_SPAN_WINDOWS, 6)
+        self._rho_flat = RowHistory(NOISE_SPAN_WINDOWS, 6)
+        self._rho_white = RowHistory(NOISE_SPAN_WINDOWS, 6)
         self._rate: deque[float] = deque(maxlen=NOISE_SPAN_WINDOWS)
         self._activity = np.ones(6)
         self._threshold_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._stuck_key = b""
+        self._stuck_runs = np.zeros(6, dtype=np.int64)
         self._active_bits = np.zeros(6, dtype=np.uint8)
         self._gyro_ref: np.ndarray | None = None
         self._rest: _Rest | None = None
@@ -490,18 +536,33 @@ class FaultDetector:
     def _compute_thresholds(self, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         sigma = floor / D4_GAIN
         q = np.where(self._lsb > 0, self._lsb, self._lsb_seen)
+        key = floor.tobytes() + q.tobytes()
+        if key != self._stuck_key:  # (the floor stays while the sensor moves)
+            self._stuck_key = key
+            self._stuck_runs = self._compute_stuck_runs(sigma, q)
+        spike = sigma * SPIKE_NOISE_GAIN * self._activity
+        return self._stuck_runs, np.maximum(spike, 1e-300), floor * D4_CLIP
+
+    def _compute_stuck_runs(self, sigma: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """The stuck-run lengths of the module docstring, from the noise and the LSB (per
+        channel in floats: numpy's operations one by one, its logs still by np.log)."""
+        p0 = []
+        for s, step in zip(sigma.tolist(), q.tolist(), strict=True):
+            finite = math.isfinite(step)
+            known = step if finite else 0.0
+            least = 0.05 * (step if finite else s)
+            sigma_noise = math.sqrt(_maximum(s * s - known * known / 12, least * least))
+            scaled = step / (2.0 * math.sqrt(2.0) * _maximum(sigma_noise, 1e-300))
+            p0.append(math.erf(scaled) if finite else 0.0)
+        p = np.array(p0)
         with np.errstate(divide="ignore", invalid="ignore"):
-            sigma_noise = np.sqrt(np.maximum(sigma**2 - np.where(np.isfinite(q), q, 0.0)**2 / 12,
-                                             (0.05 * np.where(np.isfinite(q), q, sigma))**2))
-            p0 = np.where(np.isfinite(q), np.vectorize(math.erf)(
-                q / (2.0 * math.sqrt(2.0) * np.maximum(sigma_noise, 1e-300))), 0.0)
-            runs = np.where(p0 < 1.0, np.log(STUCK_FALSE_ALARM) / np.log(np.minimum(p0, 1 - 1e-16)),
+            runs = np.where(p < 1.0, np.log(STUCK_FALSE_ALARM) / np.log(np.minimum(p, 1 - 1e-16)),
                             np.inf)
         odr = self.spec.odr_hz
-        stuck = np.clip(np.nan_to_num(runs, nan=np.inf, posinf=1e18),
-                        max(8, STUCK_MIN_S * odr), STUCK_MAX_S * odr)
-        spike = sigma * SPIKE_NOISE_GAIN * self._activity
-        return np.ceil(stuck).astype(np.int64), np.maximum(spike, 1e-300), floor * D4_CLIP
+        low, high = max(8, STUCK_MIN_S * odr), STUCK_MAX_S * odr
+        # np.nan_to_num(nan=inf, posinf=1e18), np.clip(low, high), np.ceil
+        return np.array([math.ceil(min(max(math.inf if r != r else 1e18 if r == math.inf else r,
+                                           low), high)) for r in runs.tolist()], dtype=np.int64)
 
     def _floor_or_default(self) -> np.ndarray:
         if np.all(self._floor > 0):
@@ -589,7 +650,8 @@ class FaultDetector:
         flat = spread <= NOISE_FLAT * sigma + 1e-300
         if n_d4 < 8:
             return flat, sigma
-        sigma = np.maximum(sigma, np.median(self._d4_abs[:n_d4], axis=0) / D4_MEDIAN_GAIN)
+        sigma = np.maximum(sigma, column_median(self._d4_abs[:n_d4], False, True)
+                           / D4_MEDIAN_GAIN)
         tested = np.flatnonzero(spread <= NOISE_FLAT * sigma)
         if len(tested):  # all channels at once: the least-squares line in closed form
             x = self._window_x[:n][:, tested]
@@ -607,18 +669,13 @@ class FaultDetector:
         self._active_bits &= ~np.uint8(NOISE)
         if len(self._rho) < NOISE_SPAN_WINDOWS or max(self._rate) >= NOISE_ARM_RATE_RAD_S:
             return
-        low = np.mean(np.array(self._rho), axis=0)
-        level = np.mean(np.array(self._rho_white), axis=0)
-        low_flat = np.mean(np.array(self._rho_flat), axis=0)
-        for c in range(6):
-            base = 0 if c < 3 else 3
-            others = max(low[o] for o in range(base, base + 3) if o != c)
-            ratio = low_flat[c] / max(1.0, others)
-            if ratio > NOISE_RATIO:
-                self._active_bits[c] |= NOISE
-                self._event(out, t, CHANNELS[c], "noise", "fault",
-                            f"{CHANNELS[c]} noise {level[c]:.1f}x its level at rest "
-                            f"(other axes {others:.1f}x) for 1 s", held=True)
+        level, others, ratios = _noise_ratios(self._rho.rows(), self._rho_white.rows(),
+                                              self._rho_flat.rows())
+        for c in np.flatnonzero(ratios > NOISE_RATIO):
+            self._active_bits[c] |= NOISE
+            self._event(out, t, CHANNELS[c], "noise", "fault",
+                        f"{CHANNELS[c]} noise {level[c]:.1f}x its level at rest "
+                        f"(other axes {others[c]:.1f}x) for 1 s", held=True)
 
     def _motion_noise_test(self, t: float, out: list[FaultEvent]) -> None:
         """Added noise while moving: the high band of one channel far above its own recent
@@ -773,9 +830,10 @@ class FaultDetector:
     def _frozen(self, t: float) -> np.ndarray:
         """Channels declared stuck or dead within the last HOLD_S."""
         running = self._run_len + 1 >= np.maximum(self._stuck_len // 2, 2)
+        last = self._last_flag
         return running | np.array([
-            any(t - self._last_flag.get((name, kind), -np.inf) <= HOLD_S
-                for kind in ("stuck", "dead"))
+            t - last.get((name, "stuck"), -math.inf) <= HOLD_S
+            or t - last.get((name, "dead"), -math.inf) <= HOLD_S
             for name in CHANNELS
         ])
 

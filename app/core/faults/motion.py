@@ -37,7 +37,6 @@ which.
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 from numba import njit
@@ -47,6 +46,7 @@ from app.core.faults.coherence import (
     RESIDUAL_RATIO_GYRO,
     CoherenceCheck,
 )
+from app.core.faults.rows import RowHistory, column_median, less_others
 
 BAND: tuple[float, float] = (0.25, 0.45)
 """Pass band as fractions of the sample rate."""
@@ -152,7 +152,7 @@ class MotionNoiseCheck:
 
     def reset(self) -> None:
         """Forget the history (a new sensor)."""
-        self._history: deque[np.ndarray] = deque(maxlen=HISTORY_WINDOWS + HISTORY_GAP)
+        self._history = RowHistory(HISTORY_WINDOWS + HISTORY_GAP, 6)
         self._level = np.zeros(6)
         self._coherence.reset()
         self.restart()
@@ -161,10 +161,10 @@ class MotionNoiseCheck:
         """A gap: the filter starts again and the decision with it; the levels stay."""
         self._state = np.zeros((self._sos.shape[0], 6, 2))
         self._settle = 2
-        self._ratios: deque[np.ndarray] = deque(maxlen=SPAN_WINDOWS)
-        self._white: deque[np.ndarray] = deque(maxlen=SPAN_WINDOWS)
-        self._residuals: deque[np.ndarray] = deque(maxlen=SPAN_WINDOWS)
-        self._residual_white: deque[np.ndarray] = deque(maxlen=SPAN_WINDOWS)
+        self._ratios = RowHistory(SPAN_WINDOWS, 6)
+        self._white = RowHistory(SPAN_WINDOWS, 6, np.bool_)
+        self._residuals = RowHistory(SPAN_WINDOWS, 6)
+        self._residual_white = RowHistory(SPAN_WINDOWS, 6, np.bool_)
         self._rate_sq = 0.0
         self._coherence.restart()
         self.flagged = np.zeros(6, dtype=bool)
@@ -188,26 +188,22 @@ class MotionNoiseCheck:
         self._rate_sq = 0.0
         if n < self.window // 2 or not self.enabled:
             return
-        power = np.median(self._out[:n] ** 2, axis=0)
+        power = column_median(self._out[:n], True, True)
         if self._settle > 0:  # the filter's start-up transient
             self._settle -= 1
             return
         log_raw = None
         if len(self._history) >= HISTORY_MIN + HISTORY_GAP:
-            past = np.array(self._history)[:-HISTORY_GAP]
-            level = np.maximum(np.median(past, axis=0), 1e-300)
+            past = self._history.rows()[:-HISTORY_GAP]
+            level = np.maximum(column_median(past, False, True), 1e-300)
             self._level = level
             log_r = np.log(np.maximum(power, 1e-300) / level)
             log_raw = log_r
-            log_s = np.empty(6)
-            for c in range(6):
-                log_s[c] = log_r[c] - max(0.0, float(np.max(np.delete(log_r, c))))
-            self._ratios.append(log_s)
+            self._ratios.append(less_others(log_r))
             self._white.append(self._whiteness(n))
             if len(self._ratios) == SPAN_WINDOWS:
-                ratios = np.array(self._ratios)
-                median = np.median(ratios, axis=0)
-                white = 2 * np.sum(np.array(self._white), axis=0) >= SPAN_WINDOWS
+                median = column_median(self._ratios.rows(), False, True)
+                white = 2 * np.sum(self._white.rows(), axis=0) >= SPAN_WINDOWS
                 self.by_band = (median > self._thresholds) & white
                 self.level = np.exp(median)
                 self.own = np.exp(log_r)
@@ -224,17 +220,36 @@ class MotionNoiseCheck:
         self._residual_white.append(white)
         if len(self._residuals) < SPAN_WINDOWS:
             return
-        median = np.median(np.array(self._residuals), axis=0)
-        white_most = 2 * np.sum(np.array(self._residual_white), axis=0) > SPAN_WINDOWS
+        median = column_median(self._residuals.rows(), False, True)
+        white_most = 2 * np.sum(self._residual_white.rows(), axis=0) > SPAN_WINDOWS
         self.by_residual = (median > self._residual_thresholds) & white_most
         self.residual_level = np.exp(median)
 
     def _whiteness(self, n: int) -> np.ndarray:
         """Per channel: the window's band output looks like band-limited white noise."""
-        out = self._out[:n]
-        power = np.einsum("ij,ij->j", out, out)
-        worst = np.zeros(6)
-        for k, reference in enumerate(self._white_reference, start=1):
-            lagged = np.einsum("ij,ij->j", out[k:], out[:-k]) / np.maximum(power, 1e-300)
-            worst = np.maximum(worst, np.abs(lagged - reference))
-        return worst <= WHITE_TOLERANCE
+        return _worst_lag(self._out[:n], self._white_reference) <= WHITE_TOLERANCE
+
+
+@njit(cache=True)
+def _worst_lag(out, reference):  # pragma: no cover - compiled
+    """Per column of ``out``: the largest |autocorrelation - reference| over lags 1..len, as
+    ``np.einsum("ij,ij->j", out[k:], out[:-k]) / np.maximum(power, 1e-300)`` (its sums run
+    row after row from 0.0, as einsum's do here) and ``np.maximum`` (NaN wins)."""
+    n, channels = out.shape
+    power = np.zeros(channels)
+    for i in range(n):
+        for c in range(channels):
+            power[c] += out[i, c] * out[i, c]
+    worst = np.zeros(channels)
+    lagged = np.empty(channels)
+    for k in range(1, len(reference) + 1):
+        lagged[:] = 0.0
+        for i in range(n - k):
+            for c in range(channels):
+                lagged[c] += out[k + i, c] * out[i, c]
+        for c in range(channels):
+            p = power[c] if (power[c] != power[c] or power[c] > 1e-300) else 1e-300
+            d = abs(lagged[c] / p - reference[k - 1])
+            if d != d or d > worst[c]:
+                worst[c] = d
+    return worst
