@@ -82,6 +82,23 @@ def _qapplication_first(qapp):
     return qapp
 
 
+@pytest.fixture(autouse=True)
+def _environment_left_as_found():
+    """Fail a test that leaves the process's environment changed: every later test in its
+    process, and every subprocess they start, would run with it (a leaked NUMBA_CACHE_DIR
+    made each later subprocess compile every kernel again, 20-40 s a test)."""
+    before = dict(os.environ)
+    yield
+    after = dict(os.environ)
+    for name in ("PYTEST_CURRENT_TEST",):  # pytest's own, set for each phase
+        before.pop(name, None)
+        after.pop(name, None)
+    if after != before:
+        changed = sorted(name for name in {*before, *after} if before.get(name) != after.get(name))
+        pytest.fail(f"the test left the environment changed: {', '.join(changed)}",
+                    pytrace=False)
+
+
 @pytest.fixture(scope="session")
 def firmware_lib(tmp_path_factory):
     """The firmware's portable core built for this machine (``make -C firmware host``)."""
