@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 # a hang is a failure that names the test, not a stalled run.
 TEST_WORKERS ?= 2
 
-.PHONY: run test lint bench clean bundle dist install-desktop uninstall-desktop
+.PHONY: venv run test lint bench clean bundle dist install-desktop uninstall-desktop
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -16,6 +16,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[test]"
 	rm -f $(VENV)/.installed-*
 	touch $(STAMP)
+
+# The virtual environment alone (what `run` and `test` create on first use).
+venv: $(STAMP)
 
 run: $(STAMP)
 	$(BIN)/inclinometer

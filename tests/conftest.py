@@ -40,6 +40,27 @@ _COMPILE_SCRIPT = (
 )
 
 
+LONG_TESTS_FIRST = (
+    "test_link_fuzz.py::test_decoder_survives_100000_mutated_streams",
+    "test_soak_benchmark.py::test_soak_script_accounts_for_every_sample",
+    "test_recording.py::test_sigkill_of_a_recording_process_leaves_a_file_with_every_flushed_row",
+    "test_look_and_settings.py::test_screenshots_of_every_theme_and_mode",
+    "test_window_fit.py::test_no_text_is_clipped_in_any_dock_or_dialog_at_either_size_in_any_theme",
+    "test_packaging.py::test_smoke_test_passes_from_source_and_saves_a_screenshot",
+)
+"""The suite's longest tests (10-45 s each; 0.4 s is the median). They run first: xdist's
+work stealing balances the workers with the short ones, but a long test that starts late
+keeps one worker busy after the other has run out of tests."""
+
+
+def pytest_collection_modifyitems(config, items):
+    """:data:`LONG_TESTS_FIRST` at the front, the rest in their order (the same in every
+    worker: xdist requires it)."""
+    first = [item for name in LONG_TESTS_FIRST for item in items if item.nodeid.endswith(name)]
+    chosen = set(map(id, first))
+    items[:] = first + [item for item in items if id(item) not in chosen]
+
+
 def pytest_sessionstart(session):
     """Every live filter's numba kernels compiled (or loaded from the cache) once per test
     process, before any test (a hook, so no test's timeout counts it). From a cold cache (a
