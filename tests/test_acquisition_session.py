@@ -231,12 +231,14 @@ _KERNELS_SCRIPT = """
 import sys
 from PySide6.QtCore import QCoreApplication
 from app.core.faults import detector, magnetometer, motion
+from app.core import field_check
 from app.core.filters import vqf_heading
 from app.services import worker as worker_module
 
 kernels = {"fault detector": detector._scan, "band filter": motion._band_filter,
            "magnetometer check": magnetometer._scan_field,
-           "9-axis default filter": vqf_heading._heading_kernel}
+           "9-axis default filter": vqf_heading._heading_kernel,
+           "field monitor": field_check._lowpass}
 app = QCoreApplication([])
 opened = {}
 real_open = worker_module.Connection.open
@@ -266,7 +268,7 @@ def test_the_window_loads_every_kernel_a_stream_needs_before_it_opens_the_device
     assert result.returncode == 0, result.stderr
     opened = ast.literal_eval(result.stdout.strip().splitlines()[-1])
     assert opened == {"fault detector": True, "band filter": True, "magnetometer check": True,
-                      "9-axis default filter": True}
+                      "9-axis default filter": True, "field monitor": True}
 
 
 def test_record_loads_the_filters_before_it_opens_the_device(tmp_path, monkeypatch):

@@ -15,6 +15,7 @@ import numpy as np
 
 from app.core.faults.detector import FaultDetector
 from app.core.faults.spec import SensorSpec
+from app.core.field_check import FieldMonitor
 from app.core.samples import SampleBlock
 
 _loaded = False
@@ -28,7 +29,8 @@ BLOCK = 26
 
 def warm_up_detector() -> None:
     """Run a detector (with a magnetometer) over a few seconds of a made-up turning sensor,
-    once per process; its events are dropped. A second call costs nothing."""
+    once per process; its events are dropped. The pipeline's field monitor, which runs beside
+    it on a source with a magnetometer, is loaded too. A second call costs nothing."""
     global _loaded
     if _loaded:
         return
@@ -50,4 +52,5 @@ def warm_up_detector() -> None:
         part = slice(a, a + BLOCK)
         detector.update(SampleBlock(t[part], accel[part], gyro[part], np.full(len(t[part]), 25.0),
                                     np.zeros(len(t[part]), dtype=bool), mag_ut=mag[part]))
+    FieldMonitor().update(t, accel, mag)
     _loaded = True
