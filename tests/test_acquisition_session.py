@@ -230,12 +230,13 @@ def test_the_drivers_declare_what_they_have(tmp_path):
 _KERNELS_SCRIPT = """
 import sys
 from PySide6.QtCore import QCoreApplication
-from app.core.faults import detector, magnetometer, motion
+from app.core.faults import carry, detector, magnetometer, motion
 from app.core import field_check
 from app.core.filters import vqf_heading
 from app.services import worker as worker_module
 
 kernels = {"fault detector": detector._scan, "band filter": motion._band_filter,
+           "noise test": detector._noise_ratios, "bias carry": carry._carry_sums,
            "magnetometer check": magnetometer._scan_field,
            "9-axis default filter": vqf_heading._heading_kernel,
            "field monitor": field_check._lowpass}
@@ -267,7 +268,8 @@ def test_the_window_loads_every_kernel_a_stream_needs_before_it_opens_the_device
                             env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
     assert result.returncode == 0, result.stderr
     opened = ast.literal_eval(result.stdout.strip().splitlines()[-1])
-    assert opened == {"fault detector": True, "band filter": True, "magnetometer check": True,
+    assert opened == {"fault detector": True, "band filter": True, "noise test": True,
+                      "bias carry": True, "magnetometer check": True,
                       "9-axis default filter": True, "field monitor": True}
 
 

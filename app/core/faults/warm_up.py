@@ -20,15 +20,16 @@ from app.core.samples import SampleBlock
 
 _loaded = False
 
-ODR_HZ = 104.0
-SECONDS = 6.0
-"""Long enough for several of the detector's windows (0.25 s) and its history to run every
-end-of-window test once."""
-BLOCK = 26
+ODR_HZ = 416.0
+SECONDS = 20.0
+"""Long enough for every end-of-window test (0.25 s windows) to run once: the rest tests and
+the noise test in the first :data:`REST_S`, the carried bias test in the motion after it."""
+REST_S = 6.0
+BLOCK = 104
 
 
 def warm_up_detector() -> None:
-    """Run a detector (with a magnetometer) over a few seconds of a made-up turning sensor,
+    """Run a detector (with a magnetometer) over a made-up sensor at rest and then turning,
     once per process; its events are dropped. The pipeline's field monitor, which runs beside
     it on a source with a magnetometer, is loaded too. A second call costs nothing."""
     global _loaded
@@ -37,10 +38,11 @@ def warm_up_detector() -> None:
     n = int(SECONDS * ODR_HZ)
     t = np.arange(n) / ODR_HZ
     rng = np.random.default_rng(0)
-    rate = 0.8 * np.sin(2.0 * math.pi * 0.5 * t)[:, None] * np.array([1.0, 0.5, 0.2])
+    moving = (t >= REST_S)[:, None]
+    rate = moving * 0.8 * np.sin(2.0 * math.pi * 0.5 * t)[:, None] * np.array([1.0, 0.5, 0.2])
     gyro = rate + rng.normal(0.0, 0.002, (n, 3))
     accel = np.array([0.0, 0.0, 9.81]) + rng.normal(0.0, 0.02, (n, 3))
-    accel[:, 0] += 2.0 * np.sin(2.0 * math.pi * 0.5 * t)
+    accel[:, 0] += moving[:, 0] * 2.0 * np.sin(2.0 * math.pi * 0.5 * t)
     mag = np.array([18.0, 0.0, -45.0]) + rng.normal(0.0, 0.3, (n, 3))
     mag[1::2] = np.nan  # a slower chip: a field sample every other row
     spec = SensorSpec(ODR_HZ, accel_lsb_m_s2=0.0006, gyro_lsb_rad_s=0.00015, accel_fs_g=4,
