@@ -424,8 +424,6 @@ class FaultDetector:
         self._rate: deque[float] = deque(maxlen=NOISE_SPAN_WINDOWS)
         self._activity = np.ones(6)
         self._threshold_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        self._stuck_key = b""
-        self._stuck_runs = np.zeros(6, dtype=np.int64)
         self._active_bits = np.zeros(6, dtype=np.uint8)
         self._gyro_ref: np.ndarray | None = None
         self._rest: _Rest | None = None
@@ -536,12 +534,8 @@ class FaultDetector:
     def _compute_thresholds(self, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         sigma = floor / D4_GAIN
         q = np.where(self._lsb > 0, self._lsb, self._lsb_seen)
-        key = floor.tobytes() + q.tobytes()
-        if key != self._stuck_key:  # (the floor stays while the sensor moves)
-            self._stuck_key = key
-            self._stuck_runs = self._compute_stuck_runs(sigma, q)
         spike = sigma * SPIKE_NOISE_GAIN * self._activity
-        return self._stuck_runs, np.maximum(spike, 1e-300), floor * D4_CLIP
+        return self._compute_stuck_runs(sigma, q), np.maximum(spike, 1e-300), floor * D4_CLIP
 
     def _compute_stuck_runs(self, sigma: np.ndarray, q: np.ndarray) -> np.ndarray:
         """The stuck-run lengths of the module docstring, from the noise and the LSB (per

@@ -191,7 +191,6 @@ class MagnetometerCheck:
         until the noise or the LSB is learnt again)."""
         if self._runs is None:
             self._runs = self._runs_for_noise()
-            self._sigma_known = np.where(np.isfinite(self._sigma), self._sigma, 0.0)
         return self._runs
 
     def _runs_for_noise(self) -> np.ndarray:
@@ -221,7 +220,7 @@ class MagnetometerCheck:
                         np.concatenate([v for _, v in self._pending]))
             self._pending, self._pending_count = [], 0
         interval = self._interval if np.isfinite(self._interval) else 0.0
-        runs = self._stuck_samples()  # (and the noise it was made for: _sigma_known)
+        runs = self._stuck_samples()
         flags = np.zeros((len(rows), 3), dtype=np.uint8)
         spike_t = np.full(len(rows), np.nan)
         spike_size = np.zeros((len(rows), 3))
@@ -260,6 +259,7 @@ class MagnetometerCheck:
             sigma = np.median(d2, axis=0) / D2_MEDIAN_GAIN
             self._sigma = np.where(np.isfinite(self._sigma),
                                    self._sigma + NOISE_ALPHA * (sigma - self._sigma), sigma)
+            self._sigma_known = np.where(np.isfinite(self._sigma), self._sigma, 0.0)
 
     def _emit_runs(self, t_s: np.ndarray, mag: np.ndarray, rows: np.ndarray,
                    out: list[FaultEvent]) -> None:
