@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gc
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -17,6 +18,13 @@ os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 _USER_DIRS = tempfile.mkdtemp(prefix="inclinometer-tests-")
 for _variable in ("XDG_DATA_HOME", "XDG_CONFIG_HOME", "XDG_CACHE_HOME", "XDG_STATE_HOME"):
     os.environ[_variable] = os.path.join(_USER_DIRS, _variable.lower())
+
+# A shell without job control (a script's `make test &`, nohup) starts the suite with SIGINT
+# ignored, and every process it starts inherits that: the tests of what Ctrl-C does to
+# `record` and `simulate` then waited out their timeouts (one for 300 s). A test process
+# answers Ctrl-C as a terminal's foreground job does, and so do the commands it starts.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 ARTIFACTS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "test-artifacts")
 # The firmware's host harness (firmware/host/fwcore.py) lives beside the firmware sources.
