@@ -73,17 +73,21 @@ class DockLayout:
         window = self.window
         dock = QDockWidget(spec.title, window)
         dock.setObjectName(f"dock-{spec.key}")
-        if not spec.fills:
+        if spec.fills:
+            dock.setWidget(widget)
+        else:
             # Panels scroll rather than forcing their full size on the window (the Arm panel
             # alone wants 812 px of height, the Joint panel 1079 px of width): the window
             # fits a 1366x768 screen whatever is open, and a narrow dock cuts nothing off.
             right = spec.area == RIGHT
-            scroller = PanelScroller(widget, keeps_width=right)
+            scroller = PanelScroller(keeps_width=right, parent=dock)
             if right:
                 scroller.wantsWidth.connect(lambda width, d=dock: window.resizeDocks(
                     [d], [width], Qt.Orientation.Horizontal))
-            widget = scroller
-        dock.setWidget(widget)
+            # The scroller in its dock first, then the panel: the panel's widgets move
+            # once, not twice (each move of a polished tree polishes it all again).
+            dock.setWidget(scroller)
+            scroller.set_panel(widget)
         window.addDockWidget(spec.area, dock)
         self.docks[spec.key] = dock
         # Opened from the View menu: in front of its tab group, not behind another tab.

@@ -25,11 +25,18 @@ class PanelScroller(QScrollArea):
     """In a window at least this wide, a panel that ``keeps_width`` is never narrower than
     its contents (the central view cannot take its room); a narrower window lets it scroll."""
 
-    def __init__(self, panel: QWidget, keeps_width: bool = False) -> None:
-        super().__init__()
+    def __init__(self, panel: QWidget | None = None, keeps_width: bool = False,
+                 parent: QWidget | None = None) -> None:
+        super().__init__(parent)
         self.keeps_width = keeps_width
         self.setWidgetResizable(True)
         self.setFrameShape(QFrame.Shape.NoFrame)
+        if panel is not None:
+            self.set_panel(panel)
+
+    def set_panel(self, panel: QWidget) -> None:
+        """Hold ``panel`` (best once this scroller has its final parent: Qt polishes again
+        every widget of a polished tree that moves to another parent)."""
         self.setWidget(panel)
         panel.installEventFilter(self)
 
