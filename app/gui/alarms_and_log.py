@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from PySide6.QtCore import QTimer
-from PySide6.QtWidgets import QApplication
+from PySide6.QtWidgets import QApplication, QWidget
 
 from app.core.alarms import READOUT_OF, AlarmConfig, parse_alarm
 from app.core.measurement_log import MeasurementLog
@@ -24,14 +24,15 @@ class AlarmsAndLog:
     """Makes the Alarms and Measurement log panels; after :meth:`start`, shows the alarms'
     state and events."""
 
-    def __init__(self, window: MainWindow, log_path: Path) -> None:
+    def __init__(self, window: MainWindow, log_path: Path, alarms_parent: QWidget | None = None,
+                 log_parent: QWidget | None = None) -> None:
         self.window = window
         self.shown: tuple[tuple[str, str], ...] = ()
-        self.alarm_panel = AlarmPanel()
+        self.alarm_panel = AlarmPanel(alarms_parent)
         self.alarm_panel.alarmsChanged.connect(self.apply)
         log, problem = MeasurementLog.load(log_path)
         self.log_panel = MeasurementLogPanel(
-            log, lambda label: window.presenter.current_reading(label))
+            log, lambda label: window.presenter.current_reading(label), log_parent)
         self.log_panel.problem.connect(window.show_error)
         if problem:
             QTimer.singleShot(0, lambda: window.show_error(problem))

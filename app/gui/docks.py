@@ -53,13 +53,35 @@ IN_FRONT = ("plots", "filter")
 
 
 class DockLayout:
-    """Makes ``window``'s docks from :data:`DOCKS` and keeps their layout tidy."""
+    """Makes ``window``'s docks from :data:`DOCKS` and keeps their layout tidy.
 
-    def __init__(self, window: QMainWindow, contents: dict[str, QWidget]) -> None:
+    Two steps, so that each panel is made where it stays: the docks (with a scroller for
+    each panel that scrolls) first; then :meth:`fill` with the panels, made with
+    :meth:`home` as their parent. Under the app's style sheet Qt polishes every widget of a
+    polished tree again each time the tree moves to another parent."""
+
+    def __init__(self, window: QMainWindow) -> None:
         self.window = window
         self.docks: dict[str, QDockWidget] = {}
+        self._scrollers: dict[str, PanelScroller] = {}
         for spec in DOCKS:
-            self._add(spec, contents[spec.key])
+            self._add(spec)
+
+    def home(self, key: str) -> QWidget:
+        """The parent to make dock ``key``'s contents with."""
+        scroller = self._scrollers.get(key)
+        return scroller.viewport() if scroller is not None else self.docks[key]
+
+    def fill(self, contents: dict[str, QWidget]) -> None:
+        """Put each dock's contents in, then tab, hide and raise the docks as at a first
+        start (:attr:`default_state`)."""
+        window = self.window
+        for spec in DOCKS:
+            scroller = self._scrollers.get(spec.key)
+            if scroller is not None:
+                scroller.set_panel(contents[spec.key])
+            else:
+                self.docks[spec.key].setWidget(contents[spec.key])
         for first, second in TABS:
             window.tabifyDockWidget(self.docks[first], self.docks[second])
         for spec in DOCKS:
@@ -69,13 +91,11 @@ class DockLayout:
         self.default_state: QByteArray = window.saveState()
         """The docks as first built, for View ▸ Reset layout."""
 
-    def _add(self, spec: DockSpec, widget: QWidget) -> None:
+    def _add(self, spec: DockSpec) -> None:
         window = self.window
         dock = QDockWidget(spec.title, window)
         dock.setObjectName(f"dock-{spec.key}")
-        if spec.fills:
-            dock.setWidget(widget)
-        else:
+        if not spec.fills:
             # Panels scroll rather than forcing their full size on the window (the Arm panel
             # alone wants 812 px of height, the Joint panel 1079 px of width): the window
             # fits a 1366x768 screen whatever is open, and a narrow dock cuts nothing off.
@@ -84,10 +104,8 @@ class DockLayout:
             if right:
                 scroller.wantsWidth.connect(lambda width, d=dock: window.resizeDocks(
                     [d], [width], Qt.Orientation.Horizontal))
-            # The scroller in its dock first, then the panel: the panel's widgets move
-            # once, not twice (each move of a polished tree polishes it all again).
             dock.setWidget(scroller)
-            scroller.set_panel(widget)
+            self._scrollers[spec.key] = scroller
         window.addDockWidget(spec.area, dock)
         self.docks[spec.key] = dock
         # Opened from the View menu: in front of its tab group, not behind another tab.

@@ -135,7 +135,7 @@ class MainWindow(QMainWindow):
         self.replay_bar = ReplayBar(self)
         self.addToolBar(Qt.ToolBarArea.TopToolBarArea, self.replay_bar)
         self.replay_bar.hide()
-        self.level_view = view = LevelView()
+        self.level_view = view = LevelView(self)
         self.setCentralWidget(view)
         self.banner, self.alarm_banner, self.level = view.banner, view.alarm_banner, view.level
         self.readouts, self.truth_label, self.controls = view.readouts, view.truth_label, \
@@ -143,25 +143,30 @@ class MainWindow(QMainWindow):
         self.unit_combo, self.averaging_combo = view.unit_combo, view.averaging_combo
         self.range_combo, self.hold_button = view.range_combo, view.hold_button
         self.compass, self.heading_bar = view.compass, view.heading_bar
+        # The docks first, then each one's contents made in it (made elsewhere and moved in,
+        # Qt polished every widget again: the window took half as long again to build).
+        self.dock_layout = docks = DockLayout(self)
         self.plots = LivePlots()
         self.plots_dock = PlotsDock(
-            self.plots, lambda start, end: self.presenter.range_statistics(start, end))
+            self.plots, lambda start, end: self.presenter.range_statistics(start, end),
+            docks.home("plots"))
         self.window_combo = self.plots_dock.window_combo
         self.range_box, self.range_label = self.plots_dock.range_box, self.plots_dock.range_label
-        self.filter_panel = FilterPanel()
-        self.simulator_panel = SimulatorPanel()
-        self.device_panel = DevicePanel()
-        self.measure_panel = MeasurePanel(self.session)
-        self.attitude_view = AttitudeView()
-        self.arm_panel = ArmPanel()
-        self.messages = QPlainTextEdit()
+        self.filter_panel = FilterPanel(docks.home("filter"))
+        self.simulator_panel = SimulatorPanel(docks.home("simulator"))
+        self.device_panel = DevicePanel(docks.home("device"))
+        self.measure_panel = MeasurePanel(self.session, docks.home("measure"))
+        self.attitude_view = AttitudeView(docks.home("attitude3d"))
+        self.arm_panel = ArmPanel(parent=docks.home("arm"))
+        self.messages = QPlainTextEdit(docks.home("messages"))
         self.messages.setReadOnly(True)
         self.messages.setMaximumBlockCount(2000)
-        self.alarms = AlarmsAndLog(self, default_log_path())
+        self.alarms = AlarmsAndLog(self, default_log_path(), docks.home("alarms"),
+                                   docks.home("log"))
         self.alarm_panel, self.log_panel = self.alarms.alarm_panel, self.alarms.log_panel
-        self.joint_panel = JointPanel(parent=self)
-        self.field_view = FieldView()
-        self.dock_layout = DockLayout(self, {
+        self.joint_panel = JointPanel(parent=docks.home("joint"))
+        self.field_view = FieldView(docks.home("field"))
+        docks.fill({
             "plots": self.plots_dock, "filter": self.filter_panel,
             "simulator": self.simulator_panel, "device": self.device_panel,
             "measure": self.measure_panel, "attitude3d": self.attitude_view,

@@ -16,8 +16,9 @@ PLOT_WINDOWS_S = (2, 5, 10, 20, 30, 60)
 class PlotsDock(QWidget):
     """The plots and their bar; ``statistics(start, end)`` gives a range's statistics."""
 
-    def __init__(self, plots: LivePlots, statistics: Callable[[float, float], object]) -> None:
-        super().__init__()
+    def __init__(self, plots: LivePlots, statistics: Callable[[float, float], object],
+                 parent: QWidget | None = None) -> None:
+        super().__init__(parent)
         self.plots = plots
         self.statistics = statistics
         layout = QVBoxLayout(self)
