@@ -130,10 +130,22 @@ def _environment_left_as_found():
 
 @pytest.fixture(scope="session")
 def firmware_lib(tmp_path_factory):
-    """The firmware's portable core built for this machine (``make -C firmware host``)."""
+    """The firmware's portable core built for this machine (``make -C firmware host``), once
+    per run: under xdist the first worker to need it builds it into the run's shared
+    temporary folder while the others wait on a lock, then each loads it (a build with the
+    sanitizers takes about 5 s of a core)."""
+    import fcntl
+    from pathlib import Path
+
     from fwcore import build_library
 
-    return build_library(tmp_path_factory.mktemp("firmware-build"))
+    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+        return build_library(tmp_path_factory.mktemp("firmware-build"))
+    shared: Path = tmp_path_factory.getbasetemp().parent / "firmware-build"
+    shared.mkdir(exist_ok=True)
+    with open(shared / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        return build_library(shared)  # make: nothing to do once a worker has built it
 
 
 @pytest.fixture
