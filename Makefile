@@ -23,12 +23,16 @@ venv: $(STAMP)
 run: $(STAMP)
 	$(BIN)/inclinometer
 
-# mypy (single-threaded, ~20 s from a cold cache) runs beside the suite; either failing fails.
+# mypy (single-threaded, ~30 s from a cold cache) runs beside the suite; either failing fails.
+# The suite writes Python's bytecode caches even where PYTHONDONTWRITEBYTECODE is set (an
+# empty value is unset): each test process, and each command a test starts, would otherwise
+# compile every module it imports from source again, and pytest rewrite every test file's
+# asserts again in each worker (about 9 s of a core per worker).
 test: $(STAMP)
 	$(BIN)/ruff check app drivers tests benchmarks firmware/host
 	$(BIN)/lint-imports --no-cache
 	@$(BIN)/mypy > .mypy-output 2>&1 & mypy=$$!; \
-	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist worksteal \
+	QT_QPA_PLATFORM=offscreen PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist worksteal \
 		--timeout=600; tests=$$?; \
 	wait $$mypy; typed=$$?; cat .mypy-output; rm -f .mypy-output; \
 	test $$tests -eq 0 && test $$typed -eq 0
