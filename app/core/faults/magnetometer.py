@@ -243,7 +243,9 @@ class MagnetometerCheck:
     def _learn(self, times: np.ndarray, values: np.ndarray) -> None:
         """Noise (median |second difference| of distinct samples), LSB and interval."""
         self._runs = None
-        changed = np.concatenate([[True], np.any(np.diff(values, axis=0) != 0, axis=1)])
+        changed = np.empty(len(values), dtype=bool)  # a row unlike the one before it
+        changed[0] = True
+        np.any(values[1:] != values[:-1], axis=1, out=changed[1:])
         distinct = values[changed]
         if len(distinct) > 1:
             steps = np.abs(np.diff(distinct, axis=0))
