@@ -70,7 +70,7 @@ _EYE3 = np.eye(3)
 
 def rotation_matrix(q: np.ndarray) -> np.ndarray:
     """The rotation matrix of unit quaternion ``q`` (w, x, y, z)."""
-    w, x, y, z = q
+    w, x, y, z = q.tolist()  # Python floats: the same arithmetic, without numpy scalars
     return np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
@@ -79,7 +79,8 @@ def rotation_matrix(q: np.ndarray) -> np.ndarray:
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    x, y, z = v.tolist()
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 class GravityCarry:
@@ -147,14 +148,17 @@ class GravityCarry:
         in the window-start frame, its length and, when the field is trusted this window, its
         mean field in the window-start frame (uT; None: no field part for this window).
         Returns (axis, bias step in rad/s, (3,)) when a step is declared, else None."""
-        if not (duration > 0 and np.all(np.isfinite(accel)) and np.all(np.isfinite(rotation))):
+        quat = rotation.tolist()
+        if not (duration > 0 and all(map(math.isfinite, accel.tolist()))
+                and all(map(math.isfinite, quat))):
             self.restart()
             return None
-        half = float(np.clip(rotation[0], -1.0, 1.0))
-        sine = float(np.linalg.norm(rotation[1:]))
-        turned = (2.0 * math.atan2(sine, half) / sine * rotation[1:] if sine > 1e-12
-                  else 2.0 * rotation[1:])
-        kept = field if field is not None and np.all(np.isfinite(field)) else None
+        half = min(max(quat[0], -1.0), 1.0)
+        vector = rotation[1:]
+        sine = math.sqrt(float(vector.dot(vector)))  # np.linalg.norm's own sum, without its checks
+        turned = (2.0 * math.atan2(sine, half) / sine * vector if sine > 1e-12 else 2.0 * vector)
+        kept = (field if field is not None and all(map(math.isfinite, field.tolist()))
+                else None)
         self._append(rotation_matrix(rotation), accel, duration, turned, kept)
         self._span += duration
         while self._span - self._durations[self._head] >= HORIZON_S:
@@ -198,11 +202,12 @@ class GravityCarry:
             design[axis::3, axis] = elapsed
             design[axis::3, 3 + axis] = 1.0
         design[:, 6:12] = (-_skew(gravity) @ drift).reshape(3 * k, 6)
-        fitted = _fit(design, y, 3 * k - 12)
+        gram = design.T @ design
+        fitted = _fit(design, y, 3 * k - 12, gram=gram)
         if fitted is None:
             return
         variance = max(fitted[0], 1e-300)
-        normal = design.T @ design / variance
+        normal = gram / variance
         rhs = design.T @ y / variance
         fields = int(np.count_nonzero(has_field))
         part = (self._field_part(anchored[has_field], angles[has_field])
@@ -250,7 +255,8 @@ class GravityCarry:
         for _ in range(2):  # the bias's effect depends on m0: linearise, then once again
             design[:, 6:12] = (-_skew(m0) @ angles).reshape(rows, 6)
             prior[9:12] = variance / SCALE_ERROR ** 2
-            fitted = _fit(design, y, rows - 12, prior)
+            gram = design.T @ design
+            fitted = _fit(design, y, rows - 12, prior, gram)
             if fitted is None:
                 return None
             variance, solution, residual = fitted
@@ -264,7 +270,7 @@ class GravityCarry:
         lag = min(max(lag, 0.0), MAX_LAG_CORRELATION)
         self.field_correlation = lag
         variance *= (1.0 + lag) / (1.0 - lag)
-        normal = design.T @ design / variance
+        normal = gram / variance
         return normal, design.T @ y / variance
 
 
@@ -351,29 +357,39 @@ def _ridge(normal: np.ndarray, bias: bool = True) -> None:
     """The bias and scale error's ridge (module docstring; ``bias``) and a tiny one on the
     rest."""
     if bias:  # both blocks' largest eigenvalue in one call
-        largest = np.linalg.eigvalsh(np.stack((normal[6:9, 6:9], normal[9:12, 9:12])))[:, -1]
+        blocks = np.empty((2, 3, 3))
+        blocks[0] = normal[6:9, 6:9]
+        blocks[1] = normal[9:12, 9:12]
+        largest = np.linalg.eigvalsh(blocks)[:, -1]
         for part, top in zip((slice(6, 9), slice(9, 12)), largest.tolist(), strict=True):
             normal[part, part] += RIDGE * max(top, 1e-300) * _EYE3
-    diagonal = np.diag(normal).copy()
-    top = float(diagonal.max()) if diagonal.size else 1.0
+    nuisance = NUISANCE_RIDGE * float(normal.diagonal().max()) + 1e-300
     for i in range(12, PARTS):
-        normal[i, i] += NUISANCE_RIDGE * top + 1e-300
+        normal[i, i] += nuisance
 
 
-def _fit(design: np.ndarray, y: np.ndarray, dof: int, prior: np.ndarray | None = None
-         ) -> tuple[float, np.ndarray, np.ndarray] | None:
+def _fit(design: np.ndarray, y: np.ndarray, dof: int, prior: np.ndarray | None = None,
+         gram: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray] | None:
     """The residual variance of ``y`` against ``design`` (ridged as in the joint fit), the
-    solution (0 on the unknowns ``design`` does not hold) and the residual."""
-    used = np.flatnonzero(np.any(design != 0.0, axis=0))
-    normal = design.T @ design
+    solution (0 on the unknowns ``design`` does not hold) and the residual; ``gram``:
+    ``design.T @ design`` when the caller has it."""
+    used = np.flatnonzero(design.any(axis=0))
+    normal = design.T @ design if gram is None else gram.copy()
     if prior is not None:
         normal += np.diag(prior)
     _ridge(normal)
+    first, last = (int(used[0]), int(used[-1]) + 1) if len(used) else (0, 0)
+    if last - first == len(used):  # the usual case: a run of columns, sliced, not gathered
+        square = normal[first:last, first:last]
+        columns = np.asfortranarray(design[:, first:last])  # laid out as design[:, used] is
+    else:
+        square = normal[np.ix_(used, used)]
+        columns = design[:, used]
     try:
-        part = np.linalg.solve(normal[np.ix_(used, used)], design[:, used].T @ y)
+        part = np.linalg.solve(square, columns.T @ y)
     except np.linalg.LinAlgError:
         return None
-    residual = y - design[:, used] @ part
+    residual = y - columns @ part
     solution = np.zeros(design.shape[1])
     solution[used] = part
     return float(residual @ residual) / max(dof, 1), solution, residual

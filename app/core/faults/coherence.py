@@ -81,8 +81,12 @@ _CROSS = [_regressors(c, None, False) for c in range(6)]
 def lagged(band: np.ndarray, tail: np.ndarray) -> np.ndarray:
     """(N, DIM) rows ``[channel k delayed j]`` (index ``k * SPAN + j``) of the band output
     (N, 6), ``tail`` the previous ``2 * LAGS`` rows (oldest first)."""
-    x = np.vstack([tail, band])
-    n = len(band)
+    return _lagged_rows(np.vstack([tail, band]))
+
+
+def _lagged_rows(x: np.ndarray) -> np.ndarray:
+    """:func:`lagged` of ``x`` (N + 2 * LAGS, 6): the tail and the band in one array."""
+    n = len(x) - 2 * LAGS
     z = np.empty((n, 6, SPAN))
     for j in range(SPAN):
         z[:, :, j] = x[SPAN - 1 - j:SPAN - 1 - j + n]
@@ -217,6 +221,12 @@ _SETS = (_Set([(int(_TARGET[c]), cols) for c, cols in enumerate(_FULL)]),
          _Set([(int(_TARGET[c]), cols) for c, _, cols in _WITHOUT]),
          _Set([(int(_TARGET[c]), cols) for c, cols in enumerate(_CROSS)]))
 _WITHOUT_INDEX = (np.array([c for c, _, _ in _WITHOUT]), np.array([s for _, s, _ in _WITHOUT]))
+_POWER_INDEX = np.empty((6, 7), dtype=np.intp)
+"""Where each of the (6, 7) powers comes from in the 36 residuals' medians: [c, 6] and [c, c]
+the full predictor of c (0..5), [c, s] the one without s (6..35)."""
+_POWER_INDEX[:, 6] = np.arange(6)
+_POWER_INDEX[_WITHOUT_INDEX] = np.arange(6, 36)
+_POWER_INDEX[np.arange(6), np.arange(6)] = np.arange(6)
 
 
 class CoherenceCheck:
@@ -261,7 +271,7 @@ class CoherenceCheck:
         per channel, NaN where it does not count; the cross residual white)."""
         x = np.vstack([self._tail, band])[-(MAX_ROWS + 2 * LAGS):]
         self._tail = x[-2 * LAGS:]
-        z = lagged(x[2 * LAGS:], x[:2 * LAGS])
+        z = _lagged_rows(x)
         log_s = np.full(6, np.nan)
         white = np.zeros(6, dtype=bool)
         power = None
@@ -273,10 +283,7 @@ class CoherenceCheck:
             e = _product(z, self._weights)
             half = (len(z) - 1) // 2
             med = column_kth(e[:, :36], half, True)
-            power = np.empty((6, 7))
-            power[:, 6] = med[:6]
-            power[_WITHOUT_INDEX] = med[6:36]
-            power[np.arange(6), np.arange(6)] = med[:6]
+            power = med[_POWER_INDEX]
             white = self._whiteness(e[:, 36:])
             if len(self._powers) >= self._minimum + self._gap and log_raw is not None:
                 past = self._powers.rows()[:-self._gap]

@@ -317,6 +317,13 @@ def _noise_ratios(rho, white, flat):  # pragma: no cover - compiled
     return level, others, ratios
 
 
+def _norm(v: np.ndarray) -> float:
+    """``np.linalg.norm(v)`` of a float vector, to the bit (its dot product of the raveled
+    vector and the square root), without its per-call checks."""
+    v = v.ravel(order="K")
+    return math.sqrt(float(v.dot(v)))
+
+
 def _maximum(a: float, b: float) -> float:
     """``np.maximum`` of two floats (NaN wins)."""
     return a if a != a or a >= b else b
@@ -464,12 +471,14 @@ class FaultDetector:
             out.extend(self.magnetometer.update(t, block.mag_ut, gap, counts))
         if gap[0] or t[0] <= self._last_t:
             self._restart(t[0], out, lost=raw.lost_samples if raw is not None else 0)
+        breaks = np.flatnonzero(gap[1:]).tolist()  # rows 1.. that start after a gap
         start = 0
         while start < n:
-            breaks = np.flatnonzero(gap[start + 1:])
             stop = min(n, start + self.window - int(self._ints[1]))
-            if breaks.size:
-                stop = min(stop, start + 1 + int(breaks[0]))
+            while breaks and breaks[0] + 1 <= start:
+                breaks.pop(0)
+            if breaks:
+                stop = min(stop, breaks[0] + 1)
             if start > 0 and gap[start]:
                 self._restart(t[start], out, lost=0)
             self._scan_chunk(t, x, gap, start, stop)
@@ -614,8 +623,8 @@ class FaultDetector:
         self._rho.append(rho)
         self._rho_white.append(white * D4_GAIN / self._floor)
         self._rho_flat.append(np.where(flat, rho, 0.0))
-        self._rate.append(float(np.linalg.norm(mean[3:] - (self._gyro_ref if self._gyro_ref
-                                                           is not None else 0.0))))
+        self._rate.append(_norm(mean[3:] - (self._gyro_ref if self._gyro_ref is not None
+                                            else 0.0)))
         self._noise_test(t_end, out)
         self._motion_noise_test(t_end, out)
         sigma = self._floor / D4_GAIN
@@ -675,6 +684,8 @@ class FaultDetector:
         """Added noise while moving: the high band of one channel far above its own recent
         level and the other channels' (:mod:`app.core.faults.motion`)."""
         motion = self._motion
+        if not motion.flagged.any():
+            return
         low = BAND[0] * self.spec.odr_hz
         for c in np.flatnonzero(motion.flagged):
             self._active_bits[c] |= NOISE
@@ -710,11 +721,11 @@ class FaultDetector:
         window's own mean acceleration tilts by up to 20 deg in a hand's translation (BROAD
         10), while a 2 dps bias moves the low-passed tilt by 6 deg at most."""
         up = self._tilt
-        norm_a = float(np.linalg.norm(accel))
+        norm_a = _norm(accel)
         if norm_a > 0:
             alpha = duration / (TILT_TAU_S + duration) if up is not None else 1.0
             up = accel / norm_a if up is None else up + alpha * (accel / norm_a - up)
-            up = up / float(np.linalg.norm(up))
+            up = up / _norm(up)
         # carried on into the next window's frame
         self._tilt = None if up is None else rotation_matrix(quat).T @ up
         if field is None or up is None:
@@ -722,7 +733,7 @@ class FaultDetector:
         state = self._field_state
         rate = gyro - (self._gyro_ref if self._gyro_ref is not None else 0.0)
         track_rate(state, float(rate[0]), float(rate[1]), float(rate[2]), duration)
-        norm = float(np.linalg.norm(field))
+        norm = _norm(field)
         if not norm > 0:
             return None
         dip = math.asin(max(-1.0, min(1.0, -float(field @ up) / norm)))
@@ -780,7 +791,7 @@ class FaultDetector:
             self._rest = None
             return
         self._gyro_rest_test(gyro, t, out)
-        norm = float(np.linalg.norm(accel))
+        norm = _norm(accel)
         if abs(norm - G) > GRAVITY_TOLERANCE * G:
             self._counts["gravity"] += 1
             if self._counts["gravity"] >= REST_WINDOWS:

@@ -38,6 +38,7 @@ import numpy as np
 from numba import njit
 
 from app.core.faults.events import FaultEvent
+from app.core.faults.rows import column_median
 
 MAG_CHANNELS: tuple[str, ...] = ("mx", "my", "mz")
 """The magnetometer's three axes (the ``mag`` channel is the chip as a whole)."""
@@ -194,18 +195,17 @@ class MagnetometerCheck:
         return self._runs
 
     def _runs_for_noise(self) -> np.ndarray:
-        q = self.ut_per_lsb if self.ut_per_lsb else self._lsb_seen
-        q = np.broadcast_to(np.asarray(q, dtype=float), (3,))
-        runs = np.full(3, float(STUCK_MIN_SAMPLES))
-        for axis in range(3):
-            sigma = self._sigma[axis]
-            if np.isfinite(q[axis]) and np.isfinite(sigma) and sigma > 0:
+        q = ([float(self.ut_per_lsb)] * 3 if self.ut_per_lsb
+             else self._lsb_seen.tolist())
+        runs = [float(STUCK_MIN_SAMPLES)] * 3
+        for axis, sigma in enumerate(self._sigma.tolist()):
+            if math.isfinite(q[axis]) and math.isfinite(sigma) and sigma > 0:
                 p0 = math.erf(q[axis] / (2.0 * math.sqrt(2.0) * sigma))
                 if p0 >= 1.0:
-                    runs[axis] = np.inf
+                    runs[axis] = math.inf
                 elif p0 > 0.0:
                     runs[axis] = max(runs[axis], math.log(STUCK_FALSE_ALARM) / math.log(p0))
-        return runs
+        return np.array(runs)
 
     def _scan(self, t_s: np.ndarray, mag: np.ndarray, rows: np.ndarray,
               out: list[FaultEvent], restart_after: bool = False) -> None:
@@ -219,7 +219,7 @@ class MagnetometerCheck:
             self._learn(np.concatenate([t for t, _ in self._pending]),
                         np.concatenate([v for _, v in self._pending]))
             self._pending, self._pending_count = [], 0
-        interval = self._interval if np.isfinite(self._interval) else 0.0
+        interval = self._interval if math.isfinite(self._interval) else 0.0
         runs = self._stuck_samples()
         flags = np.zeros((len(rows), 3), dtype=np.uint8)
         spike_t = np.full(len(rows), np.nan)
@@ -243,7 +243,9 @@ class MagnetometerCheck:
     def _learn(self, times: np.ndarray, values: np.ndarray) -> None:
         """Noise (median |second difference| of distinct samples), LSB and interval."""
         self._runs = None
-        changed = np.concatenate([[True], np.any(np.diff(values, axis=0) != 0, axis=1)])
+        changed = np.empty(len(values), dtype=bool)  # a row unlike the one before it
+        changed[0] = True
+        np.any(values[1:] != values[:-1], axis=1, out=changed[1:])
         distinct = values[changed]
         if len(distinct) > 1:
             steps = np.abs(np.diff(distinct, axis=0))
@@ -251,12 +253,12 @@ class MagnetometerCheck:
             self._lsb_seen = np.minimum(self._lsb_seen, steps)
             spacing = np.diff(times[changed])
             if self.odr_hz is None and len(spacing):
-                interval = float(np.median(spacing))
+                interval = float(column_median(spacing[:, None], False, True)[0])  # np.median
                 self._interval = interval if not np.isfinite(self._interval) else (
                     self._interval + NOISE_ALPHA * (interval - self._interval))
         if len(distinct) >= 8:
             d2 = np.abs(distinct[2:] - 2.0 * distinct[1:-1] + distinct[:-2])
-            sigma = np.median(d2, axis=0) / D2_MEDIAN_GAIN
+            sigma = column_median(d2, False, True) / D2_MEDIAN_GAIN  # np.median(axis=0)
             self._sigma = np.where(np.isfinite(self._sigma),
                                    self._sigma + NOISE_ALPHA * (sigma - self._sigma), sigma)
             self._sigma_known = np.where(np.isfinite(self._sigma), self._sigma, 0.0)
@@ -306,7 +308,7 @@ class MagnetometerCheck:
 
     def _silence(self, t_s: np.ndarray, rows: np.ndarray, out: list[FaultEvent]) -> None:
         """The chip stopped delivering while the accelerometer goes on."""
-        if not np.isfinite(self._last_field_t) or not np.isfinite(self._interval):
+        if not math.isfinite(self._last_field_t) or not math.isfinite(self._interval):
             return
         newest = float(t_s[-1])
         silent = newest - self._last_field_t

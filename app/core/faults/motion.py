@@ -203,7 +203,7 @@ class MotionNoiseCheck:
             self._white.append(self._whiteness(n))
             if len(self._ratios) == SPAN_WINDOWS:
                 median = column_median(self._ratios.rows(), False, True)
-                white = 2 * np.sum(self._white.rows(), axis=0) >= SPAN_WINDOWS
+                white = 2 * self._white.rows().sum(axis=0) >= SPAN_WINDOWS
                 self.by_band = (median > self._thresholds) & white
                 self.level = np.exp(median)
                 self.own = np.exp(log_r)
@@ -221,7 +221,7 @@ class MotionNoiseCheck:
         if len(self._residuals) < SPAN_WINDOWS:
             return
         median = column_median(self._residuals.rows(), False, True)
-        white_most = 2 * np.sum(self._residual_white.rows(), axis=0) > SPAN_WINDOWS
+        white_most = 2 * self._residual_white.rows().sum(axis=0) > SPAN_WINDOWS
         self.by_residual = (median > self._residual_thresholds) & white_most
         self.residual_level = np.exp(median)
 

@@ -240,10 +240,23 @@ class Recording:
         return np.concatenate([bounds, [n]]).astype(np.int64) if n else np.zeros(1, np.int64)
 
     def raw_blocks(self, size: int | None = None) -> Iterator[RawBlock]:
-        """The whole recording as device blocks (see :meth:`block_bounds`)."""
+        """The whole recording as device blocks (see :meth:`block_bounds`): the columns are
+        stacked once and each block holds views of its rows (the same values as
+        :meth:`raw_block` of those rows, without four stackings a block)."""
         bounds = self.block_bounds(size)
-        for start, stop in itertools.pairwise(bounds):
-            yield self.raw_block(int(start), int(stop))
+        if len(bounds) < 2:
+            return
+        whole = self.raw_block()
+        for start, stop in itertools.pairwise(bounds.tolist()):
+            rows = slice(start, stop)
+            yield RawBlock(
+                t_s=whole.t_s[rows], accel_raw=whole.accel_raw[rows],
+                gyro_raw=whole.gyro_raw[rows], temp_raw=whole.temp_raw[rows],
+                scale=whole.scale, gap=whole.gap[rows] if whole.gap is not None else None,
+                reference_quat=(whole.reference_quat[rows] if whole.reference_quat is not None
+                                else None),
+                mag_raw=whole.mag_raw[rows] if whole.mag_raw is not None else None,
+            )
 
     def sample_block(self, calibration: SensorCalibration | None = None) -> SampleBlock:
         """Every sample in SI units, with ``calibration`` applied (none when None)."""
