@@ -68,31 +68,60 @@ FRAMES = base_frames()
 POOL_BODIES = {cobs.decode(frame[:-1]) for frame in FRAMES}
 
 
+def _valid_sample_packet(frame: bytes) -> bytes | None:
+    """The SAMPLES packet (with CRC) in one frame if it passes every check, else None."""
+    if not frame or len(frame) > MAX_FRAME_BYTES:
+        return None
+    try:
+        packet = cobs.decode(frame)
+    except cobs.DecodeError:
+        return None
+    if (3 <= len(packet) <= 512 and packet[0] == p.SAMPLES and len(packet) >= 12
+            and len(packet) == 12 + 12 * packet[7] and 1 <= packet[7] <= 32
+            and binascii.crc_hqx(packet[:-2], 0xFFFF) == int.from_bytes(packet[-2:], "little")):
+        return packet
+    return None
+
+
+# Half the frames in the streams are unharmed pool frames: their checks are made once here.
+_POOL_FRAME_PACKETS = {frame[:-1]: _valid_sample_packet(frame[:-1]) for frame in FRAMES}
+_NOT_A_POOL_FRAME = b""
+
+
 def valid_sample_packets(stream: bytes) -> list[bytes]:
     """The SAMPLES packets (with CRC) in ``stream`` that pass every check (a reference)."""
     found = []
+    pool = _POOL_FRAME_PACKETS
     for frame in stream.split(b"\x00")[:-1]:  # the last piece has no 0x00 yet
-        if not frame or len(frame) > MAX_FRAME_BYTES:
-            continue
-        try:
-            packet = cobs.decode(frame)
-        except cobs.DecodeError:
-            continue
-        if (3 <= len(packet) <= 512 and packet[0] == p.SAMPLES and len(packet) >= 12
-                and len(packet) == 12 + 12 * packet[7] and 1 <= packet[7] <= 32
-                and binascii.crc_hqx(packet[:-2], 0xFFFF) == int.from_bytes(packet[-2:], "little")):
+        packet = pool.get(frame, _NOT_A_POOL_FRAME)
+        if packet is _NOT_A_POOL_FRAME:
+            packet = _valid_sample_packet(frame)
+        if packet is not None:
             found.append(packet)
     return found
 
 
-def _rows_of(packet: bytes, stream_id: int) -> np.ndarray:
-    """(count, 9) int16 rows: stream id (2 columns), gx..az, temperature."""
+def _data_rows_of(packet: bytes) -> np.ndarray:
+    """(count, 7) int16 rows of a valid SAMPLES packet: gx..az, temperature."""
     count = packet[7]
-    rows = np.empty((count, 9), dtype=np.int16)
+    rows = np.empty((count, 7), dtype=np.int16)
+    rows[:, :6] = np.frombuffer(packet, "<i2", count=6 * count, offset=10).reshape(count, 6)
+    rows[:, 6] = np.frombuffer(packet, "<i2", count=1, offset=8)[0]
+    return rows
+
+
+_POOL_ROWS = {body: _data_rows_of(body) for body in POOL_BODIES
+              if _valid_sample_packet(cobs.encode(body))}
+
+
+def _with_stream_ids(data: list[np.ndarray], ids: list[int], counts: list[int]) -> np.ndarray:
+    """(n, 9) int16 rows: stream id (2 columns) then the data rows, all batches joined."""
+    stream_id = np.repeat(np.array(ids, dtype=np.int64), counts)
+    rows = np.empty((stream_id.shape[0], 9), dtype=np.int16)
     rows[:, 0] = stream_id >> 16
     rows[:, 1] = stream_id & 0x7FFF
-    rows[:, 2:8] = np.frombuffer(packet, "<i2", count=6 * count, offset=10).reshape(count, 6)
-    rows[:, 8] = np.frombuffer(packet, "<i2", count=1, offset=8)[0]
+    if data:
+        rows[:, 2:] = np.concatenate(data)
     return rows
 
 
@@ -110,7 +139,9 @@ class Checker:
 
     Rows carry their stream's number, so a batch of streams is checked at once: each decoded
     row must be among the rows of the valid SAMPLES packets of its own stream, and time must
-    increase from row to row within a stream.
+    increase from row to row within a stream. The rows of a batch are built in one go at
+    :meth:`check` (a stream has few samples: numpy calls per block would cost more than the
+    decoder).
     """
 
     BATCH = 2000
@@ -121,9 +152,20 @@ class Checker:
         self.crc_collisions = 0
         """Valid-looking SAMPLES packets that are none of the pool's (the CRC missed them)."""
         self.foreign_samples = 0
-        self._decoded: list[np.ndarray] = []
+        self._clear_batch()
+
+    def _clear_batch(self) -> None:
+        # What the decoder delivered: block arrays, and each block's stream and length.
+        self._gyro: list[np.ndarray] = []
+        self._accel: list[np.ndarray] = []
+        self._temp: list[np.ndarray] = []
         self._times: list[np.ndarray] = []
+        self._decoded_ids: list[int] = []
+        self._decoded_counts: list[int] = []
+        # The rows of the valid SAMPLES packets (gx..az, temperature), and their streams.
         self._allowed: list[np.ndarray] = []
+        self._allowed_ids: list[int] = []
+        self._allowed_counts: list[int] = []
 
     def run(self, stream: bytes, cuts: list[int]) -> None:
         stream_id = self.streams
@@ -138,29 +180,37 @@ class Checker:
                 assert block.gyro_raw.shape == (n, 3) and block.accel_raw.shape == (n, 3)
                 assert block.temp_raw.shape == (n,) and block.gap.shape == (n,)
                 assert block.gyro_raw.dtype == np.int16 and block.gap.dtype == bool
-                rows = np.empty((n, 9), dtype=np.int16)
-                rows[:, 0] = stream_id >> 16
-                rows[:, 1] = stream_id & 0x7FFF
-                rows[:, 2:5] = block.gyro_raw
-                rows[:, 5:8] = block.accel_raw
-                rows[:, 8] = block.temp_raw
-                self._decoded.append(rows)
+                self._gyro.append(block.gyro_raw)
+                self._accel.append(block.accel_raw)
+                self._temp.append(block.temp_raw)
                 self._times.append(block.t_s)
+                self._decoded_ids.append(stream_id)
+                self._decoded_counts.append(n)
         assert decoder.counters().bytes_received == len(stream)
         for packet in valid_sample_packets(stream):
-            self.crc_collisions += packet not in POOL_BODIES
-            self._allowed.append(_rows_of(packet, stream_id))
+            rows = _POOL_ROWS.get(packet)
+            if rows is None:
+                self.crc_collisions += 1
+                rows = _data_rows_of(packet)
+            self._allowed.append(rows)
+            self._allowed_ids.append(stream_id)
+            self._allowed_counts.append(len(rows))
         self.streams += 1
         if self.streams % self.BATCH == 0:
             self.check()
 
     def check(self) -> None:
-        if not self._decoded:
+        if not self._times:
             return
-        rows = np.concatenate(self._decoded)
+        n = sum(self._decoded_counts)
+        decoded = np.empty((n, 7), dtype=np.int16)
+        decoded[:, 0:3] = np.concatenate(self._gyro)
+        decoded[:, 3:6] = np.concatenate(self._accel)
+        decoded[:, 6] = np.concatenate(self._temp)
+        rows = _with_stream_ids([decoded], self._decoded_ids, self._decoded_counts)
         times = np.concatenate(self._times)
-        allowed = np.concatenate(self._allowed) if self._allowed else rows[:0]
-        self._decoded, self._times, self._allowed = [], [], []
+        allowed = _with_stream_ids(self._allowed, self._allowed_ids, self._allowed_counts)
+        self._clear_batch()
         # No bogus sample: each comes from a valid packet of its own stream.
         assert np.isin(_row_keys(rows), _row_keys(allowed)).all(), "a sample from no valid packet"
         # Time is finite and strictly increasing within each stream.
