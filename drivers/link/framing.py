@@ -68,10 +68,10 @@ def unframe(frame: bytes) -> bytes:
         raise FrameError("undecodable", f"bad COBS: {exc}") from None
     if not 3 <= len(packet) <= MAX_PACKET_BYTES:
         raise FrameError("undecodable", f"decoded packet of {len(packet)} bytes")
-    view = memoryview(packet)
-    if crc16(view[:-2]) != int.from_bytes(view[-2:], "little"):
+    body = packet[:-2]
+    if binascii.crc_hqx(body, CRC_INIT) != packet[-2] | packet[-1] << 8:  # little-endian
         raise FrameError("crc", "CRC mismatch")
-    return packet[:-2]
+    return body
 
 
 class FrameSplitter:
