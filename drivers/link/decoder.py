@@ -58,7 +58,7 @@ import numpy as np
 from app.core.samples import RawBlock, ScaleFactors
 from drivers import lsm6dsox
 from drivers.link import protocol as p
-from drivers.link.framing import FrameError, FrameSplitter, unframe
+from drivers.link.framing import FrameError, FrameSplitter, check_frame
 
 _SAMPLES_HEADER = struct.Struct("<HIBh")
 _COUNT_AT = 1 + 6
@@ -287,15 +287,14 @@ class LinkDecoder:
             self._corrupt_since_samples += self._splitter.oversized - self._oversized_seen
             self._oversized_seen = self._splitter.oversized
         for frame in frames:
-            try:
-                body = unframe(frame)
-            except FrameError as exc:
-                if exc.kind == "crc":
+            body = check_frame(frame)
+            if isinstance(body, FrameError):
+                if body.kind == "crc":
                     self._crc_errors += 1
                 else:
                     self._undecodable += 1
                 self._corrupt_since_samples += 1
-                self.last_error = str(exc)
+                self.last_error = str(body)
                 continue
             packet_type = body[0]
             if (packet_type == p.SAMPLES and len(body) > _COUNT_AT
@@ -559,7 +558,7 @@ class LinkDecoder:
             gap[0] = bool(self._gap_packets)
         else:
             # Few packets of few samples each: numpy calls, not the rows, are the cost here.
-            t_s = np.repeat(self._starts, counts) + np.concatenate(
+            t_s = np.array(self._starts).repeat(counts) + np.concatenate(
                 [offsets_s[:count] for count in counts])
             temp_raw = np.repeat(np.array(self._temps, dtype=np.int16), counts)
             if self._gap_packets:

@@ -60,17 +60,29 @@ def unframe(frame: bytes) -> bytes:
         ``kind="undecodable"`` for bad COBS or a length outside 3..512 bytes, ``kind="crc"``
         when the CRC does not match.
     """
+    body = check_frame(frame)
+    if isinstance(body, FrameError):
+        raise body from None
+    return body
+
+
+def check_frame(frame: bytes) -> bytes | FrameError:
+    """:func:`unframe` that returns the :class:`FrameError` instead of raising it.
+
+    For a decoder on a noisy link, where bad frames are common: raising and catching costs
+    more than the checks.
+    """
     if len(frame) > MAX_FRAME_BYTES:
-        raise FrameError("undecodable", f"frame of {len(frame)} bytes is too long")
+        return FrameError("undecodable", f"frame of {len(frame)} bytes is too long")
     try:
         packet = cobs.decode(frame)
     except cobs.DecodeError as exc:
-        raise FrameError("undecodable", f"bad COBS: {exc}") from None
+        return FrameError("undecodable", f"bad COBS: {exc}")
     if not 3 <= len(packet) <= MAX_PACKET_BYTES:
-        raise FrameError("undecodable", f"decoded packet of {len(packet)} bytes")
+        return FrameError("undecodable", f"decoded packet of {len(packet)} bytes")
     body = packet[:-2]
     if binascii.crc_hqx(body, CRC_INIT) != packet[-2] | packet[-1] << 8:  # little-endian
-        raise FrameError("crc", "CRC mismatch")
+        return FrameError("crc", "CRC mismatch")
     return body
 
 
