@@ -232,11 +232,58 @@ class Checker:
         self.samples += len(rows)
 
 
+def _numpy_integer(rng: np.random.Generator, low: int, high: int) -> int:
+    return int(rng.integers(low, high))
+
+
+def _lemire_integer(rng: np.random.Generator, low: int, high: int) -> int:
+    """``int(rng.integers(low, high))`` for ``high - low <= 2**32``, drawn as numpy draws it.
+
+    ``Generator.integers`` spends about 3 us setting up one scalar draw (three times the draw
+    itself, and most of the stream generator's time). For such a range numpy takes one uint32
+    from the bit generator (none if ``high - low == 1``) and scales it by Lemire's method,
+    drawing again in the rare biased case (``buffered_bounded_lemire_uint32``); the same is
+    done here through the bit generator's ctypes interface, on the same state.
+    """
+    span = high - low
+    if span == 1:
+        return low
+    if span > 1 << 32:
+        return int(rng.integers(low, high))
+    bits = rng.bit_generator.ctypes
+    scaled = bits.next_uint32(bits.state) * span
+    if scaled & 0xFFFFFFFF < span:
+        threshold = ((1 << 32) - span) % span
+        while scaled & 0xFFFFFFFF < threshold:
+            scaled = bits.next_uint32(bits.state) * span
+    return low + (scaled >> 32)
+
+
+def _lemire_matches_numpy() -> bool:
+    """Whether :func:`_lemire_integer` gives what this numpy's ``Generator.integers`` gives,
+    interleaved with the other draws the streams use (checked once; else numpy is used)."""
+    ours, theirs = np.random.default_rng(99), np.random.default_rng(99)
+    spans = [1, 2, 3, 5, 7, 24, 64, 200, 256, 1500, 3001, 2**31 + 5, 2**32]
+    for i in range(3000):
+        low, span = i % 7 - 3, spans[i % len(spans)]
+        if _lemire_integer(ours, low, low + span) != int(theirs.integers(low, low + span)):
+            return False
+        if i % 5 == 0 and (ours.random() != theirs.random() or ours.integers(
+                0, 256, i % 37, dtype=np.uint8).tobytes() != theirs.integers(
+                0, 256, i % 37, dtype=np.uint8).tobytes()):
+            return False
+    return True
+
+
+random_integer = _lemire_integer if _lemire_matches_numpy() else _numpy_integer
+"""``int(rng.integers(low, high))`` (the same numbers, from the same generator state)."""
+
+
 def random_bytes(rng: np.random.Generator, length: int) -> bytes:
     """``rng.bytes(length)``, drawn one uint32 at a time: the same bytes (``Generator.bytes``
     draws ``ceil(length / 4)`` uint32s and takes them little-endian), without the cost of
     an array call for a few bytes."""
-    words = [int(rng.integers(0, 1 << 32, dtype=np.uint32)) for _ in range((length + 3) // 4)]
+    words = [random_integer(rng, 0, 1 << 32) for _ in range((length + 3) // 4)]
     return b"".join(word.to_bytes(4, "little") for word in words)[:length]
 
 
@@ -244,25 +291,25 @@ def random_cuts(rng: np.random.Generator, size: int) -> list[int]:
     """``rng.integers(0, size + 1, k).tolist()`` for a random k of 0..2 (the same numbers:
     each element of an int64 draw is drawn as a scalar draw would be), without the cost of an
     array call for one or two numbers."""
-    return [int(rng.integers(0, size + 1)) for _ in range(int(rng.integers(0, 3)))]
+    return [random_integer(rng, 0, size + 1) for _ in range(random_integer(rng, 0, 3))]
 
 
 def mutate(stream: bytearray, rng: np.random.Generator) -> bytearray:
-    for _ in range(int(rng.integers(0, 5))):
-        kind = int(rng.integers(0, 7))
+    for _ in range(random_integer(rng, 0, 5)):
+        kind = random_integer(rng, 0, 7)
         size = len(stream)
-        at = int(rng.integers(0, size + 1))
+        at = random_integer(rng, 0, size + 1)
         if kind == 0 and size:  # flip bits in one byte
             at = min(at, size - 1)
-            stream[at] ^= int(rng.integers(1, 256))
+            stream[at] ^= random_integer(rng, 1, 256)
         elif kind == 1 and size:  # a zero in the middle of a frame
             stream[min(at, size - 1)] = 0
         elif kind == 2:  # insert noise
-            stream[at:at] = random_bytes(rng, int(rng.integers(1, 24)))
+            stream[at:at] = random_bytes(rng, random_integer(rng, 1, 24))
         elif kind == 3:  # lose bytes
-            del stream[at:at + int(rng.integers(1, 64))]
+            del stream[at:at + random_integer(rng, 1, 64)]
         elif kind == 4:  # repeat a piece
-            stream[at:at] = stream[at:at + int(rng.integers(1, 200))]
+            stream[at:at] = stream[at:at + random_integer(rng, 1, 200)]
         elif kind == 5:  # cut the end
             del stream[at:]
         else:  # overwrite with noise
@@ -273,14 +320,14 @@ def mutate(stream: bytearray, rng: np.random.Generator) -> bytearray:
 def random_stream(rng: np.random.Generator) -> bytes:
     choice = rng.random()
     if choice < 0.1:  # pure noise, sometimes with many zeros
-        noise = rng.integers(0, 256, int(rng.integers(0, 1500)), dtype=np.uint8)
+        noise = rng.integers(0, 256, random_integer(rng, 0, 1500), dtype=np.uint8)
         if rng.random() < 0.5:
             noise[rng.random(noise.size) < 0.05] = 0
         return noise.tobytes()
-    start = int(rng.integers(0, len(FRAMES)))
-    picked = FRAMES[start:start + int(rng.integers(1, 12))]
+    start = random_integer(rng, 0, len(FRAMES))
+    picked = FRAMES[start:start + random_integer(rng, 1, 12)]
     if choice < 0.3:  # frames in another order, some twice, some missing
-        order = rng.integers(0, len(FRAMES), int(rng.integers(1, 10)))
+        order = [random_integer(rng, 0, len(FRAMES)) for _ in range(random_integer(rng, 1, 10))]
         picked = [FRAMES[i] for i in order]
     return bytes(mutate(bytearray(b"".join(picked)), rng))
 
