@@ -110,27 +110,32 @@ def _data_rows_of(packet: bytes) -> np.ndarray:
     return rows
 
 
-_POOL_ROWS = {body: _data_rows_of(body) for body in POOL_BODIES
-              if _valid_sample_packet(cobs.encode(body))}
-
-
-def _with_stream_ids(data: list[np.ndarray], stream_id: np.ndarray) -> np.ndarray:
-    """(n, 9) int16 rows: stream id (2 columns) then the data rows, all batches joined."""
-    rows = np.empty((stream_id.shape[0], 9), dtype=np.int16)
-    rows[:, 0] = stream_id >> 16
-    rows[:, 1] = stream_id & 0x7FFF
-    if data:
-        rows[:, 2:] = np.concatenate(data)
-    return rows
-
-
 _KEY_WEIGHTS = np.random.default_rng(7).integers(1, 2**62, size=9, dtype=np.int64) | 1
 
 
-def _row_keys(rows: np.ndarray) -> np.ndarray:
-    """One 64-bit hash per row (wrapping arithmetic; a collision is a 2**-64 event)."""
+def _row_keys(stream_id: np.ndarray, data: np.ndarray) -> np.ndarray:
+    """One 64-bit hash per row of (stream id, gx..az, temperature); wrapping arithmetic, a
+    collision is a 2**-64 event. ``stream_id`` (n,), ``data`` (n, 7)."""
     with np.errstate(over="ignore"):
-        return (rows.astype(np.int64) + 32768) @ _KEY_WEIGHTS
+        return _stream_keys(stream_id) + _data_keys(data)
+
+
+def _stream_keys(stream_id: np.ndarray) -> np.ndarray:
+    """The stream's part of :func:`_row_keys` (the id in two int16 columns)."""
+    with np.errstate(over="ignore"):
+        return (((stream_id >> 16) + 32768) * _KEY_WEIGHTS[0]
+                + ((stream_id & 0x7FFF) + 32768) * _KEY_WEIGHTS[1])
+
+
+def _data_keys(data: np.ndarray) -> np.ndarray:
+    """The data's part of :func:`_row_keys` (a sum: the parts add up modulo 2**64)."""
+    with np.errstate(over="ignore"):
+        return (data.astype(np.int64) + 32768) @ _KEY_WEIGHTS[2:]
+
+
+_POOL_KEYS = {body: _data_keys(_data_rows_of(body)) for body in POOL_BODIES
+              if _valid_sample_packet(cobs.encode(body))}
+"""The data keys of the rows of each pool SAMPLES packet (most valid packets are these)."""
 
 
 class Checker:
@@ -187,13 +192,13 @@ class Checker:
                 self._decoded_counts.append(n)
         assert decoder.counters().bytes_received == len(stream)
         for packet in valid_sample_packets(stream):
-            rows = _POOL_ROWS.get(packet)
-            if rows is None:
+            keys = _POOL_KEYS.get(packet)
+            if keys is None:
                 self.crc_collisions += 1
-                rows = _data_rows_of(packet)
-            self._allowed.append(rows)
+                keys = _data_keys(_data_rows_of(packet))
+            self._allowed.append(keys)
             self._allowed_ids.append(stream_id)
-            self._allowed_counts.append(len(rows))
+            self._allowed_counts.append(len(keys))
         self.streams += 1
         if self.streams % self.BATCH == 0:
             self.check()
@@ -207,13 +212,12 @@ class Checker:
         decoded[:, 3:6] = np.concatenate(self._accel)
         decoded[:, 6] = np.concatenate(self._temp)
         stream_id = np.repeat(np.array(self._decoded_ids, dtype=np.int64), self._decoded_counts)
-        rows = _with_stream_ids([decoded], stream_id)
         times = np.concatenate(self._times)
-        allowed = _with_stream_ids(self._allowed, np.repeat(
-            np.array(self._allowed_ids, dtype=np.int64), self._allowed_counts))
+        allowed_keys = np.concatenate([*self._allowed, np.empty(0, np.int64)]) + np.repeat(
+            _stream_keys(np.array(self._allowed_ids, dtype=np.int64)), self._allowed_counts)
         self._clear_batch()
         # No bogus sample: each comes from a valid packet of its own stream.
-        keys, allowed_keys = _row_keys(rows), np.sort(_row_keys(allowed))
+        keys, allowed_keys = _row_keys(stream_id, decoded), np.sort(allowed_keys)
         assert allowed_keys.size, "a sample from no valid packet"
         at = np.searchsorted(allowed_keys, keys).clip(max=allowed_keys.size - 1)
         assert np.all(allowed_keys[at] == keys), "a sample from no valid packet"
@@ -222,14 +226,14 @@ class Checker:
         same_stream = stream_id[1:] == stream_id[:-1]
         assert np.all(np.diff(times)[same_stream] > 0), "time went backwards"
         # Samples that are none of the pool's rows came through a CRC collision.
-        data = rows[:, 2:].astype(np.int64)
+        data = decoded.astype(np.int64)
         pid, row = data[:, 0], data[:, 1]
         known = (pid >= 0) & (pid < POOL)
         known[known] &= (row[known] >= 0) & (row[known] < COUNTS[pid[known]])
         known[known] &= np.all(data[known, 2:6] == TABLE[pid[known], row[known]], axis=1)
         known &= data[:, 6] == pid
         self.foreign_samples += int(np.count_nonzero(~known))
-        self.samples += len(rows)
+        self.samples += n
 
 
 def _numpy_integer(rng: np.random.Generator, low: int, high: int) -> int:
