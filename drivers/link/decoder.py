@@ -58,12 +58,14 @@ import numpy as np
 from app.core.samples import RawBlock, ScaleFactors
 from drivers import lsm6dsox
 from drivers.link import protocol as p
-from drivers.link.framing import FrameError, FrameSplitter, check_frame
+from drivers.link.framing import FrameSplitter, check_frame
 
 _SAMPLES_HEADER = struct.Struct("<HIBh")
 _COUNT_AT = 1 + 6
 """Where a SAMPLES body (type byte first) holds its sample count."""
 _SAMPLES_BODY_BYTES = 1 + p.SAMPLES_HEADER_BYTES
+_SAMPLE_ROW = np.dtype(("<i2", (6,)))
+"""One sample on the wire: gx, gy, gz, ax, ay, az (frombuffer gives (n, 6) int16 rows)."""
 _WRAP32 = 1 << 32
 _MASK32 = _WRAP32 - 1
 _HALF32 = 1 << 31
@@ -288,13 +290,13 @@ class LinkDecoder:
             self._oversized_seen = self._splitter.oversized
         for frame in frames:
             body = check_frame(frame)
-            if isinstance(body, FrameError):
-                if body.kind == "crc":
+            if isinstance(body, tuple):  # (kind, message) of a bad frame
+                if body[0] == "crc":
                     self._crc_errors += 1
                 else:
                     self._undecodable += 1
                 self._corrupt_since_samples += 1
-                self.last_error = str(body)
+                self.last_error = body[1]
                 continue
             packet_type = body[0]
             if (packet_type == p.SAMPLES and len(body) > _COUNT_AT
@@ -546,8 +548,7 @@ class LinkDecoder:
         config, scale = self._config, self._scale
         assert config is not None and scale is not None
         offsets_s = _sample_offsets_s(config.odr_mhz)
-        data = np.frombuffer(b"".join(self._chunks), dtype="<i2").astype(np.int16)
-        data = data.reshape(-1, 6)
+        data = np.frombuffer(b"".join(self._chunks), dtype=_SAMPLE_ROW).astype(np.int16)
         n = data.shape[0]
         gap = np.zeros(n, dtype=bool)
         counts = self._counts
