@@ -217,7 +217,8 @@ class Checker:
             _stream_keys(np.array(self._allowed_ids, dtype=np.int64)), self._allowed_counts)
         self._clear_batch()
         # No bogus sample: each comes from a valid packet of its own stream.
-        keys, allowed_keys = _row_keys(stream_id, decoded), np.sort(allowed_keys)
+        # (Both sorted: searchsorted of sorted keys walks the allowed keys once.)
+        keys, allowed_keys = np.sort(_row_keys(stream_id, decoded)), np.sort(allowed_keys)
         assert allowed_keys.size, "a sample from no valid packet"
         at = np.searchsorted(allowed_keys, keys).clip(max=allowed_keys.size - 1)
         assert np.all(allowed_keys[at] == keys), "a sample from no valid packet"
@@ -226,12 +227,11 @@ class Checker:
         same_stream = stream_id[1:] == stream_id[:-1]
         assert np.all(np.diff(times)[same_stream] > 0), "time went backwards"
         # Samples that are none of the pool's rows came through a CRC collision.
-        data = decoded.astype(np.int64)
-        pid, row = data[:, 0], data[:, 1]
-        known = (pid >= 0) & (pid < POOL)
-        known[known] &= (row[known] >= 0) & (row[known] < COUNTS[pid[known]])
-        known[known] &= np.all(data[known, 2:6] == TABLE[pid[known], row[known]], axis=1)
-        known &= data[:, 6] == pid
+        pid, row = decoded[:, 0], decoded[:, 1]
+        indexable = (pid >= 0) & (pid < POOL) & (row >= 0) & (row < TABLE.shape[1])
+        pid_at, row_at = np.where(indexable, pid, 0), np.where(indexable, row, 0)
+        known = (indexable & (row < COUNTS[pid_at]) & (decoded[:, 6] == pid)
+                 & np.all(decoded[:, 2:6] == TABLE[pid_at, row_at], axis=1))
         self.foreign_samples += int(np.count_nonzero(~known))
         self.samples += n
 
