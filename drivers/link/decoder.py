@@ -64,6 +64,7 @@ _SAMPLES_HEADER = struct.Struct("<HIBh")
 _COUNT_AT = 1 + 6
 """Where a SAMPLES body (type byte first) holds its sample count."""
 _SAMPLES_BODY_BYTES = 1 + p.SAMPLES_HEADER_BYTES
+_SAMPLES, _MAX_COUNT, _SAMPLE_BYTES = p.SAMPLES, p.MAX_SAMPLES_PER_PACKET, p.SAMPLE_BYTES
 _SAMPLE_ROW = np.dtype(("<i2", (6,)))
 """One sample on the wire: gx, gy, gz, ax, ay, az (frombuffer gives (n, 6) int16 rows)."""
 _WRAP32 = 1 << 32
@@ -299,9 +300,9 @@ class LinkDecoder:
                 self.last_error = body[1]
                 continue
             packet_type = body[0]
-            if (packet_type == p.SAMPLES and len(body) > _COUNT_AT
-                    and 1 <= body[_COUNT_AT] <= p.MAX_SAMPLES_PER_PACKET
-                    and len(body) == _SAMPLES_BODY_BYTES + p.SAMPLE_BYTES * body[_COUNT_AT]):
+            if (packet_type == _SAMPLES and len(body) > _COUNT_AT
+                    and 1 <= body[_COUNT_AT] <= _MAX_COUNT
+                    and len(body) == _SAMPLES_BODY_BYTES + _SAMPLE_BYTES * body[_COUNT_AT]):
                 # A valid SAMPLES packet (the common case), checked as samples_count would.
                 self._packets += 1
                 if self.sensor == 0:
@@ -530,16 +531,19 @@ class LinkDecoder:
         self._last_seq = seq
         self._last_t0 = t0
         self._t_ticks = t_ticks
-        self._end_ticks = t_ticks + count * self._ticks_per_sample
-        self._last_period_ticks = self._ticks_per_sample
+        ticks_per_sample = self._ticks_per_sample
+        self._end_ticks = t_ticks + count * ticks_per_sample
+        self._last_period_ticks = ticks_per_sample
         self._pending_gap = False
+        counts = self._counts
         if gap:
-            self._gap_packets.append(len(self._counts))
+            self._gap_packets.append(len(counts))
         self._starts.append(self._offset_s + (t_ticks - self._origin_ticks) * self._tick_s)
-        self._counts.append(count)
+        counts.append(count)
         self._temps.append(temperature)
         self._chunks.append(body[offset + p.SAMPLES_HEADER_BYTES:])
-        self._batch_lost += lost
+        if lost:
+            self._batch_lost += lost
 
     def _flush(self) -> None:
         """Turn the collected SAMPLES packets into one block."""
