@@ -143,9 +143,9 @@ class Checker:
 
     Rows carry their stream's number, so a batch of streams is checked at once: each decoded
     row must be among the rows of the valid SAMPLES packets of its own stream, and time must
-    increase from row to row within a stream. The rows of a batch are built in one go at
-    :meth:`check` (a stream has few samples: numpy calls per block would cost more than the
-    decoder).
+    increase from row to row within a stream. A batch's rows and their keys are built in one
+    go at :meth:`check` (a stream has few samples: numpy calls per block or per packet would
+    cost more than the decoder).
     """
 
     BATCH = 2000
@@ -166,7 +166,7 @@ class Checker:
         self._times: list[np.ndarray] = []
         self._decoded_ids: list[int] = []
         self._decoded_counts: list[int] = []
-        # The rows of the valid SAMPLES packets (gx..az, temperature), and their streams.
+        # The data keys of the rows of the valid SAMPLES packets, and their streams.
         self._allowed: list[np.ndarray] = []
         self._allowed_ids: list[int] = []
         self._allowed_counts: list[int] = []
