@@ -17,6 +17,8 @@ run is reproducible; with them, one 8-byte burst in about 20 000 such bursts hit
 from __future__ import annotations
 
 import binascii
+import functools
+from collections.abc import Callable
 
 import numpy as np
 from cobs import cobs
@@ -254,13 +256,20 @@ def _lemire_integer(rng: np.random.Generator, low: int, high: int) -> int:
         return low
     if span > 1 << 32:
         return int(rng.integers(low, high))
-    bits = rng.bit_generator.ctypes
-    scaled = bits.next_uint32(bits.state) * span
+    next_uint32, state = _uint32_source(rng)
+    scaled = next_uint32(state) * span
     if scaled & 0xFFFFFFFF < span:
         threshold = ((1 << 32) - span) % span
         while scaled & 0xFFFFFFFF < threshold:
-            scaled = bits.next_uint32(bits.state) * span
+            scaled = next_uint32(state) * span
     return low + (scaled >> 32)
+
+
+@functools.lru_cache(maxsize=4)
+def _uint32_source(rng: np.random.Generator) -> tuple[Callable[[object], int], object]:
+    """The bit generator's own next_uint32 and its state (ctypes), as numpy's draws use them."""
+    bits = rng.bit_generator.ctypes
+    return bits.next_uint32, bits.state
 
 
 def _lemire_matches_numpy() -> bool:

@@ -565,7 +565,7 @@ class LinkDecoder:
             # Few packets of few samples each: numpy calls, not the rows, are the cost here.
             t_s = np.array(self._starts).repeat(counts) + np.concatenate(
                 [offsets_s[:count] for count in counts])
-            temp_raw = np.repeat(np.array(self._temps, dtype=np.int16), counts)
+            temp_raw = np.array(self._temps, dtype=np.int16).repeat(counts)
             if self._gap_packets:
                 packet_first = list(accumulate(counts, initial=0))
                 gap[[packet_first[i] for i in self._gap_packets]] = True
