@@ -47,18 +47,26 @@ otherwise the board dropped the data (``cause="board"``), and its STATUS says wh
 
 from __future__ import annotations
 
+import functools
 import math
 import struct
 from dataclasses import dataclass
+from itertools import accumulate
 
 import numpy as np
 
 from app.core.samples import RawBlock, ScaleFactors
 from drivers import lsm6dsox
 from drivers.link import protocol as p
-from drivers.link.framing import FrameError, FrameSplitter, unframe
+from drivers.link.framing import FrameSplitter, check_frame
 
 _SAMPLES_HEADER = struct.Struct("<HIBh")
+_COUNT_AT = 1 + 6
+"""Where a SAMPLES body (type byte first) holds its sample count."""
+_SAMPLES_BODY_BYTES = 1 + p.SAMPLES_HEADER_BYTES
+_SAMPLES, _MAX_COUNT, _SAMPLE_BYTES = p.SAMPLES, p.MAX_SAMPLES_PER_PACKET, p.SAMPLE_BYTES
+_SAMPLE_ROW = np.dtype(("<i2", (6,)))
+"""One sample on the wire: gx, gy, gz, ax, ay, az (frombuffer gives (n, 6) int16 rows)."""
 _WRAP32 = 1 << 32
 _MASK32 = _WRAP32 - 1
 _HALF32 = 1 << 31
@@ -134,13 +142,29 @@ class GapReport:
 
 def scale_factors(config: p.Config, magnetometer: p.Magnetometer | None = None) -> ScaleFactors:
     """How the raw numbers of a device with this CONFIG (and MAGNETOMETER) become SI units."""
+    return _scale_factors(config.accel_fs_g, config.gyro_fs_dps,
+                          magnetometer.ut_per_lsb if magnetometer is not None else 1.0)
+
+
+@functools.lru_cache(maxsize=64, typed=True)
+def _scale_factors(accel_fs_g: int, gyro_fs_dps: int, mag_ut_per_lsb: float) -> ScaleFactors:
+    """One (immutable) :class:`ScaleFactors` per setting: a decoder is made per connection and
+    a CONFIG may come again and again, so they are not computed each time."""
     return ScaleFactors(
-        accel_m_s2_per_lsb=lsm6dsox.accel_m_s2_per_lsb(config.accel_fs_g),
-        gyro_rad_s_per_lsb=lsm6dsox.gyro_rad_s_per_lsb(config.gyro_fs_dps),
+        accel_m_s2_per_lsb=lsm6dsox.accel_m_s2_per_lsb(accel_fs_g),
+        gyro_rad_s_per_lsb=lsm6dsox.gyro_rad_s_per_lsb(gyro_fs_dps),
         temp_degc_per_lsb=1.0 / lsm6dsox.TEMP_LSB_PER_DEGC,
         temp_offset_degc=lsm6dsox.TEMP_OFFSET_DEGC,
-        mag_ut_per_lsb=magnetometer.ut_per_lsb if magnetometer is not None else 1.0,
+        mag_ut_per_lsb=mag_ut_per_lsb,
     )
+
+
+@functools.lru_cache(maxsize=64)
+def _sample_offsets_s(odr_mhz: int) -> np.ndarray:
+    """Time of sample ``i`` of a packet after its first, ``i / ODR`` (read-only, shared)."""
+    offsets_s = np.arange(p.MAX_SAMPLES_PER_PACKET) * (1000.0 / odr_mhz)
+    offsets_s.flags.writeable = False
+    return offsets_s
 
 
 class LinkDecoder:
@@ -260,21 +284,32 @@ class LinkDecoder:
         """
         self._bytes += len(data)
         packets: list[p.Packet] = []
-        for frame in self._splitter.feed(data):
-            if self._splitter.oversized != self._oversized_seen:
-                self._corrupt_since_samples += self._splitter.oversized - self._oversized_seen
-                self._oversized_seen = self._splitter.oversized
-            try:
-                body = unframe(frame)
-            except FrameError as exc:
-                if exc.kind == "crc":
+        frames = self._splitter.feed(data)
+        if frames and self._splitter.oversized != self._oversized_seen:
+            # Runs too long to be frames count as corrupt frames before the first frame after.
+            self._corrupt_since_samples += self._splitter.oversized - self._oversized_seen
+            self._oversized_seen = self._splitter.oversized
+        for frame in frames:
+            body = check_frame(frame)
+            if isinstance(body, tuple):  # (kind, message) of a bad frame
+                if body[0] == "crc":
                     self._crc_errors += 1
                 else:
                     self._undecodable += 1
                 self._corrupt_since_samples += 1
-                self.last_error = str(exc)
+                self.last_error = body[1]
                 continue
             packet_type = body[0]
+            if (packet_type == _SAMPLES and len(body) > _COUNT_AT
+                    and 1 <= body[_COUNT_AT] <= _MAX_COUNT
+                    and len(body) == _SAMPLES_BODY_BYTES + _SAMPLE_BYTES * body[_COUNT_AT]):
+                # A valid SAMPLES packet (the common case), checked as samples_count would.
+                self._packets += 1
+                if self.sensor == 0:
+                    self._on_samples(body, body[_COUNT_AT])
+                elif self._armed is None:
+                    self._other_sensor += 1
+                continue
             if packet_type in (p.SAMPLES, p.SAMPLES_INDEXED):
                 try:
                     index, offset = self._samples_index(body)
@@ -496,16 +531,19 @@ class LinkDecoder:
         self._last_seq = seq
         self._last_t0 = t0
         self._t_ticks = t_ticks
-        self._end_ticks = t_ticks + count * self._ticks_per_sample
-        self._last_period_ticks = self._ticks_per_sample
+        ticks_per_sample = self._ticks_per_sample
+        self._end_ticks = t_ticks + count * ticks_per_sample
+        self._last_period_ticks = ticks_per_sample
         self._pending_gap = False
+        counts = self._counts
         if gap:
-            self._gap_packets.append(len(self._counts))
+            self._gap_packets.append(len(counts))
         self._starts.append(self._offset_s + (t_ticks - self._origin_ticks) * self._tick_s)
-        self._counts.append(count)
+        counts.append(count)
         self._temps.append(temperature)
         self._chunks.append(body[offset + p.SAMPLES_HEADER_BYTES:])
-        self._batch_lost += lost
+        if lost:
+            self._batch_lost += lost
 
     def _flush(self) -> None:
         """Turn the collected SAMPLES packets into one block."""
@@ -513,23 +551,24 @@ class LinkDecoder:
             return
         config, scale = self._config, self._scale
         assert config is not None and scale is not None
-        period_s = 1000.0 / config.odr_mhz
-        data = np.frombuffer(b"".join(self._chunks), dtype="<i2").astype(np.int16)
-        data = data.reshape(-1, 6)
+        offsets_s = _sample_offsets_s(config.odr_mhz)
+        data = np.frombuffer(b"".join(self._chunks), dtype=_SAMPLE_ROW).astype(np.int16)
         n = data.shape[0]
         gap = np.zeros(n, dtype=bool)
-        if len(self._counts) == 1:  # common at low rates: skip the bookkeeping
-            t_s = self._starts[0] + np.arange(n) * period_s
-            temp_raw = np.full(n, self._temps[0], dtype=np.int16)
+        counts = self._counts
+        if len(counts) == 1:  # common at low rates: skip the bookkeeping
+            t_s = self._starts[0] + offsets_s[:n]
+            temp_raw = np.empty(n, dtype=np.int16)
+            temp_raw.fill(self._temps[0])
             gap[0] = bool(self._gap_packets)
         else:
-            counts = np.array(self._counts, dtype=np.int64)
-            packet_first = np.cumsum(counts) - counts
-            within = np.arange(n) - np.repeat(packet_first, counts)
-            t_s = np.repeat(np.array(self._starts), counts) + within * period_s
-            temp_raw = np.repeat(np.array(self._temps, dtype=np.int16), counts)
+            # Few packets of few samples each: numpy calls, not the rows, are the cost here.
+            t_s = np.array(self._starts).repeat(counts) + np.concatenate(
+                [offsets_s[:count] for count in counts])
+            temp_raw = np.array(self._temps, dtype=np.int16).repeat(counts)
             if self._gap_packets:
-                gap[packet_first[self._gap_packets]] = True
+                packet_first = list(accumulate(counts, initial=0))
+                gap[[packet_first[i] for i in self._gap_packets]] = True
         self._blocks.append(
             RawBlock(
                 t_s=t_s,

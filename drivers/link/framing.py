@@ -60,18 +60,34 @@ def unframe(frame: bytes) -> bytes:
         ``kind="undecodable"`` for bad COBS or a length outside 3..512 bytes, ``kind="crc"``
         when the CRC does not match.
     """
+    body = check_frame(frame)
+    if isinstance(body, tuple):
+        raise FrameError(*body)
+    return body
+
+
+_CRC_MISMATCH = ("crc", "CRC mismatch")
+
+
+def check_frame(frame: bytes) -> bytes | tuple[str, str]:
+    """:func:`unframe` without exceptions: the packet, or the ``(kind, message)`` of the
+    :class:`FrameError` that :func:`unframe` would raise.
+
+    For a decoder on a noisy link, where bad frames are common: making, raising and catching
+    an exception per bad frame costs more than the checks.
+    """
     if len(frame) > MAX_FRAME_BYTES:
-        raise FrameError("undecodable", f"frame of {len(frame)} bytes is too long")
+        return "undecodable", f"frame of {len(frame)} bytes is too long"
     try:
         packet = cobs.decode(frame)
     except cobs.DecodeError as exc:
-        raise FrameError("undecodable", f"bad COBS: {exc}") from None
+        return "undecodable", f"bad COBS: {exc}"
     if not 3 <= len(packet) <= MAX_PACKET_BYTES:
-        raise FrameError("undecodable", f"decoded packet of {len(packet)} bytes")
-    view = memoryview(packet)
-    if crc16(view[:-2]) != int.from_bytes(view[-2:], "little"):
-        raise FrameError("crc", "CRC mismatch")
-    return packet[:-2]
+        return "undecodable", f"decoded packet of {len(packet)} bytes"
+    body = packet[:-2]
+    if binascii.crc_hqx(body, CRC_INIT) != packet[-2] | packet[-1] << 8:  # little-endian
+        return _CRC_MISMATCH
+    return body
 
 
 class FrameSplitter:
