@@ -46,6 +46,8 @@ def test_window_shows_live_data(qtbot, window, artifacts_dir):
     assert window.plots.angle_curves["roll"].isVisible()
     assert window.plots.angle_curves["ref_roll"].isVisible()
     assert window.truth_label.text().startswith("Simulator truth")
+    assert window.plots.legend_entries(window.plots.angle_plot) == [
+        "roll", "pitch", "true roll", "true pitch"]
     path = os.path.join(artifacts_dir, "main_window.png")
     assert window.grab().save(path)
 

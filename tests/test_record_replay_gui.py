@@ -227,3 +227,12 @@ def test_a_recordings_own_reference_is_named_not_called_the_simulators_truth(
                     timeout=TIMEOUT_MS)
     assert "Simulator" not in window.truth_label.text()
     assert "The reference: optical motion capture (BROAD)" in window.truth_label.toolTip()
+    # The angle plot's dashed traces are named as measured, not as the simulator's truth.
+    plots = window.plots
+    assert plots.legend_entries(plots.angle_plot)[2:] == ["reference roll", "reference pitch"]
+    assert "reference roll" in plots.angle_plot.titleLabel.text
+    assert "true roll" not in plots.angle_plot.titleLabel.text
+    # A simulator again: its truth is called truth again.
+    with qtbot.waitSignal(window.session.connected, timeout=TIMEOUT_MS):
+        window.connect_device("sim://static?seed=2")
+    assert plots.legend_entries(plots.angle_plot)[2:] == ["true roll", "true pitch"]

@@ -20,6 +20,12 @@ def reference_title(source: str) -> str:
     return "Simulator truth" if source == SIMULATOR_REFERENCE else "Reference"
 
 
+def is_measured_reference(info: DeviceInfo) -> bool:
+    """Whether ``info``'s stream carries a measured reference (a recording's motion capture),
+    not the simulator's truth (a stream without a named reference is the simulator's)."""
+    return bool(info.reference) and info.reference != SIMULATOR_REFERENCE
+
+
 def printable(text: str) -> str:
     """``text`` safe to print on a terminal: control and format characters (escape sequences,
     carriage returns, bidirectional overrides) become ``\\xNN`` / ``\\uNNNN`` escapes.

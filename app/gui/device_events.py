@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from app.core.devices import DeviceInfo
+from app.core.devices import DeviceInfo, is_measured_reference
 from app.core.filters import FILTERS
 from app.core.self_test import SelfTestReport
 from app.services.devices import has_simulator_controls, is_replay_url
@@ -38,6 +38,7 @@ class DeviceEvents:
         window.device_bar.select_url(info.url)
         window.device_bar.set_state("streaming", "Streaming")
         window.device_panel.show_info(info)
+        window.plots.name_reference(is_measured_reference(info))
         window.status_device.setText(
             f"{replay_caption(info) or info.name}  ·  {info.odr_hz:.1f} Hz")
         window.replay_bar.setVisible(is_replay_url(info.url))

@@ -321,6 +321,18 @@ class LivePlots(QWidget):
         self._pens.pop(curve, None)
         self._legends[plot] = [entry for entry in self._legends[plot] if entry[1] is not curve]
 
+    def name_reference(self, measured: bool) -> None:
+        """Call the dashed angle traces "reference roll/pitch" for a measured reference (a
+        recording's motion capture), "true roll/pitch" for the simulator's truth."""
+        word = "reference" if measured else "true"
+        curves = {self.angle_curves["ref_roll"]: f"{word} roll",
+                  self.angle_curves["ref_pitch"]: f"{word} pitch"}
+        entries = self._legends[self.angle_plot]
+        renamed = [(curves.get(curve, label), curve) for label, curve in entries]
+        if renamed != entries:
+            self._legends[self.angle_plot] = renamed
+            self._show_legend(self.angle_plot)
+
     def legend_entries(self, plot: pg.PlotItem) -> list[str]:
         """The labels in ``plot``'s legend line, in order."""
         return [label for label, _ in self._legends.get(plot, [])]
