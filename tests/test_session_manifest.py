@@ -73,9 +73,11 @@ def test_replaying_a_manifest_keeps_the_sensors_in_sync(qtbot, group, tmp_path) 
     assert not session.sensors[1].shared_clock
     replay = SessionReplay(session)
     # The manifest's time maps put sensor 1's clock 7.5 s ahead of sensor 0's (2000 ppm fast:
-    # too little to see in a session this short, so within what receive jitter allows).
+    # too little to see in a session this short, so within what receive jitter allows). The
+    # devices run at 10x speed, so the host's receive jitter counts ten times in device time:
+    # 15 ms of it (a loaded 2-core machine running three test processes) is 0.15 s here.
     t0 = replay.recordings[0].t_s[[0, -1]]
-    assert np.allclose(replay.to_member_clock(0, 1, t0), t0 * (1 + 2000e-6) + 7.5, atol=0.05)
+    assert np.allclose(replay.to_member_clock(0, 1, t0), t0 * (1 + 2000e-6) + 7.5, atol=0.15)
     period = 1.0 / 104.0 / 10.0 * 1.05  # one sample of the 10x-speed device, on the host
     position = replay.start_s
     checked = 0
