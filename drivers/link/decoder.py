@@ -61,10 +61,7 @@ from drivers.link import protocol as p
 from drivers.link.framing import FrameSplitter, check_frame
 
 _SAMPLES_HEADER = struct.Struct("<HIBh")
-_COUNT_AT = 1 + 6
-"""Where a SAMPLES body (type byte first) holds its sample count."""
-_SAMPLES_BODY_BYTES = 1 + p.SAMPLES_HEADER_BYTES
-_SAMPLES, _MAX_COUNT, _SAMPLE_BYTES = p.SAMPLES, p.MAX_SAMPLES_PER_PACKET, p.SAMPLE_BYTES
+_SAMPLES = p.SAMPLES
 _SAMPLE_ROW = np.dtype(("<i2", (6,)))
 """One sample on the wire: gx, gy, gz, ax, ay, az (frombuffer gives (n, 6) int16 rows)."""
 _WRAP32 = 1 << 32
@@ -300,13 +297,11 @@ class LinkDecoder:
                 self.last_error = body[1]
                 continue
             packet_type = body[0]
-            if (packet_type == _SAMPLES and len(body) > _COUNT_AT
-                    and 1 <= body[_COUNT_AT] <= _MAX_COUNT
-                    and len(body) == _SAMPLES_BODY_BYTES + _SAMPLE_BYTES * body[_COUNT_AT]):
-                # A valid SAMPLES packet (the common case), checked as samples_count would.
+            count = p.valid_samples_count(body, 1) if packet_type == _SAMPLES else 0
+            if count:  # a valid SAMPLES packet (the common case); the rest are sorted below
                 self._packets += 1
                 if self.sensor == 0:
-                    self._on_samples(body, body[_COUNT_AT])
+                    self._on_samples(body, count)
                 elif self._armed is None:
                     self._other_sensor += 1
                 continue

@@ -85,7 +85,7 @@ def check_frame(frame: bytes) -> bytes | tuple[str, str]:
     if not 3 <= len(packet) <= MAX_PACKET_BYTES:
         return "undecodable", f"decoded packet of {len(packet)} bytes"
     body = packet[:-2]
-    if binascii.crc_hqx(body, CRC_INIT) != packet[-2] | packet[-1] << 8:  # little-endian
+    if crc16(body) != packet[-2] | packet[-1] << 8:  # little-endian
         return _CRC_MISMATCH
     return body
 

@@ -285,11 +285,27 @@ class Samples:
         ) and np.array_equal(np.asarray(self.data), np.asarray(other.data))
 
 
+def valid_samples_count(buffer: bytes | memoryview, offset: int) -> int:
+    """The sample count of a valid SAMPLES payload at ``offset`` (the rest of ``buffer``), 0 for
+    an invalid one: :func:`samples_count` without an exception, for a decoder's hot path."""
+    length = len(buffer) - offset
+    if length < SAMPLES_HEADER_BYTES:
+        return 0
+    count = buffer[offset + 6]
+    valid = 1 <= count <= MAX_SAMPLES_PER_PACKET and length == (
+        SAMPLES_HEADER_BYTES + SAMPLE_BYTES * count)
+    return count if valid else 0
+
+
 def samples_count(buffer: bytes | memoryview, offset: int, length: int | None = None) -> int:
     """Validate a SAMPLES payload at ``offset`` and return its sample count.
 
     ``length`` is the payload's length (default: the rest of ``buffer``).
     """
+    if length is None:
+        count = valid_samples_count(buffer, offset)
+        if count:
+            return count
     length = len(buffer) - offset if length is None else length
     if length < SAMPLES_HEADER_BYTES:
         raise PacketError(f"SAMPLES payload is {length} bytes, at least 9 expected")
