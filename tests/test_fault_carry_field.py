@@ -159,3 +159,39 @@ def test_without_a_field_the_carry_solves_as_before() -> None:
         found = found or carry.push(rotation, accel, 0.25, field + rng.standard_normal(3) * 0.2)
     assert found is not None and found[0] == 2
     assert 1.6 <= math.degrees(found[1][2]) <= 2.4
+
+
+def test_the_evaluation_carries_a_recordings_field_and_not_a_simulators_raw_one() -> None:
+    """``evaluate-faults`` takes a recording's field as calibrated (BROAD's is, by its
+    authors), or through the recording's own calibration, and a simulator's raw field (its
+    board's hard iron in it) not at all: every detector it makes for a source is told so."""
+    from app.core.faults.evaluation import clean_events
+    from app.services.fault_evaluation import (
+        CleanStream,
+        FaultEvaluationSettings,
+        resolve_fault_sources,
+    )
+    from tests.broad_trials import trial_path
+
+    faulty = _stream(2.0, 2, 14.0)
+    spec = SensorSpec(odr_hz=ODR)
+
+    def bias_events(stream: CleanStream) -> list:
+        return [e for e in clean_events(stream.clean, spec, stream.detector_for())
+                if e.kind == "bias"]
+
+    found = bias_events(CleanStream(faulty, faulty, spec, None, field_calibrated=True))
+    assert found and found[0].channel == "gz" and "field" in found[0].message, found
+    assert bias_events(CleanStream(faulty, faulty, spec, None)) == []  # raw: gravity alone
+    hard_iron = np.array([20.0, -35.0, 12.0])
+    assert faulty.mag_ut is not None
+    with_iron = SampleBlock(faulty.t_s, faulty.accel_m_s2, faulty.gyro_rad_s, faulty.temp_degc,
+                            faulty.gap, None, faulty.mag_ut + hard_iron)
+    through = bias_events(CleanStream(with_iron, with_iron, spec, None, field_calibration=(
+        MagnetometerCalibration(hard_iron_ut=hard_iron))))
+    assert through and through[0].channel == "gz", through
+    # a BROAD trial (no calibration of its own) is loaded as calibrated
+    source = resolve_fault_sources([str(trial_path("01_undisturbed_slow_rotation_A"))])[0]
+    stream = source.load(FaultEvaluationSettings())
+    assert stream.field_calibrated and stream.field_calibration is None
+    assert stream.detector_for()(stream.spec).field_calibrated

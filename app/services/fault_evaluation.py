@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from app.core.calibration import MagnetometerCalibration
 from app.core.faults import SensorSpec
 from app.core.faults.detector import FaultDetector
 from app.core.faults.evaluation import (
@@ -33,12 +34,15 @@ from app.core.faults.evaluation import (
     SourceSweep,
     clean_events,
     evaluation_json,
+    field_trusting,
     motion_runs,
     sample_rows,
     summarize_group,
     sweep_samples,
 )
 from app.core.faults.events import CHANNELS, FaultEvent
+from app.core.faults.recording import recorded_field_calibration
+from app.core.recording.format import KEY_MAGNETOMETER
 from app.core.recording.reader import read_recording
 from app.core.samples import SampleBlock
 from app.services.acquisition import Acquisition, Until
@@ -99,6 +103,25 @@ class CleanStream:
     clean: SampleBlock
     spec: SensorSpec
     lsb: np.ndarray | None
+    field_calibrated: bool = False
+    """The field comes free of the sensor's own iron (a recording's without a calibration of
+    its own, as BROAD's, calibrated by its authors): the gyro bias test may carry it."""
+    field_calibration: MagnetometerCalibration | None = None
+    """A recording's own magnetometer calibration (applied while it was recorded)."""
+
+    def detector_for(self, make: Callable[[SensorSpec], FaultDetector] = FaultDetector
+                     ) -> Callable[[SensorSpec], FaultDetector]:
+        """How to make a detector for this stream: ``make``, told what to trust of the field
+        (a simulator's raw field holds its board's hard iron: gravity alone)."""
+        calibration = self.field_calibration
+        if calibration is None:
+            return field_trusting(make) if self.field_calibrated else make
+
+        def made(spec: SensorSpec) -> FaultDetector:
+            detector = make(spec)
+            detector.field_calibration = calibration
+            return detector
+        return made
 
 
 @dataclass(slots=True)
@@ -221,7 +244,9 @@ def _simulator_stream(url: str, settings: FaultEvaluationSettings) -> CleanStrea
 def _recording_stream(path: Path) -> CleanStream:
     recording = read_recording(path)
     samples = recording.sample_block(None)
-    return CleanStream(samples, samples, recording_spec(recording), None)
+    calibration = recorded_field_calibration(recording.metadata.get(KEY_MAGNETOMETER))
+    return CleanStream(samples, samples, recording_spec(recording), None,
+                       field_calibrated=calibration is None, field_calibration=calibration)
 
 
 def _join(blocks: list[SampleBlock]) -> SampleBlock:
@@ -256,7 +281,8 @@ def run_fault_evaluation(
         sweep = sweep_samples(
             stream.sweep, stream.spec, label=source.label, group=source.group,
             onset_s=settings.onset_s, channels=channels, multiples=settings.multiples,
-            thetas=settings.thetas, seed=settings.seed, lsb=stream.lsb, clean=stream.clean)
+            thetas=settings.thetas, seed=settings.seed, lsb=stream.lsb, clean=stream.clean,
+            detector=stream.detector_for())
         result.sweeps.append(sweep)
         if progress is not None:
             progress(f"{source.group}/{source.label}: {sweep.duration_s:.0f} s swept, "
@@ -309,9 +335,10 @@ def run_motion_evaluation(
         moving = None
         if source.group != SIMULATOR_GROUP:
             moving = _moving_at(source, onset_s)
+        made = stream.detector_for(detector)
         runs = motion_runs(stream.sweep, stream.spec, source=source.label, onset_s=onset_s,
-                           faults=faults, seed=seed, lsb=stream.lsb, detector=detector)
-        clean = clean_events(stream.clean, stream.spec, detector)
+                           faults=faults, seed=seed, lsb=stream.lsb, detector=made)
+        clean = clean_events(stream.clean, stream.spec, made)
         seconds = float(stream.clean.t_s[-1] - stream.clean.t_s[0]) if len(stream.clean) else 0.0
         results.append(MotionSource(source.label, source.group, onset_s, moving, seconds, clean,
                                     runs))

@@ -135,12 +135,12 @@ class DetectorRun:
     events: list[FaultEvent]
 
 
-def run_detector(samples: SampleBlock, spec: SensorSpec, block_s: float = BLOCK_S
+def run_detector(samples: SampleBlock, spec: SensorSpec, block_s: float = BLOCK_S,
+                 detector_for: Callable[[SensorSpec], FaultDetector] = FaultDetector,
                  ) -> DetectorRun:
-    """A fresh :class:`FaultDetector` over ``samples`` in blocks of ``block_s``. The field
-    is taken as calibrated (BROAD's is, by its authors)."""
-    detector = FaultDetector(spec)
-    detector.field_calibrated = True
+    """A fresh detector (``detector_for``: how to make one) over ``samples`` in blocks of
+    ``block_s``."""
+    detector = detector_for(spec)
     n = len(samples)
     size = max(1, round(block_s * spec.odr_hz))
     flags = np.zeros((n, len(CHANNELS)), dtype=np.uint8)
@@ -150,6 +150,18 @@ def run_detector(samples: SampleBlock, spec: SensorSpec, block_s: float = BLOCK_
         events += detector.update(sample_rows(samples, start, stop))
         flags[start:stop] = detector.flags
     return DetectorRun(flags, events)
+
+
+def field_trusting(make: Callable[[SensorSpec], FaultDetector] = FaultDetector
+                   ) -> Callable[[SensorSpec], FaultDetector]:
+    """``make``, its detectors told the field comes calibrated (a recording's, such as
+    BROAD's, calibrated by its authors): their gyro bias test carries the field as the
+    earth's. A simulator's raw field holds the board's hard iron and must not be taken so."""
+    def made(spec: SensorSpec) -> FaultDetector:
+        detector = make(spec)
+        detector.field_calibrated = True
+        return detector
+    return made
 
 
 def inject(samples: SampleBlock, specs: Sequence[FaultSpec], seed: int = 0,
@@ -247,13 +259,15 @@ def sweep_samples(
     channels: Sequence[int] = tuple(range(6)), multiples: Sequence[float] = NOISE_MULTIPLES,
     thetas: Sequence[int] = THETAS, seed: int = 0, lsb: np.ndarray | None = None,
     clean: SampleBlock | None = None, progress: Callable[[str], None] | None = None,
+    detector: Callable[[SensorSpec], FaultDetector] = FaultDetector,
 ) -> SourceSweep:
     """NDR, FDI and false alarms of one source.
 
     ``samples`` are the clean stream the noise is injected into (from ``onset_s`` seconds
     after its first sample to its end); ``clean`` a longer clean stream beginning with the
     same samples for the false alarms (default: ``samples``). ``lsb`` re-quantises what is
-    injected (a simulated chip). ``progress`` gets a line per channel.
+    injected (a simulated chip). ``progress`` gets a line per channel; ``detector``: how to
+    make a detector for the source (:func:`field_trusting`).
     """
     if len(samples) == 0:
         raise ValueError(f"{label}: no samples")
@@ -264,7 +278,7 @@ def sweep_samples(
         raise ValueError(f"{label}: the onset ({onset_s:g} s) is after the end "
                          f"({float(samples.t_s[-1]) - t0:.1f} s)")
     clean = samples if clean is None else clean
-    clean_run = run_detector(clean, spec)
+    clean_run = run_detector(clean, spec, detector_for=detector)
     noise, basis = own_noise(clean, spec)
     clean_s = _duration(clean, spec.odr_hz)
     sweep = SourceSweep(label, group, spec.odr_hz, len(samples), _duration(samples, spec.odr_hz),
@@ -278,7 +292,8 @@ def sweep_samples(
             if not (math.isfinite(sigma) and sigma > 0):
                 continue
             fault = FaultSpec("noise", CHANNELS[c], to_user_units(c, sigma), onset)
-            result = run_detector(inject(samples, [fault], seed, lsb), spec)
+            result = run_detector(inject(samples, [fault], seed, lsb), spec,
+                                  detector_for=detector)
             first = next((e.t - onset for e in result.events
                           if e.channel == CHANNELS[c] and e.t >= onset), None)
             sweep.runs.append(InjectionRun(
