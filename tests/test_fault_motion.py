@@ -214,3 +214,21 @@ def test_replay_prints_the_fault_detectors_verdict(tmp_path, capsys) -> None:
     assert main(["replay", str(source), "--filter", "complementary",
                  "--out", str(tmp_path / "angles2.csv")]) == 0
     assert "fault detector: no sensor fault" in capsys.readouterr().out
+
+
+def test_a_hard_stroke_of_the_hand_is_not_taken_for_a_bias_step(monkeypatch) -> None:
+    """sim://translation (ideal chip: no gyro error at all) strikes hard at 172-174 s: the
+    velocity moves by metres per second at the horizon's end and its fit reads a 2.8 dps bias
+    on gy; the displacement stays within reach and does not agree, so no step is declared."""
+    from app.core.faults import carry
+    from app.services.diagnosis import Diagnosis, diagnose_events
+
+    url = "sim://translation?seed=1&errors=0"
+
+    def bias_events() -> list:
+        return [e for e in diagnose_events(url, 185.0, Diagnosis()) if e.kind == "bias"]
+
+    assert bias_events() == []
+    monkeypatch.setattr(carry, "AGREEMENT", -math.inf)  # the velocity's verdict alone
+    fooled = bias_events()
+    assert fooled and fooled[0].channel == "gy" and 170.0 < fooled[0].t < 176.0, fooled

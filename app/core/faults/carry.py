@@ -24,6 +24,17 @@ while the sensor keeps its attitude: a small ridge keeps that part at zero until
 rotation makes it seen. Without a magnetometer the vertical axis's bias is found only as the
 sensor turns.
 
+**Gravity alone: the displacement must agree.** A hard stroke of the hand at the horizon's end
+moves the velocity by metres per second within half a second, where the bias's drift weighs
+most, and the fit takes it for a bias (an hour of the simulator's translation raised four 2-3
+dps steps, with an ideal chip as well). Summed once more, the velocity is a displacement: a hand
+keeps the sensor within reach while a bias's drift grows as t^3 (1.6 dps over 8 s: 20 m). So
+without the field a step is declared only where the displacement's own fit (gravity, start
+velocity and position free, the same ridge) gives the same sign and at least ``AGREEMENT``
+(half) of ``STEP_RAD_S`` on that axis. The displacement does not replace the velocity: its
+white-noise scatter overstates its weight, and in the joint fit it drowned the field (clean
+BROAD 26 raised two vertical steps), so the field's fit keeps the velocity.
+
 **With the field.** The gyro carries the earth's field as well, and the magnetometer measures
 it: per window the mean field, turned sample by sample into the window-start frame, then into
 the anchor frame, ``F_i = m0 - [m0]x A_i (b, s)`` with ``A_i`` the bias and scale error's turn
@@ -59,6 +70,9 @@ beyond the lag-1 correction, and with priors in place of the ridge an axis both 
 see weakly can wander (clean BROAD 04 and 32, held out, reached 3.9 and 4.3); a 2 dps step
 on an axis either reference sees stood at 8-26 standard errors on the tuning trials."""
 CONFIRM = 4
+AGREEMENT = 0.5
+"""Gravity alone: a step is declared only where the displacement's bias has the velocity's
+sign and at least this share of ``STEP_RAD_S`` (module docstring)."""
 RIDGE = 1e-3
 """Relative to the largest eigenvalue of the normal equations' bias block."""
 
@@ -137,6 +151,8 @@ class GravityCarry:
         self.error = np.full(3, np.inf)
         self.field_windows = 0
         """Windows of the last solve that carried the field."""
+        self.displaced = np.zeros(3)
+        """The bias the displacement gives (gravity alone; module docstring), rad/s."""
         self.field_scatter = 0.0
         self.field_correlation = 0.0
         """The field residual's lag-1 correlation in the last solve."""
@@ -171,6 +187,8 @@ class GravityCarry:
         significance = FIELD_SIGNIFICANCE if self.field_windows else SIGNIFICANCE
         big = (np.abs(self.estimate) > STEP_RAD_S) & (np.abs(self.estimate)
                                                     > significance * self.error)
+        if not self.field_windows:  # gravity alone: the displacement must drift too
+            big &= self.displaced * np.sign(self.estimate) >= AGREEMENT * STEP_RAD_S
         self._hits = self._hits + 1 if big.any() else 0
         if self._hits < CONFIRM:
             return None
@@ -232,6 +250,8 @@ class GravityCarry:
         solution = inverse @ rhs
         self.estimate = solution[6:9]
         self.error = np.sqrt(np.maximum(np.diag(inverse)[6:9], 1e-300))
+        self.displaced = _displaced_bias(velocity, drift, elapsed, self._durations[held],
+                                         gravity)
 
     def _field_part(self, measured: np.ndarray, angles: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray] | None:
@@ -343,6 +363,38 @@ FIELD_GUESS_UT = 0.5
 """The field residual's scatter assumed before the first fit has measured it."""
 NUISANCE_RIDGE = 1e-9
 """Relative ridge on the nuisance unknowns (none without a field: it must stay invertible)."""
+
+
+def _summed(values: np.ndarray, durations: np.ndarray) -> np.ndarray:
+    """The running integral over the windows of ``values`` given at each window's end (zero
+    at the anchor), by the trapezoid rule: (k, ...) -> (k, ...)."""
+    before = np.empty_like(values)
+    before[0] = 0.0
+    before[1:] = values[:-1]
+    weights = (0.5 * durations).reshape((-1,) + (1,) * (values.ndim - 1))
+    return np.cumsum((before + values) * weights, axis=0)
+
+
+def _displaced_bias(velocity: np.ndarray, drift: np.ndarray, elapsed: np.ndarray,
+                    durations: np.ndarray, gravity: np.ndarray) -> np.ndarray:
+    """The bias (3,) that fits the displacement, the velocity summed once more: ``P(t) = g
+    t^2 / 2 - v(0) t + p(t) - p(0) - [g]x M(t) (b, s)`` with ``M`` the drift kernel summed;
+    gravity, the start velocity and the start position (in the field's columns, unused here)
+    are free; the velocity fit's ridge (zeros when it cannot be solved)."""
+    k = len(durations)
+    design = np.zeros((3 * k, PARTS))
+    for axis in range(3):
+        design[axis::3, axis] = 0.5 * elapsed * elapsed
+        design[axis::3, 3 + axis] = elapsed
+        design[axis::3, 12 + axis] = 1.0
+    design[:, 6:12] = (-_skew(gravity) @ _summed(drift, durations)).reshape(3 * k, 6)
+    normal = design.T @ design
+    _ridge(normal)
+    try:
+        return np.linalg.solve(normal, design.T @ _summed(velocity, durations).reshape(3 * k)
+                               )[6:9]
+    except np.linalg.LinAlgError:
+        return np.zeros(3)
 
 
 def _with_priors(normal: np.ndarray) -> np.ndarray:
