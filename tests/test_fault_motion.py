@@ -232,3 +232,33 @@ def test_a_hard_stroke_of_the_hand_is_not_taken_for_a_bias_step(monkeypatch) -> 
     monkeypatch.setattr(carry, "AGREEMENT", -math.inf)  # the velocity's verdict alone
     fooled = bias_events()
     assert fooled and fooled[0].channel == "gy" and 170.0 < fooled[0].t < 176.0, fooled
+
+
+def test_noise_found_by_the_residual_stays_flagged_until_it_stops() -> None:
+    """1 dps on gx during BROAD's fast translation (15) is found by the residual test only;
+    in a burst of motion its ratio dips under the threshold (1.6x after 5 s). Released there,
+    the noisy windows became the channel's recent level and the light went green for good
+    while the noise went on; held down to the release level, it stays red until the noise
+    stops and goes green after."""
+    from tests.broad_trials import load_trial
+
+    samples, _ = load_trial("15_undisturbed_fast_translation_A")
+    spec = recording_spec(read_recording(trial_path("15_undisturbed_fast_translation_A")))
+    part = _slice(samples, 0.0, 96.0)
+    t0 = float(samples.t_s[0])
+    noisy = _inject(part, FaultSpec("noise", "gx", 1.0, t0 + 60.0, t0 + 80.0))
+    detector = FaultDetector(spec)
+    size = round(0.1 * spec.odr_hz)
+    states: list[tuple[float, str]] = []
+    events = []
+    for start in range(0, len(noisy), size):
+        block = sample_rows(noisy, start, min(len(noisy), start + size))
+        events += detector.update(block)
+        states.append((float(block.t_s[-1]) - t0, detector.health()["gx"]))
+    first = next(t for t, state in states if state == "fault")
+    assert 60.0 < first <= 62.0
+    assert all(state == "fault" for t, state in states if first <= t <= 80.0)
+    assert states[-1][1] == "ok"  # released after the noise stopped
+    found = [e for e in events if e.channel != "link"]
+    assert [(e.channel, e.kind) for e in found] == [("gx", "noise")]
+    assert "do not explain" in found[0].message  # the residual test's, not the band's
