@@ -37,9 +37,13 @@ def record(qtbot, group: SensorGroup, directory: Path, urls: list[str], seconds:
     qtbot.waitUntil(lambda: group.connected_count() == len(urls), timeout=15000)
     manifest = group.start_recording(directory, "arm",
                                      joints=[JointConfig(0, 1)], note="two links")
-    first = group.pipeline(0).samples
-    start = first.total_written
-    qtbot.waitUntil(lambda: first.total_written - start > seconds * 104, timeout=15000)
+    # every sensor, not just the first, for ``seconds``: under load one worker thread can
+    # starve for a moment, and at 10x speed 0.1 s of host time is a second of device time (a
+    # member with under 2 s of clock pairs gets no drift fit: its map is off tenfold)
+    buffers = [group.pipeline(k).samples for k in range(len(urls))]
+    starts = [b.total_written for b in buffers]
+    qtbot.waitUntil(lambda: all(b.total_written - s > seconds * 104
+                                for b, s in zip(buffers, starts, strict=True)), timeout=15000)
     with qtbot.waitSignal(group.sessionRecorded, timeout=10000) as written:
         group.stop_recording()
     assert written.args == [str(manifest)]
