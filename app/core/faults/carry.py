@@ -151,8 +151,6 @@ class GravityCarry:
         self.error = np.full(3, np.inf)
         self.field_windows = 0
         """Windows of the last solve that carried the field."""
-        self.displaced = np.zeros(3)
-        """The bias the displacement gives (gravity alone; module docstring), rad/s."""
         self.field_scatter = 0.0
         self.field_correlation = 0.0
         """The field residual's lag-1 correlation in the last solve."""
@@ -187,8 +185,8 @@ class GravityCarry:
         significance = FIELD_SIGNIFICANCE if self.field_windows else SIGNIFICANCE
         big = (np.abs(self.estimate) > STEP_RAD_S) & (np.abs(self.estimate)
                                                     > significance * self.error)
-        if not self.field_windows:  # gravity alone: the displacement must drift too
-            big &= self.displaced * np.sign(self.estimate) >= AGREEMENT * STEP_RAD_S
+        if big.any() and not self.field_windows:  # gravity alone: the displacement too
+            big &= self._displaced() * np.sign(self.estimate) >= AGREEMENT * STEP_RAD_S
         self._hits = self._hits + 1 if big.any() else 0
         if self._hits < CONFIRM:
             return None
@@ -210,16 +208,8 @@ class GravityCarry:
             self._rotations[held], self._accels[held], self._durations[held],
             self._turned[held], self._fields[held], has_field)
         y = velocity.reshape(3 * k)
-        # the least-squares line of each axis's velocity over time: its slope is gravity
-        centred = elapsed - elapsed.mean()
-        gravity = centred @ (velocity - velocity.mean(axis=0)) / max(float(centred @ centred),
-                                                                      1e-300)
-        # first gravity and the start velocity alone, then with the bias and scale errors
-        design = np.zeros((3 * k, PARTS))
-        for axis in range(3):  # gravity times the time elapsed, the start velocity
-            design[axis::3, axis] = elapsed
-            design[axis::3, 3 + axis] = 1.0
-        design[:, 6:12] = (-_skew(gravity) @ drift).reshape(3 * k, 6)
+        # gravity times the time elapsed and the start velocity, the bias and scale errors
+        design = _design(((0, elapsed), (3, 1.0)), drift, _gravity(elapsed, velocity))
         gram = design.T @ design
         fitted = _fit(design, y, 3 * k - 12, gram=gram)
         if fitted is None:
@@ -250,8 +240,27 @@ class GravityCarry:
         solution = inverse @ rhs
         self.estimate = solution[6:9]
         self.error = np.sqrt(np.maximum(np.diag(inverse)[6:9], 1e-300))
-        self.displaced = _displaced_bias(velocity, drift, elapsed, self._durations[held],
-                                         gravity)
+
+    def _displaced(self) -> np.ndarray:
+        """The bias (3,) the displacement gives over the horizon: the velocity summed once
+        more, ``P(t) = g t^2 / 2 - v(0) t + p(t) - p(0) - [g]x M(t) (b, s)`` with ``M`` the
+        drift kernel summed; gravity, the start velocity and the start position (in the
+        field's columns, unused without the field) free; the velocity fit's ridge. Asked only
+        for a step the velocity already declares (zeros when it cannot be solved)."""
+        held = slice(self._head, self._head + self._count)
+        durations = self._durations[held]
+        velocity, drift, elapsed, _, _ = _carry_sums(
+            self._rotations[held], self._accels[held], durations, self._turned[held],
+            self._fields[held], self._has_field[held])
+        design = _design(((0, 0.5 * elapsed * elapsed), (3, elapsed), (12, 1.0)),
+                         _summed(drift, durations), _gravity(elapsed, velocity))
+        normal = design.T @ design
+        _ridge(normal)
+        try:
+            return np.linalg.solve(normal, design.T @ _summed(velocity, durations).reshape(-1)
+                                   )[6:9]
+        except np.linalg.LinAlgError:
+            return np.zeros(3)
 
     def _field_part(self, measured: np.ndarray, angles: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray] | None:
@@ -375,26 +384,25 @@ def _summed(values: np.ndarray, durations: np.ndarray) -> np.ndarray:
     return np.cumsum((before + values) * weights, axis=0)
 
 
-def _displaced_bias(velocity: np.ndarray, drift: np.ndarray, elapsed: np.ndarray,
-                    durations: np.ndarray, gravity: np.ndarray) -> np.ndarray:
-    """The bias (3,) that fits the displacement, the velocity summed once more: ``P(t) = g
-    t^2 / 2 - v(0) t + p(t) - p(0) - [g]x M(t) (b, s)`` with ``M`` the drift kernel summed;
-    gravity, the start velocity and the start position (in the field's columns, unused here)
-    are free; the velocity fit's ridge (zeros when it cannot be solved)."""
-    k = len(durations)
+def _gravity(elapsed: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+    """Gravity in the anchor frame: the slope of each axis's least-squares line of the summed
+    velocity over time."""
+    centred = elapsed - elapsed.mean()
+    return centred @ (velocity - velocity.mean(axis=0)) / max(float(centred @ centred), 1e-300)
+
+
+def _design(terms: tuple[tuple[int, np.ndarray | float], ...], kernel: np.ndarray,
+            gravity: np.ndarray) -> np.ndarray:
+    """The gravity part's design (3k, PARTS): per ``(column, values)`` of ``terms`` the
+    per-axis columns ``column + axis`` (gravity's, the start velocity's, ...), and the bias
+    and scale error's drift ``-[g]x kernel`` (kernel (k, 3, 6))."""
+    k = len(kernel)
     design = np.zeros((3 * k, PARTS))
     for axis in range(3):
-        design[axis::3, axis] = 0.5 * elapsed * elapsed
-        design[axis::3, 3 + axis] = elapsed
-        design[axis::3, 12 + axis] = 1.0
-    design[:, 6:12] = (-_skew(gravity) @ _summed(drift, durations)).reshape(3 * k, 6)
-    normal = design.T @ design
-    _ridge(normal)
-    try:
-        return np.linalg.solve(normal, design.T @ _summed(velocity, durations).reshape(3 * k)
-                               )[6:9]
-    except np.linalg.LinAlgError:
-        return np.zeros(3)
+        for column, values in terms:
+            design[axis::3, column + axis] = values
+    design[:, 6:12] = (-_skew(gravity) @ kernel).reshape(3 * k, 6)
+    return design
 
 
 def _with_priors(normal: np.ndarray) -> np.ndarray:
