@@ -113,15 +113,9 @@ class CleanStream:
                      ) -> Callable[[SensorSpec], FaultDetector]:
         """How to make a detector for this stream: ``make``, told what to trust of the field
         (a simulator's raw field holds its board's hard iron: gravity alone)."""
-        calibration = self.field_calibration
-        if calibration is None:
-            return field_trusting(make) if self.field_calibrated else make
-
-        def made(spec: SensorSpec) -> FaultDetector:
-            detector = make(spec)
-            detector.field_calibration = calibration
-            return detector
-        return made
+        if self.field_calibration is None and not self.field_calibrated:
+            return make
+        return field_trusting(make, self.field_calibration)
 
 
 @dataclass(slots=True)

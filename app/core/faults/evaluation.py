@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from app.core.calibration import MagnetometerCalibration
 from app.core.faults.detector import D4_GAIN, FaultDetector
 from app.core.faults.events import CHANNELS, FaultEvent
 from app.core.faults.injection import FaultInjector, FaultSpec
@@ -152,14 +153,19 @@ def run_detector(samples: SampleBlock, spec: SensorSpec, block_s: float = BLOCK_
     return DetectorRun(flags, events)
 
 
-def field_trusting(make: Callable[[SensorSpec], FaultDetector] = FaultDetector
+def field_trusting(make: Callable[[SensorSpec], FaultDetector] = FaultDetector,
+                   calibration: MagnetometerCalibration | None = None,
                    ) -> Callable[[SensorSpec], FaultDetector]:
-    """``make``, its detectors told the field comes calibrated (a recording's, such as
-    BROAD's, calibrated by its authors): their gyro bias test carries the field as the
-    earth's. A simulator's raw field holds the board's hard iron and must not be taken so."""
+    """``make``, its detectors told to carry the field as the earth's in the gyro bias test:
+    as it comes (a recording's, such as BROAD's, calibrated by its authors), or through
+    ``calibration`` (a recording's own). A simulator's raw field holds the board's hard iron
+    and must not be given to them."""
     def made(spec: SensorSpec) -> FaultDetector:
         detector = make(spec)
-        detector.field_calibrated = True
+        if calibration is None:
+            detector.field_calibrated = True
+        else:
+            detector.field_calibration = calibration
         return detector
     return made
 
