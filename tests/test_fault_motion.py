@@ -240,8 +240,6 @@ def test_noise_found_by_the_residual_stays_flagged_until_it_stops() -> None:
     the noisy windows became the channel's recent level and the light went green for good
     while the noise went on; held down to the release level, it stays red until the noise
     stops and goes green after."""
-    from tests.broad_trials import load_trial
-
     samples, _ = load_trial("15_undisturbed_fast_translation_A")
     spec = recording_spec(read_recording(trial_path("15_undisturbed_fast_translation_A")))
     part = _slice(samples, 0.0, 96.0)
